@@ -1,0 +1,1 @@
+"""Geometry: rotations, linear blend skinning, Laplacians, smoothing, normals, distances, sampling."""
