@@ -69,7 +69,8 @@ class AnnyShape:
         values = np.asarray(values, dtype=np.float64).reshape(-1)
         if values.shape != (6,):
             raise InputError(f"Anny shape needs 6 values {cls.names()}, got {values.shape[0]}")
-        return cls(*map(float, values))
+        # Round so that a float32 round trip gives back the same (hashable, cache-key) shape.
+        return cls(*(round(float(v), 6) for v in values))
 
     def to_array(self) -> np.ndarray:
         """``(6,)`` float32 in :meth:`names` order."""
