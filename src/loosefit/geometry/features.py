@@ -1,0 +1,88 @@
+"""Per-vertex features relating a garment to the body (FitGar, Li et al. 2023, Sec. 4.1-4.4).
+
+- :func:`nearest_body_vertex` / :func:`indicator_matrix`: FitGar's garment-to-body indicator
+  ``I in {0, 1}^(Ng x Nb)``, one 1 per garment row at the closest body vertex (rest pose), so that
+  ``I @ body_verts`` follows the body (``M_coarse = I M_b + Delta``).
+- :func:`vertex_joint_distances`: distance from every vertex to every joint, ``x_i`` in FitGar.
+- :func:`relative_skinning_features`: ``p_i = sum_s w_si G_s(theta) G_s(theta*)^-1 pbar_i``: the
+  linearly blend-skinned rest position without the root's translation, so a body translated without
+  rotation keeps the same features.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import torch
+from scipy.spatial import cKDTree
+
+from loosefit.errors import InputError
+from loosefit.geometry.lbs import linear_blend_skinning, skinning_transforms
+
+
+def _points(x, name: str) -> np.ndarray:
+    x = np.asarray(x)
+    if x.ndim < 2 or x.shape[-1] != 3 or not np.isfinite(x).all():
+        raise InputError(f"{name} must be finite positions (..., N, 3), got shape {x.shape}")
+    return x
+
+
+def nearest_body_vertex(garment_verts: np.ndarray, body_verts: np.ndarray) -> np.ndarray:
+    """Index ``(Vg,)`` int64 of the closest body vertex (Euclidean) to each garment vertex ``(Vg, 3)``."""
+    g = _points(garment_verts, "garment vertices")
+    b = _points(body_verts, "body vertices")
+    if g.ndim != 2 or b.ndim != 2:
+        raise InputError("nearest_body_vertex takes one garment (Vg, 3) and one body (Vb, 3)")
+    return cKDTree(b).query(g)[1].astype(np.int64)
+
+
+def indicator_matrix(nearest: np.ndarray, num_body_verts: int) -> sp.csr_matrix:
+    """FitGar's indicator ``(Vg, Vb)`` float32 sparse 0/1 matrix with ``I[i, nearest[i]] = 1``."""
+    nearest = np.asarray(nearest, dtype=np.int64)
+    if nearest.ndim != 1 or (len(nearest) and (nearest.min() < 0 or nearest.max() >= num_body_verts)):
+        raise InputError(f"nearest body vertex indices must be a vector in [0, {num_body_verts})")
+    n = len(nearest)
+    return sp.csr_matrix((np.ones(n, np.float32), (np.arange(n), nearest)), shape=(n, num_body_verts))
+
+
+def vertex_joint_distances(verts: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Euclidean distances ``(..., V, J)`` float32 in metres from ``verts (..., V, 3)`` to ``joints (..., J, 3)``.
+
+    Leading dimensions broadcast (e.g. a rest garment ``(V, 3)`` against posed joints ``(T, J, 3)``).
+    """
+    v = _points(verts, "vertices").astype(np.float64)
+    j = _points(joints, "joints").astype(np.float64)
+    return np.linalg.norm(v[..., :, None, :] - j[..., None, :, :], axis=-1).astype(np.float32)
+
+
+def relative_skinning_features(
+    rest_verts: np.ndarray, weights: np.ndarray, joint_transforms: np.ndarray, rest_joints: np.ndarray, root: int = 0
+) -> np.ndarray:
+    """FitGar's relative skinning features ``(T, V, 3)`` float32, metres.
+
+    Args:
+        rest_verts: ``(V, 3)`` rest-pose positions (body vertices, or garment vertices with weights
+            borrowed from the body, e.g. ``body_weights[nearest_body_vertex(...)]``).
+        weights: ``(V, J)`` skinning weights, rows summing to 1.
+        joint_transforms: ``(T, J, 4, 4)`` world joint transforms (:attr:`PosedBody.joint_transforms`).
+        rest_joints: ``(J, 3)`` rest joint positions.
+        root: index of the root joint whose translation is removed.
+
+    Returns:
+        Skinned positions with the root joint held at its rest position: global orientation and
+        joint rotations act, root translation does not.
+    """
+    rest = _points(rest_verts, "rest vertices")
+    weights = np.asarray(weights)
+    G = np.asarray(joint_transforms)
+    rj = _points(rest_joints, "rest joints")
+    if weights.shape != (rest.shape[0], rj.shape[0]):
+        raise InputError(f"skinning weights must have shape {(rest.shape[0], rj.shape[0])}, got {weights.shape}")
+    if G.ndim != 4 or G.shape[1:] != (rj.shape[0], 4, 4):
+        raise InputError(f"joint transforms must have shape (T, {rj.shape[0]}, 4, 4), got {G.shape}")
+    G = torch.from_numpy(G.astype(np.float64))
+    rj_t = torch.from_numpy(rj.astype(np.float64))
+    A = skinning_transforms(G, rj_t)
+    A[..., :3, 3] -= (G[:, root, :3, 3] - rj_t[root])[:, None]
+    out = linear_blend_skinning(torch.from_numpy(rest.astype(np.float64)), torch.from_numpy(weights.astype(np.float64)), A)
+    return out.numpy().astype(np.float32)

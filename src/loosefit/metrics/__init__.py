@@ -1,0 +1,8 @@
+"""Evaluation metrics, one module per family:
+
+- :mod:`~loosefit.metrics.errors`: RMSE, mean vertex error, Hausdorff distance (mm).
+- :mod:`~loosefit.metrics.sted`: STED, spatial and temporal parts (Vasa and Skala 2011).
+- :mod:`~loosefit.metrics.surface`: E_dist (cm), E_norm (degrees), Laplacian consistency (SwinGar).
+- :mod:`~loosefit.metrics.collision`: garment-body collision ratio (%).
+- :mod:`~loosefit.metrics.report`: evaluate sequences, print a table, write CSV and JSON.
+"""

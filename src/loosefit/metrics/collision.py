@@ -1,0 +1,69 @@
+"""Garment-body collision ratio (SwinGar, Li et al. 2024, Table II).
+
+A garment vertex collides when its signed distance to the body is below ``-tolerance`` (inside the
+body by more than the tolerance); the ratio is ``100 * colliding / V`` per frame, in percent, and
+the ratio of a sequence is the mean over its frames (every frame has the same ``V``).
+
+The body is given either as a :class:`~loosefit.geometry.signed_distance.BodySDF` (one static body
+for every frame), a list of ``T`` of them, or as body vertices ``(Vb, 3)`` / ``(T, Vb, 3)`` with faces
+(a posed body sequence; one AABB tree is built per frame). The default tolerance of 1 mm ignores
+vertices resting on the skin within simulation round-off.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from loosefit.errors import InputError
+from loosefit.geometry.signed_distance import BodySDF
+
+DEFAULT_TOLERANCE = 1e-3
+
+
+def _body_sdfs(body, body_faces, num_frames: int) -> list[BodySDF]:
+    if isinstance(body, BodySDF):
+        return [body] * num_frames
+    if isinstance(body, Sequence) and len(body) and all(isinstance(b, BodySDF) for b in body):
+        if len(body) != num_frames:
+            raise InputError(f"got {len(body)} body SDFs for {num_frames} garment frames")
+        return list(body)
+    verts = np.asarray(body, dtype=np.float64)
+    if body_faces is None:
+        raise InputError("body vertices need body faces")
+    if verts.ndim == 2:
+        return [BodySDF(verts, body_faces)] * num_frames
+    if verts.ndim != 3 or len(verts) != num_frames:
+        raise InputError(f"body vertices must be (Vb, 3) or ({num_frames}, Vb, 3), got {verts.shape}")
+    return [BodySDF(v, body_faces) for v in verts]
+
+
+def collision_mask(garment_verts: np.ndarray, body, body_faces: np.ndarray | None = None, tolerance: float = DEFAULT_TOLERANCE) -> np.ndarray:
+    """``(T, V)`` bool: garment vertex inside the body deeper than ``tolerance`` metres.
+
+    Args:
+        garment_verts: ``(T, V, 3)`` or ``(V, 3)`` garment positions, metres.
+        body: a ``BodySDF``, a list of ``T`` of them, or body vertices ``(Vb, 3)`` / ``(T, Vb, 3)``.
+        body_faces: ``(Fb, 3)`` body triangles, needed when ``body`` is vertices.
+        tolerance: depth in metres (>= 0) a vertex must exceed to count.
+    """
+    g = np.asarray(garment_verts, dtype=np.float64)
+    if g.ndim == 2:
+        g = g[None]
+    if g.ndim != 3 or g.shape[2] != 3 or not np.isfinite(g).all():
+        raise InputError(f"garment vertices must be finite (T, V, 3), got shape {g.shape}")
+    if not tolerance >= 0:
+        raise InputError(f"collision tolerance must be >= 0 metres, got {tolerance}")
+    sdfs = _body_sdfs(body, body_faces, len(g))
+    return np.stack([sdf.query(frame) < -tolerance for sdf, frame in zip(sdfs, g)])
+
+
+def collision_ratio_per_frame(garment_verts, body, body_faces=None, tolerance: float = DEFAULT_TOLERANCE) -> np.ndarray:
+    """``(T,)`` percentage of garment vertices inside the body beyond ``tolerance``."""
+    return 100.0 * collision_mask(garment_verts, body, body_faces, tolerance).mean(1)
+
+
+def collision_ratio(garment_verts, body, body_faces=None, tolerance: float = DEFAULT_TOLERANCE) -> float:
+    """Mean over frames of the colliding-vertex percentage."""
+    return float(collision_ratio_per_frame(garment_verts, body, body_faces, tolerance).mean())

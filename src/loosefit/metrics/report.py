@@ -1,0 +1,291 @@
+"""Evaluate predicted garment sequences against ground truth: per-sequence and overall metrics,
+a text table, and CSV / JSON files (written atomically).
+
+Metrics per sequence (see each module for the formula): ``rmse_mm``, ``mean_vertex_error_mm``,
+``hausdorff_mm`` (:mod:`~loosefit.metrics.errors`); ``sted_spatial``, ``sted_temporal``, ``sted``
+(:mod:`~loosefit.metrics.sted`); ``e_dist_cm``, ``e_norm_deg`` (:mod:`~loosefit.metrics.surface`);
+``collision_pct`` when a posed body is known (:mod:`~loosefit.metrics.collision`).
+
+Overall values pool every frame of every sequence, so long sequences weigh more: RMSE is the root
+of the pooled mean square; mean errors, STED_s and collision are weighted by frames x vertices,
+STED_t by frame pairs x vertices, Hausdorff by frames, E_norm by frames x faces; the overall STED
+combines the overall STED_s and STED_t. A sequence of one frame has no temporal STED (``None``).
+
+Inputs: mesh-sequence ``.npz`` files (:class:`~loosefit.io.mesh_sequence.MeshSequence`; a GT file may
+carry the posed body as ``body_verts`` / ``body_faces``), directories of them matched by file name,
+or sequences of a dataset store (ground truth) with predictions in a directory as ``<sequence>.npz``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from loosefit.errors import InputError
+from loosefit.io.mesh_sequence import MeshSequence
+from loosefit.metrics import sted as sted_mod
+from loosefit.metrics.collision import DEFAULT_TOLERANCE, collision_ratio
+from loosefit.metrics.errors import check_pair, hausdorff_per_frame, vertex_errors
+from loosefit.metrics.surface import face_normal_deviation_deg
+from loosefit.paths import atomic_path
+
+#: Reported columns in order: key, table header, format.
+COLUMNS = (
+    ("frames", "frames", "{:d}"),
+    ("vertices", "verts", "{:d}"),
+    ("rmse_mm", "RMSE mm", "{:.2f}"),
+    ("mean_vertex_error_mm", "mean err mm", "{:.2f}"),
+    ("hausdorff_mm", "Hausdorff mm", "{:.2f}"),
+    ("sted_spatial", "STED_s", "{:.4f}"),
+    ("sted_temporal", "STED_t", "{:.4f}"),
+    ("sted", "STED", "{:.4f}"),
+    ("e_dist_cm", "E_dist cm", "{:.3f}"),
+    ("e_norm_deg", "E_norm deg", "{:.2f}"),
+    ("collision_pct", "collision %", "{:.3f}"),
+)
+
+
+@dataclass
+class SequencePair:
+    """One predicted sequence and its ground truth: ``pred``/``gt (T, V, 3)`` metres on ``faces (F, 3)``,
+    optionally the posed body ``body_verts (T, Vb, 3)`` with ``body_faces (Fb, 3)`` for the collision ratio."""
+
+    name: str
+    pred: np.ndarray
+    gt: np.ndarray
+    faces: np.ndarray
+    body_verts: np.ndarray | None = None
+    body_faces: np.ndarray | None = None
+
+
+@dataclass
+class EvaluationSettings:
+    """STED parameters (see :mod:`loosefit.metrics.sted`) and the collision tolerance in metres."""
+
+    sted_rings: int = sted_mod.DEFAULT_RINGS
+    sted_dt: float = sted_mod.DEFAULT_DT
+    sted_c: float = sted_mod.DEFAULT_C
+    collision_tolerance: float = DEFAULT_TOLERANCE
+
+
+@dataclass
+class Evaluation:
+    """Per-sequence rows (``name``, ``faces`` and the :data:`COLUMNS` keys) and the pooled ``overall`` row."""
+
+    rows: list[dict]
+    overall: dict
+    settings: EvaluationSettings = field(default_factory=EvaluationSettings)
+
+    def _columns(self) -> list[tuple[str, str, str]]:
+        present = {k for row in self.rows for k, v in row.items() if v is not None}
+        return [c for c in COLUMNS if c[0] in present]
+
+    def table(self) -> str:
+        """A fixed-width text table: one line per sequence, then ``overall``."""
+        cols = self._columns()
+        header = ["sequence"] + [h for _, h, _ in cols]
+        lines = []
+        for row in self.rows + [self.overall]:
+            lines.append([row["name"]] + [_fmt(row.get(k), f) for k, _, f in cols])
+        widths = [max(len(header[i]), *(len(line[i]) for line in lines)) for i in range(len(header))]
+
+        def fmt_line(cells: list[str]) -> str:
+            # Names left-aligned, numbers right-aligned.
+            return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+        rule = "-" * len(fmt_line(header))
+        return "\n".join([fmt_line(header), rule] + [fmt_line(x) for x in lines[:-1]] + [rule, fmt_line(lines[-1])])
+
+    def write_csv(self, path: str | Path) -> None:
+        """One row per sequence, then the ``overall`` row; empty cells for metrics that do not apply."""
+        keys = ["name"] + [k for k, _, _ in self._columns()]
+        with atomic_path(path) as tmp:
+            with open(tmp, "w", newline="") as f:
+                writer = csv.writer(f)
+                writer.writerow(keys)
+                for row in self.rows + [self.overall]:
+                    writer.writerow(["" if row.get(k) is None else row[k] for k in keys])
+
+    def write_json(self, path: str | Path) -> None:
+        """``{"settings": ..., "sequences": [...], "overall": {...}}`` with ``null`` for metrics that do not apply."""
+        doc = {"settings": vars(self.settings), "sequences": self.rows, "overall": self.overall}
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(doc, indent=2) + "\n")
+
+
+def _fmt(value, fmt: str) -> str:
+    return "-" if value is None else fmt.format(value)
+
+
+def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = None) -> dict:
+    """All metrics of one pair as a row dict (``name``, ``faces`` and the :data:`COLUMNS` keys; ``None`` where n/a)."""
+    s = settings or EvaluationSettings()
+    try:
+        pred, gt = check_pair(pair.pred, pair.gt)
+        T, V = gt.shape[:2]
+        err = vertex_errors(pred, gt)
+        spatial = float(sted_mod.sted_spatial_per_frame(pred, gt, pair.faces, s.sted_rings).mean())
+        temporal = sted_mod.sted_temporal(pred, gt, s.sted_dt) if T >= 2 else None
+        normals = face_normal_deviation_deg(pred, gt, pair.faces)
+        collision = None
+        if pair.body_verts is not None:
+            collision = collision_ratio(pred, pair.body_verts, pair.body_faces, s.collision_tolerance)
+    except InputError as e:
+        raise InputError(f"sequence {pair.name!r}: {e}") from None
+    return {
+        "name": pair.name,
+        "frames": int(T),
+        "vertices": int(V),
+        "rmse_mm": float(1000 * np.sqrt(np.mean(err * err))),
+        "mean_vertex_error_mm": float(1000 * err.mean()),
+        "hausdorff_mm": float(1000 * hausdorff_per_frame(pred, gt).mean()),
+        "sted_spatial": spatial,
+        "sted_temporal": temporal,
+        "sted": None if temporal is None else sted_mod.combine(spatial, temporal, s.sted_c),
+        "e_dist_cm": float(100 * err.mean()),
+        "e_norm_deg": None if np.isnan(normals).all() else float(np.nanmean(normals)),
+        "collision_pct": collision,
+        "faces": int(len(pair.faces)),
+    }
+
+
+def _weighted(rows: list[dict], key: str, weight) -> float | None:
+    pairs = [(row[key], weight(row)) for row in rows if row.get(key) is not None and weight(row) > 0]
+    if not pairs:
+        return None
+    values, weights = np.array(pairs).T
+    return float((values * weights).sum() / weights.sum())
+
+
+def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) -> dict:
+    """Pool per-sequence rows into the ``overall`` row (weights in the module docstring)."""
+    s = settings or EvaluationSettings()
+
+    def tv(row: dict) -> int:
+        return row["frames"] * row["vertices"]
+
+    ms = _weighted([{**r, "ms": r["rmse_mm"] ** 2} for r in rows], "ms", tv)
+    spatial = _weighted(rows, "sted_spatial", tv)
+    temporal = _weighted(rows, "sted_temporal", lambda r: (r["frames"] - 1) * r["vertices"])
+    return {
+        "name": "overall",
+        "frames": int(sum(r["frames"] for r in rows)),
+        "vertices": None,
+        "faces": None,
+        "rmse_mm": None if ms is None else float(np.sqrt(ms)),
+        "mean_vertex_error_mm": _weighted(rows, "mean_vertex_error_mm", tv),
+        "hausdorff_mm": _weighted(rows, "hausdorff_mm", lambda r: r["frames"]),
+        "sted_spatial": spatial,
+        "sted_temporal": temporal,
+        "sted": None if spatial is None or temporal is None else sted_mod.combine(spatial, temporal, s.sted_c),
+        "e_dist_cm": _weighted(rows, "e_dist_cm", tv),
+        "e_norm_deg": _weighted(rows, "e_norm_deg", lambda r: r["frames"] * r["faces"]),
+        "collision_pct": _weighted(rows, "collision_pct", tv),
+    }
+
+
+def evaluate(pairs: list[SequencePair], settings: EvaluationSettings | None = None, progress: bool = True) -> Evaluation:
+    """Evaluate every pair; returns per-sequence rows and the pooled overall row."""
+    if not pairs:
+        raise InputError("nothing to evaluate: no sequence pairs")
+    s = settings or EvaluationSettings()
+    rows = [evaluate_sequence(p, s) for p in tqdm(pairs, desc="evaluate", unit="seq", disable=not progress)]
+    return Evaluation(rows, overall_row(rows, s), s)
+
+
+def _npz_files(path: Path) -> dict[str, Path]:
+    if path.is_dir():
+        files = {p.stem: p for p in sorted(path.glob("*.npz"))}
+        if not files:
+            raise InputError("directory holds no .npz mesh sequences", path)
+        return files
+    if path.suffix != ".npz" or not path.is_file():
+        raise InputError("expected a mesh-sequence .npz file or a directory of them", path)
+    return {path.stem: path}
+
+
+def _pair(name: str, pred: MeshSequence, gt: MeshSequence, pred_path: Path, gt_path: Path, body: MeshSequence | None) -> SequencePair:
+    if pred.verts.shape != gt.verts.shape:
+        raise InputError(f"prediction {pred.verts.shape} does not match ground truth {gt.verts.shape} in {gt_path}", pred_path)
+    if pred.faces.shape != gt.faces.shape or not np.array_equal(pred.faces, gt.faces):
+        raise InputError(f"prediction triangles differ from those of the ground truth {gt_path}", pred_path)
+    body_verts, body_faces = gt.extra.get("body_verts"), gt.extra.get("body_faces")
+    if body is not None:
+        body_verts, body_faces = body.verts, body.faces
+    if body_verts is not None:
+        if body_faces is None:
+            raise InputError("body_verts without body_faces", gt_path)
+        if len(body_verts) != len(gt.verts):
+            raise InputError(f"body has {len(body_verts)} frames, the sequence {len(gt.verts)}", gt_path)
+    return SequencePair(name, pred.verts, gt.verts, gt.faces, body_verts, body_faces)
+
+
+def pairs_from_files(pred: str | Path, gt: str | Path, body: str | Path | None = None) -> list[SequencePair]:
+    """Pairs from mesh-sequence ``.npz`` files: two files, or two directories matched by file name.
+
+    Every ground-truth sequence needs a prediction of the same name; ``body`` (a posed-body mesh
+    sequence) overrides the ``body_verts`` a ground-truth file may carry.
+    """
+    pred_files, gt_files = _npz_files(Path(pred)), _npz_files(Path(gt))
+    body_seq = MeshSequence.load(body) if body is not None else None
+    if len(pred_files) == 1 and len(gt_files) == 1 and not Path(pred).is_dir():
+        ((_, p),), ((name, g),) = pred_files.items(), gt_files.items()
+        return [_pair(name, MeshSequence.load(p), MeshSequence.load(g), p, g, body_seq)]
+    missing = sorted(set(gt_files) - set(pred_files))
+    if missing:
+        raise InputError(f"no prediction for ground-truth sequence(s) {missing}", Path(pred))
+    return [_pair(n, MeshSequence.load(pred_files[n]), MeshSequence.load(g), pred_files[n], g, body_seq) for n, g in gt_files.items()]
+
+
+def pairs_from_store(
+    store: str | Path,
+    pred_dir: str | Path,
+    names: list[str] | None = None,
+    split: str | None = "test",
+    body: str | Path | None = None,
+) -> list[SequencePair]:
+    """Pairs with ground truth from a dataset store and predictions ``<pred_dir>/<sequence>.npz``.
+
+    ``names`` picks sequences (default: every ``"ok"`` sequence of ``split``; ``split=None`` for all).
+    ``body`` (a posed-body mesh sequence) is attached to every pair, so it suits one sequence or
+    sequences of one motion; without it there is no collision ratio.
+    """
+    from loosefit.data.store import DatasetStore
+
+    body_seq = MeshSequence.load(body) if body is not None else None
+    ds = DatasetStore.open(store, "r")
+    names = ds.sequence_names(split=split) if names is None else list(names)
+    if not names:
+        raise InputError(f"no sequences to evaluate (split {split!r})", Path(store))
+    pred_dir = Path(pred_dir)
+    pairs = []
+    for name in names:
+        seq = ds.sequence(name)
+        path = pred_dir / f"{name}.npz"
+        if not path.is_file():
+            raise InputError(f"no prediction for dataset sequence {name!r}", path)
+        gt = MeshSequence(seq.verts[:], ds.read_array(f"garments/{seq.garment}", "faces"))
+        pairs.append(_pair(name, MeshSequence.load(path), gt, path, Path(store), body_seq))
+    return pairs
+
+
+def is_dataset_store(path: str | Path) -> bool:
+    """Whether ``path`` is a Zarr directory (a dataset store) rather than a mesh-sequence file or folder."""
+    return Path(path).is_dir() and (Path(path) / ".zgroup").is_file()
+
+
+def load_pairs(
+    pred: str | Path, gt: str | Path, body: str | Path | None = None, names: list[str] | None = None, split: str | None = "test"
+) -> list[SequencePair]:
+    """Pairs for ``loosefit evaluate PRED GT``: :func:`pairs_from_store` when ``gt`` is a dataset store
+    (``names`` / ``split`` pick its sequences), else :func:`pairs_from_files`."""
+    if is_dataset_store(gt):
+        return pairs_from_store(gt, pred, names, split, body)
+    if names is not None:
+        raise InputError("sequence names only apply when the ground truth is a dataset store", Path(gt))
+    return pairs_from_files(pred, gt, body)

@@ -1,0 +1,48 @@
+"""Face areas and normals, vertex normals: closed forms, libigl, batching."""
+
+import igl
+import numpy as np
+import pytest
+import trimesh
+
+from loosefit.geometry.normals import face_areas, face_normals, vertex_normals
+
+
+def test_triangle_normal_and_area_follow_right_hand_rule():
+    verts = np.array([[0, 0, 0], [2, 0, 0], [0, 1, 0]], dtype=np.float32)
+    faces = np.array([[0, 1, 2]])
+    assert np.allclose(face_normals(verts, faces), [[0, 0, 1]])
+    assert np.allclose(face_normals(verts, faces[:, ::-1]), [[0, 0, -1]])
+    assert face_areas(verts, faces)[0] == pytest.approx(1.0)
+    assert face_normals(verts, faces).dtype == np.float32
+
+
+def test_vertex_normals_of_sphere_are_radial_and_match_libigl():
+    m = trimesh.creation.icosphere(3, radius=0.7)
+    v, f = np.asarray(m.vertices), np.asarray(m.faces)
+    n = vertex_normals(v, f)
+    assert np.abs(n - v / 0.7).max() < 0.02  # polyhedral approximation of the sphere
+    ref_area = igl.per_vertex_normals(v, f, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_AREA)
+    ref_uniform = igl.per_vertex_normals(v, f, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_UNIFORM)
+    assert np.abs(n - ref_area).max() < 1e-6
+    assert np.abs(vertex_normals(v, f, "uniform") - ref_uniform).max() < 1e-6
+
+
+def test_batched_frames_equal_per_frame_results():
+    m = trimesh.creation.icosphere(2)
+    v, f = np.asarray(m.vertices), np.asarray(m.faces)
+    rng = np.random.default_rng(1)
+    frames = v[None] + rng.normal(0, 0.05, (4, len(v), 3))
+    batched = vertex_normals(frames, f)
+    assert batched.shape == (4, len(v), 3)
+    for t in range(4):
+        assert np.abs(batched[t] - vertex_normals(frames[t], f)).max() < 1e-6
+        assert np.abs(face_normals(frames, f)[t] - face_normals(frames[t], f)).max() < 1e-6
+    assert face_areas(frames[None], f).shape == (1, 4, len(f))
+
+
+def test_degenerate_face_and_unused_vertex_get_zero_normals():
+    verts = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [5, 5, 5]], dtype=np.float64)  # collinear + unused
+    faces = np.array([[0, 1, 2]])
+    assert np.allclose(face_normals(verts, faces), 0)
+    assert np.allclose(vertex_normals(verts, faces), 0)

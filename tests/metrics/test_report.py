@@ -1,0 +1,95 @@
+"""Evaluation report: pooled overall values, table, CSV / JSON files, file and dataset inputs."""
+
+import csv
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import trimesh
+
+from loosefit.data import DatasetStore
+from loosefit.errors import InputError
+from loosefit.io.mesh_sequence import MeshSequence
+from loosefit.metrics.errors import hausdorff_mm, rmse_mm
+from loosefit.metrics.report import SequencePair, evaluate, load_pairs, pairs_from_files, pairs_from_store
+from loosefit.metrics.sted import sted
+
+SPHERE = trimesh.creation.icosphere(1, radius=0.3)
+V, F = np.asarray(SPHERE.vertices), np.asarray(SPHERE.faces)
+
+
+def sequence(frames, seed, noise=0.005):
+    rng = np.random.default_rng(seed)
+    gt = V[None] + np.linspace(0, 0.1, frames)[:, None, None] * [0, 1.0, 0] + [0, 0, 1.0]
+    return (gt + rng.normal(0, noise, gt.shape)).astype(np.float32), gt.astype(np.float32)
+
+
+def test_overall_pools_all_frames_and_table_lists_sequences(tmp_path):
+    (p1, g1), (p2, g2) = sequence(6, 0), sequence(3, 1, noise=0.02)
+    ev = evaluate([SequencePair("a", p1, g1, F), SequencePair("b", p2, g2, F)], progress=False)
+    assert [r["name"] for r in ev.rows] == ["a", "b"]
+    row = ev.rows[0]
+    assert row["rmse_mm"] == pytest.approx(rmse_mm(p1, g1)) and row["hausdorff_mm"] == pytest.approx(hausdorff_mm(p1, g1))
+    assert row["sted"] == pytest.approx(sted(p1, g1, F).combined) and row["collision_pct"] is None
+    # Overall RMSE is the RMSE of all frames together, not the mean of the two.
+    assert ev.overall["rmse_mm"] == pytest.approx(rmse_mm(np.concatenate([p1, p2]), np.concatenate([g1, g2])))
+    assert ev.overall["hausdorff_mm"] == pytest.approx((6 * row["hausdorff_mm"] + 3 * ev.rows[1]["hausdorff_mm"]) / 9)
+    assert ev.overall["frames"] == 9
+    table = ev.table()
+    assert "overall" in table and "STED" in table and "collision" not in table
+    ev.write_csv(tmp_path / "m.csv")
+    ev.write_json(tmp_path / "m.json")
+    rows = list(csv.DictReader(open(tmp_path / "m.csv")))
+    assert [r["name"] for r in rows] == ["a", "b", "overall"]
+    assert float(rows[2]["rmse_mm"]) == pytest.approx(ev.overall["rmse_mm"])
+    doc = json.loads((tmp_path / "m.json").read_text())
+    assert doc["overall"]["frames"] == 9 and doc["settings"]["sted_dt"] == 0.3 and len(doc["sequences"]) == 2
+
+
+def test_files_directories_body_and_single_frame(tmp_path):
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    for name, seed, frames in (("walk", 0, 4), ("pose", 1, 1)):
+        pred, gt = sequence(frames, seed)
+        body = np.repeat(np.asarray(box.vertices)[None] + [0, 0, 1.0], frames, 0)
+        MeshSequence(gt, F, extra={"body_verts": body, "body_faces": np.asarray(box.faces)}).save(tmp_path / "gt" / f"{name}.npz")
+        MeshSequence(pred, F).save(tmp_path / "pred" / f"{name}.npz")
+    ev = evaluate(load_pairs(tmp_path / "pred", tmp_path / "gt"), progress=False)
+    by_name = {r["name"]: r for r in ev.rows}
+    # The 0.3 m sphere sits inside the 1 m box: every vertex collides.
+    assert by_name["pose"]["collision_pct"] == pytest.approx(100.0)
+    assert by_name["pose"]["sted_temporal"] is None and by_name["walk"]["sted_temporal"] is not None
+    assert ev.overall["sted_temporal"] == pytest.approx(by_name["walk"]["sted_temporal"])
+    single = pairs_from_files(tmp_path / "pred" / "walk.npz", tmp_path / "gt" / "walk.npz")
+    assert len(single) == 1 and single[0].name == "walk" and single[0].body_verts.shape == (4, 8, 3)
+
+    (tmp_path / "pred" / "pose.npz").unlink()
+    with pytest.raises(InputError, match=r"no prediction .*pose"):
+        pairs_from_files(tmp_path / "pred", tmp_path / "gt")
+    MeshSequence(sequence(4, 0)[0], F[:, ::-1]).save(tmp_path / "flipped.npz")
+    with pytest.raises(InputError, match="triangles differ"):
+        pairs_from_files(tmp_path / "flipped.npz", tmp_path / "gt" / "walk.npz")
+    with pytest.raises(InputError, match="sequence names"):
+        load_pairs(tmp_path / "pred", tmp_path / "gt", names=["walk"])
+    with pytest.raises(InputError, match="mesh-sequence"):
+        pairs_from_files(tmp_path / "nothing.obj", tmp_path / "gt")
+
+
+def test_dataset_sequences_as_ground_truth(tmp_path):
+    store = DatasetStore.create(tmp_path / "data.zarr")
+    garment = SimpleNamespace(verts=V.astype(np.float32), faces=F, pinned=np.zeros(len(V), bool), kind="test", params={}, name="ball")
+    store.add_garment("ball", garment)
+    store.add_body("b", np.full(6, 0.5, np.float32))
+    from loosefit.motion import Motion
+
+    store.add_motion("m", Motion(np.zeros((5, 31, 3)), np.zeros((5, 3)), joint_names=[f"j{i}" for i in range(31)]))
+    pred, gt = sequence(5, 2)
+    store.write_sequence("s1", gt, garment="ball", body="b", motion="m", sim_params={}, stats={}, split="test")
+    MeshSequence(pred, F).save(tmp_path / "pred" / "s1.npz")
+    pairs = load_pairs(tmp_path / "pred", tmp_path / "data.zarr")
+    assert [p.name for p in pairs] == ["s1"] and np.array_equal(pairs[0].gt, gt) and pairs[0].body_verts is None
+    assert evaluate(pairs, progress=False).rows[0]["rmse_mm"] == pytest.approx(rmse_mm(pred, gt), rel=1e-6)
+    with pytest.raises(InputError, match="no sequences"):
+        pairs_from_store(tmp_path / "data.zarr", tmp_path / "pred", split="train")
+    with pytest.raises(InputError, match="no prediction"):
+        pairs_from_store(tmp_path / "data.zarr", tmp_path / "data.zarr")
