@@ -1,0 +1,43 @@
+"""Human-readable text of a dataset store's summary (``loosefit info DATA.zarr``)."""
+
+from __future__ import annotations
+
+
+def _size(num_bytes: int) -> str:
+    if num_bytes < 1024:
+        return f"{num_bytes} B"
+    value = num_bytes / 1024
+    for unit in ("KiB", "MiB"):
+        if value < 1024:
+            return f"{value:.1f} {unit}"
+        value /= 1024
+    return f"{value:.1f} GiB"
+
+
+def format_info(info: dict) -> str:
+    """Multi-line text of :meth:`loosefit.data.store.DatasetStore.info`'s dict."""
+    seqs = info["sequences"]
+    lines = [
+        f"{info['path']}: {info['format']} v{info['format_version']} "
+        f"(created {info['created'] or '?'} by loosefit {info['loosefit_version'] or '?'}), "
+        f"{_size(info['size_bytes'])}",
+        f"garments ({len(info['garments'])}):",
+    ]
+    for name, g in info["garments"].items():
+        lines.append(f"  {name}: {g['kind']}, {g['verts']} vertices, {g['faces']} faces, {g['pinned']} pinned")
+    lines.append(f"bodies ({len(info['bodies'])}):")
+    for name, b in info["bodies"].items():
+        shape = "?" if b["shape"] is None else ", ".join(f"{v:.3g}" for v in b["shape"])
+        lines.append(f"  {name}: {b['model']} [{shape}]")
+    lines.append(f"motions ({len(info['motions'])}):")
+    for name, m in info["motions"].items():
+        lines.append(f"  {name}: {m['frames']} frames at {m['fps']:g} fps, {m['joints']} joints ({m['rig']})")
+    lines.append(f"sequences ({seqs['count']}, {seqs['frames']} frames ok):")
+    for split, counts in sorted(seqs["by_split"].items()):
+        lines.append(f"  {split}: {counts['ok']} ok ({counts['frames']} frames), {counts['failed']} failed")
+    if info["problems"]:
+        lines.append(f"problems ({len(info['problems'])}):")
+        lines.extend(f"  {path}: {problem}" for path, problem in info["problems"].items())
+    else:
+        lines.append("problems: none")
+    return "\n".join(lines)
