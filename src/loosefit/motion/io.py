@@ -1,0 +1,52 @@
+"""Load a motion from any supported file onto a body: loosefit ``.npz``, AMASS ``.npz`` or ``.bvh``."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from loosefit.errors import InputError
+from loosefit.motion.amass import import_amass
+from loosefit.motion.bvh import import_bvh
+from loosefit.motion.motion import DEFAULT_FPS, Motion
+from loosefit.motion.retarget import JointMap
+
+
+def load_motion(path: str | Path, body, joint_map: JointMap | str | Path | None = None, fps: float = DEFAULT_FPS) -> Motion:
+    """Read a motion file and return it on ``body``'s rig.
+
+    Dispatch on the content: a ``.bvh`` file is imported with :func:`~loosefit.motion.bvh.import_bvh`
+    (``joint_map`` applies); an ``.npz`` with ``rotations`` is a loosefit :class:`Motion` (checked
+    against the body's rig, kept at its own frame rate); an ``.npz`` with ``poses`` is AMASS
+    (:func:`~loosefit.motion.amass.import_amass`). Imported motions are resampled to ``fps``.
+
+    Raises:
+        InputError: naming the file, when it is none of these or is malformed.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("motion file not found", path)
+    if path.suffix.lower() == ".bvh":
+        return import_bvh(path, body, joint_map, fps=fps)
+    if joint_map is not None:
+        raise InputError("a joint map applies to BVH files only", path)
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile) as e:
+        raise InputError(f"not a .bvh or .npz motion file ({e})", path) from None
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise InputError("not an .npz archive (a single .npy array)", path)
+    with archive:
+        keys = set(archive.files)
+    if "rotations" in keys:
+        motion = Motion.load(path)
+        try:
+            body.check_motion(motion)
+        except InputError as e:
+            raise InputError(e.problem, path) from None
+        return motion
+    if "poses" in keys:
+        return import_amass(path, body, fps=fps)
+    raise InputError(f"unknown .npz motion: expected 'rotations' (loosefit) or 'poses' (AMASS), found {sorted(keys)}", path)
