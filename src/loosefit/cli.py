@@ -1,0 +1,235 @@
+"""The ``loosefit`` command line: argument parsing only; every verb calls a library function."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from loosefit.errors import LoosefitError
+
+
+def _body(args):
+    """The body for ``--shape`` / ``--smpl``: Anny by default, a SMPL-family file when given."""
+    if getattr(args, "smpl", None):
+        from loosefit.body.smpl_body import SMPLBody
+
+        betas = [float(b) for b in args.shape.split(",")] if args.shape else None
+        return SMPLBody(args.smpl, betas)
+    from loosefit.body import AnnyBody, AnnyShape
+
+    return AnnyBody(AnnyShape.parse(args.shape), resolution=getattr(args, "resolution", "full"))
+
+
+def cmd_body(args):
+    import numpy as np
+
+    from loosefit.io.mesh_sequence import MeshSequence
+    from loosefit.io.obj import write_obj
+    from loosefit.motion.io import load_motion
+
+    body = _body(args)
+    motion = load_motion(args.motion, body) if args.motion else body.rest_motion(1)
+    posed = body.pose(motion)
+    out = Path(args.out)
+    if out.suffix == ".obj":
+        write_obj(out, posed.verts[args.frame], body.faces, header=f"loosefit body {body.name} frame {args.frame}")
+    elif out.suffix == ".npz":
+        MeshSequence(posed.verts, body.faces, motion.fps,
+                     {"joints": posed.joints, "joint_transforms": posed.joint_transforms,
+                      "parents": np.asarray(body.parents)}).save(out)
+    else:
+        raise LoosefitError(f"{out}: unsupported output, use .obj or .npz")
+    print(f"wrote {out}: {body.name}, {posed.verts.shape[0]} frame(s), {body.num_verts} vertices")
+
+
+def cmd_motion_generate(args):
+    from loosefit.motion.procedural import generate
+
+    body = _body(args)
+    motion = generate(args.kind, args.seconds, args.seed, body, fps=args.fps)
+    motion.save(args.out)
+    print(f"wrote {args.out}: {motion.name}, {motion.num_frames} frames at {motion.fps:g} fps")
+
+
+def cmd_motion_import(args):
+    from loosefit.motion.io import load_motion
+
+    body = _body(args)
+    motion = load_motion(args.file, body, joint_map=args.joint_map)
+    motion.save(args.out)
+    print(f"wrote {args.out}: {motion.num_frames} frames at {motion.fps:g} fps on rig {motion.rig}")
+
+
+def _garment_params(items: list[str]) -> dict:
+    params = {}
+    for item in items or []:
+        key, sep, val = item.partition("=")
+        if not sep:
+            raise LoosefitError(f"bad garment parameter {item!r}: expected NAME=VALUE")
+        try:
+            params[key] = json.loads(val)
+        except json.JSONDecodeError:
+            params[key] = val
+    return params
+
+
+def cmd_garment_make(args):
+    from loosefit.garment import make_garment
+
+    params = _garment_params(args.param)
+    if args.length is not None:
+        params["length"] = args.length
+    if args.flare is not None:
+        params["flare"] = args.flare
+    garment = make_garment(args.kind, _body(args), seed=args.seed, edge_length=args.edge_length, **params)
+    garment.save(args.out)
+    print(f"wrote {args.out}: {garment.kind}, {len(garment.verts)} vertices, {len(garment.faces)} faces, "
+          f"{int(garment.pinned.sum())} pinned")
+
+
+def cmd_garment_import(args):
+    from loosefit.garment import import_garment
+
+    garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up)
+    garment.save(args.out)
+    print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces")
+
+
+def cmd_info(args):
+    from loosefit.data import DatasetStore, format_info
+
+    info = DatasetStore.open(args.data, mode="r").info()
+    print(json.dumps(info, indent=2, default=str) if args.json else format_info(info))
+
+
+def cmd_render(args):
+    from loosefit.viz.inputs import load_panels
+    from loosefit.viz.render import render_video
+
+    panels = [panel for path in args.input for panel in load_panels(path, sequence=args.sequence)]
+    render_video(panels, args.out, fps=args.fps, size=(args.width, args.height), backend=args.backend)
+    print(f"wrote {args.out}")
+
+
+def cmd_evaluate(args):
+    from loosefit.metrics.report import EvaluationSettings, evaluate, load_pairs
+
+    given = dict(sted_rings=args.sted_rings, sted_dt=args.sted_dt, sted_c=args.sted_c, collision_tolerance=args.tolerance)
+    settings = EvaluationSettings(**{k: v for k, v in given.items() if v is not None})
+    result = evaluate(load_pairs(args.pred, args.gt, args.body, args.sequence, args.split), settings)
+    print(result.table())
+    out = Path(args.out)
+    result.write_csv(out / "metrics.csv")
+    result.write_json(out / "metrics.json")
+    print(f"wrote {out / 'metrics.csv'} and {out / 'metrics.json'}")
+
+
+def cmd_demo(args):
+    from loosefit.demo import run_demo
+
+    run_demo(Path(args.out))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="loosefit", description=__doc__)
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def body_options(sp, resolution=False):
+        sp.add_argument("--shape", default=None, help="Anny: gender=0.8,weight=0.3 (values in [0,1]); SMPL: betas b0,b1,...")
+        sp.add_argument("--smpl", default=None, help="SMPL / SMPL-H / SMPL-X model file to use instead of Anny")
+        if resolution:
+            sp.add_argument("--resolution", choices=["full", "low"], default="full", help="Anny mesh resolution")
+
+    sp = sub.add_parser("body", help="pose the body along a motion and write it")
+    body_options(sp, resolution=True)
+    sp.add_argument("--motion", default=None, help="motion .npz / .bvh (default: the rest pose)")
+    sp.add_argument("--frame", type=int, default=0, help="frame written to an .obj")
+    sp.add_argument("--out", required=True, help="body.obj (one frame) or body.npz (mesh sequence)")
+    sp.set_defaults(func=cmd_body)
+
+    motion = sub.add_parser("motion", help="generate or import motions").add_subparsers(dest="motion_command", required=True)
+    sp = motion.add_parser("generate", help="a procedural motion by kind and seed")
+    sp.add_argument("--kind", required=True, help="walk, run, turn, spin, jump, kick, squat, bow, arm_raise, wave, sway, mix")
+    sp.add_argument("--seconds", type=float, default=8.0)
+    sp.add_argument("--seed", type=int, default=0)
+    sp.add_argument("--fps", type=float, default=30.0)
+    body_options(sp)
+    sp.add_argument("--out", required=True)
+    sp.set_defaults(func=cmd_motion_generate)
+    sp = motion.add_parser("import", help="import a BVH or AMASS file onto the body rig")
+    sp.add_argument("file")
+    sp.add_argument("--joint-map", default=None, help="YAML joint map for skeletons without a built-in map")
+    body_options(sp)
+    sp.add_argument("--out", required=True)
+    sp.set_defaults(func=cmd_motion_import)
+
+    garment = sub.add_parser("garment", help="make or import garments").add_subparsers(dest="garment_command", required=True)
+    sp = garment.add_parser("make", help="a garment template fitted to the body")
+    sp.add_argument("--kind", required=True, choices=["skirt", "dress", "long_shirt", "jumpsuit"])
+    sp.add_argument("--length", type=float, default=None)
+    sp.add_argument("--flare", type=float, default=None)
+    sp.add_argument("--seed", type=int, default=0)
+    sp.add_argument("--edge-length", type=float, default=0.02, help="target edge length, metres (sets the resolution)")
+    sp.add_argument("--param", action="append", help="any other template parameter, NAME=VALUE (repeatable)")
+    body_options(sp)
+    sp.add_argument("--out", required=True)
+    sp.set_defaults(func=cmd_garment_make)
+    sp = garment.add_parser("import", help="validate, repair and align an OBJ / PLY garment")
+    sp.add_argument("file")
+    sp.add_argument("--unit", choices=["m", "cm", "mm"], default=None, help="file unit (default: detected from size)")
+    sp.add_argument("--up", choices=["y", "z"], default=None, help="file up axis (default: detected by fitting)")
+    body_options(sp)
+    sp.add_argument("--out", required=True)
+    sp.set_defaults(func=cmd_garment_import)
+
+    sp = sub.add_parser("info", help="summarise a dataset store")
+    sp.add_argument("data")
+    sp.add_argument("--json", action="store_true", help="print the summary as JSON")
+    sp.set_defaults(func=cmd_info)
+
+    sp = sub.add_parser("render", help="render a mesh sequence, dataset sequence or motion to MP4 / GIF / PNG")
+    sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, or DATA.zarr with --sequence; several side by side")
+    sp.add_argument("--sequence", default=None, help="sequence name inside a dataset store")
+    sp.add_argument("--out", required=True, help="out.mp4, out.gif, out.png or a folder")
+    sp.add_argument("--fps", type=float, default=30.0)
+    sp.add_argument("--width", type=int, default=640)
+    sp.add_argument("--height", type=int, default=480)
+    sp.add_argument("--backend", choices=["auto", "pyvista", "matplotlib"], default="auto")
+    sp.set_defaults(func=cmd_render)
+
+    sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
+    sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")
+    sp.add_argument("gt", help="ground-truth .npz / folder, or DATA.zarr (predictions read from PRED/<sequence>.npz)")
+    sp.add_argument("--body", default=None, help="body mesh-sequence .npz for the collision ratio (else body_verts in GT)")
+    sp.add_argument("--sequence", action="append", default=None, help="dataset sequence to evaluate (repeatable)")
+    sp.add_argument("--split", default="test", help="dataset split evaluated when no --sequence is given")
+    sp.add_argument("--out", default=".", help="folder for metrics.csv and metrics.json")
+    sp.add_argument("--sted-rings", type=int, default=None, help="STED neighbourhood rings (default in loosefit.metrics.sted)")
+    sp.add_argument("--sted-dt", type=float, default=None, help="STED temporal distance")
+    sp.add_argument("--sted-c", type=float, default=None, help="STED temporal weight")
+    sp.add_argument("--tolerance", type=float, default=None, help="collision tolerance, metres (default 1 mm)")
+    sp.set_defaults(func=cmd_evaluate)
+
+    sp = sub.add_parser("demo", help="the main job on the embedded default data")
+    sp.add_argument("--out", default="demo_out")
+    sp.set_defaults(func=cmd_demo)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        args.func(args)
+    except LoosefitError as e:
+        print(f"loosefit {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
