@@ -127,6 +127,63 @@ def cmd_evaluate(args):
     print(f"wrote {out / 'metrics.csv'} and {out / 'metrics.json'}")
 
 
+def cmd_simulate(args):
+    from loosefit.sim import SimParams, run_plan, simulate_file
+
+    if args.plan is not None:
+        if args.garment or args.motion:
+            raise LoosefitError("give either PLAN.yaml or --garment and --motion, not both")
+        summary = run_plan(args.plan, args.out, workers=args.workers, address=args.address)
+        print(json.dumps({k: v for k, v in summary.items() if k != "sequences"}, indent=2))
+        return
+    if not (args.garment and args.motion):
+        raise LoosefitError("simulate needs PLAN.yaml, or --garment G.obj and --motion M.npz")
+    sets = args.set or []
+    params = SimParams.load(args.params, sets) if args.params else SimParams().with_overrides(sets)
+    result = simulate_file(args.garment, args.motion, args.out, params=params, shape=args.shape, joint_map=args.joint_map)
+    print(json.dumps(result.stats, indent=2, default=str))
+    if result.status != "ok":
+        raise LoosefitError(f"{args.out}: the simulation failed the quality gate: {result.reason}")
+
+
+def cmd_prepare(args):
+    from loosefit.rig.prepare import prepare
+
+    summary = prepare(args.data, bones=args.bones, force=args.force)
+    for name, g in summary["garments"].items():
+        rig = f"{g['bones']} bones, LF RMSE {g['rmse_lf_mm']:.2f} mm" if "bones" in g else "no training sequences"
+        print(f"{name}: {rig}")
+    print(f"fit attribute: {summary['fit_attribute'].get('status', summary['fit_attribute'])}")
+
+
+def cmd_train(args):
+    from loosefit.train.pipeline import train_model
+
+    result = train_model(args.method, args.data, args.garment, args.out, config=args.config,
+                         overrides=args.set or (), resume=args.resume)
+    if result is None:
+        print(f"{args.method} has no trainable parameters: wrote its fixed weights to {args.out}")
+    else:
+        print(json.dumps(result.summary(), indent=2, default=str))
+
+
+def cmd_animate(args):
+    from loosefit.animate import Animator
+    from loosefit.io.export import export_animation
+    from loosefit.motion.io import load_motion
+
+    body = _body(args)
+    animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads)
+    motions = [load_motion(path, body) for path in args.motion]
+    results = animator.animate_batch(motions)
+    outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
+    for motion, verts, out in zip(motions, results, outs):
+        posed = body.pose(motion) if args.with_body else None
+        export_animation(out, verts, animator.faces, fps=motion.fps,
+                         body_verts=None if posed is None else posed.verts, body_faces=None if posed is None else body.faces)
+        print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method})")
+
+
 def cmd_demo(args):
     from loosefit.demo import run_demo
 
@@ -134,7 +191,9 @@ def cmd_demo(args):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="loosefit", description=__doc__)
+    p = argparse.ArgumentParser(
+        prog="loosefit",
+        description="Learning-based animation of loose-fitting garments: simulate, prepare, train, animate, evaluate.")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -200,6 +259,46 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--height", type=int, default=480)
     sp.add_argument("--backend", choices=["auto", "pyvista", "matplotlib"], default="auto")
     sp.set_defaults(func=cmd_render)
+
+    sp = sub.add_parser("simulate", help="simulate ground truth with Blender cloth: one sequence or a plan")
+    sp.add_argument("plan", nargs="?", default=None, help="a plan YAML (configs/datasets/*.yaml)")
+    sp.add_argument("--out", required=True, help="DATA.zarr for a plan; seq.npz for one sequence")
+    sp.add_argument("--garment", default=None, help="garment .obj (one sequence)")
+    sp.add_argument("--motion", default=None, help="motion .npz / .bvh (one sequence)")
+    sp.add_argument("--params", default=None, help="simulation parameters YAML")
+    sp.add_argument("--set", action="append", help="simulation parameter override, e.g. bending=1e-4 (repeatable)")
+    sp.add_argument("--shape", default=None, help="Anny shape, e.g. height=0.8")
+    sp.add_argument("--joint-map", default=None, help="joint map for a BVH motion")
+    sp.add_argument("--workers", type=int, default=1, help="parallel Blender workers (Ray) for a plan")
+    sp.add_argument("--address", default=None, help="an existing Ray cluster's address")
+    sp.set_defaults(func=cmd_simulate)
+
+    sp = sub.add_parser("prepare", help="virtual bones, descriptors, fit attributes and statistics of a dataset")
+    sp.add_argument("data")
+    sp.add_argument("--bones", type=int, default=80, help="virtual bones per garment")
+    sp.add_argument("--force", action="store_true", help="redo garments already prepared")
+    sp.set_defaults(func=cmd_prepare)
+
+    sp = sub.add_parser("train", help="train a garment model")
+    sp.add_argument("--method", required=True, help="virtualbones, jointnet or body-lbs")
+    sp.add_argument("--data", required=True, help="a prepared DATA.zarr")
+    sp.add_argument("--garment", required=True, help="garment name in the dataset (see loosefit info)")
+    sp.add_argument("--out", required=True, help="run folder")
+    sp.add_argument("--config", default=None, help="method config YAML (configs/models/<method>.yaml)")
+    sp.add_argument("--set", action="append", help="config override, e.g. train.epochs=5 (repeatable)")
+    sp.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    sp.set_defaults(func=cmd_train)
+
+    sp = sub.add_parser("animate", help="animate a trained garment on new motions")
+    sp.add_argument("run", help="run folder written by loosefit train")
+    sp.add_argument("--motion", required=True, action="append", help="motion .npz / .bvh / AMASS .npz (repeatable)")
+    body_options(sp)
+    sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
+    sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
+    sp.add_argument("--with-body", action="store_true", help="export the posed body too")
+    sp.add_argument("--checkpoint", default="best", help="best, last or a checkpoint path")
+    sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    sp.set_defaults(func=cmd_animate)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
     sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")

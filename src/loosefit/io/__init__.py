@@ -1,1 +1,1 @@
-"""Mesh and animation files: OBJ, mesh-sequence .npz (and, later, glTF, USD, Alembic, PC2)."""
+"""Mesh and animation files: OBJ and OBJ sequences, mesh-sequence .npz, USD, glTF (.glb), Alembic, PC2."""

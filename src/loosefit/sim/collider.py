@@ -1,0 +1,80 @@
+"""The collision body Blender's cloth collides with: the body's low-resolution proxy, inflated to enclose the full body.
+
+It also sets how finely Blender must step: cloth-body contacts are found by proximity, so the
+body must not move much more than the collision distance within one solver step
+(:func:`steps_per_frame`).
+
+The decimated proxy (1,229 vertices) lies up to about 1 cm inside the full-resolution surface
+(chest, hips, calves), so cloth resting on it would sink into the full body that the quality gate
+measures. Each proxy vertex is therefore pushed out along its normal, in the rest pose, by the
+largest distance by which the full-body vertices nearest to it stick out of the proxy; the
+inflated proxy is then posed with the proxy's own skinning.
+"""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+from scipy.spatial import cKDTree
+
+from loosefit.body.base import BodyModel
+from loosefit.geometry.normals import vertex_normals
+from loosefit.motion.motion import Motion
+from loosefit.sim.attach import skin_garment
+
+
+def inflated_rest(body: BodyModel, proxy: BodyModel, shape=None) -> np.ndarray:
+    """``(Vp, 3)`` float32 rest vertices of ``proxy`` pushed out so that ``body`` (full resolution) is inside."""
+    full = body.rest_verts(shape).astype(np.float64)
+    low = proxy.rest_verts(shape).astype(np.float64)
+    outside = igl.signed_distance(full, low, proxy.faces, igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
+    _, nearest = cKDTree(low).query(full)
+    push = np.zeros(len(low))
+    np.maximum.at(push, nearest, outside)
+    return (low + push[:, None] * vertex_normals(low, proxy.faces)).astype(np.float32)
+
+
+def collider_frames(body: BodyModel, motion: Motion, shape=None, kind: str = "proxy") -> tuple[np.ndarray, np.ndarray]:
+    """The collision body along ``motion``.
+
+    Args:
+        body: the full-resolution body.
+        motion: ``T`` frames on its rig.
+        shape: body shape (``None`` for the body's own).
+        kind: ``"proxy"`` (inflated low-resolution proxy) or ``"full"`` (the body itself).
+
+    Returns:
+        ``(verts (T, Vc, 3) float32, faces (Fc, 3) int64)``.
+    """
+    if kind == "full":
+        return body.pose(motion, shape).verts, body.faces
+    proxy = body.collision_proxy()
+    rest = inflated_rest(body, proxy, shape)
+    return skin_garment(rest, proxy.skinning_weights(), proxy, motion, shape), proxy.faces
+
+
+#: Body surface travel allowed per solver step, in collision distances. At 2 a 7k-vertex skirt on a
+#: two-turns-per-second spin (body 12 cm per frame near the skirt: 16 steps) stays out of the body;
+#: with 8 steps 7% of its vertices went through.
+TRAVEL_PER_STEP = 2.0
+#: Never more solver steps per frame than this.
+MAX_STEPS = 64
+
+
+def steps_per_frame(
+    collider: np.ndarray, garment: np.ndarray, collision_distance: float, minimum: int, near: float = 0.1
+) -> int:
+    """Solver steps per frame so that the collider near the garment moves at most
+    ``TRAVEL_PER_STEP * collision_distance`` per step (at least ``minimum``, at most ``MAX_STEPS``).
+
+    Args:
+        collider: ``(N, Vc, 3)`` collider vertices per frame.
+        garment: ``(V, 3)`` garment at frame 0; collider vertices within ``near`` metres of it count.
+        collision_distance: m.
+        minimum: the fewest steps.
+    """
+    close = cKDTree(garment).query(collider[0], distance_upper_bound=near)[0] < near
+    if len(collider) < 2 or not close.any():
+        return minimum
+    travel = float(np.linalg.norm(np.diff(collider[:, close], axis=0), axis=-1).max())
+    return int(np.clip(np.ceil(travel / (TRAVEL_PER_STEP * collision_distance)), minimum, MAX_STEPS))

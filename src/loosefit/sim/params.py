@@ -1,0 +1,141 @@
+"""Cloth simulation parameters: a typed config in physical units, loaded from YAML with overrides.
+
+Fabric properties are physical and independent of the garment's mesh resolution; the Blender
+backend converts them per mesh (see :func:`loosefit.sim.blender.cloth_settings`). The three
+parameters varied by the VirtualBones paper map onto ``bending`` (bending stiffness), ``density``
+(mass density) and ``time_scale``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from loosefit.errors import InputError
+
+COLLIDERS = ("proxy", "full")
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """Parameters of one cloth simulation.
+
+    Attributes:
+        density: areal mass density, kg/m^2 (silk ~0.05, cotton ~0.15, denim ~0.4).
+        tension: stretch stiffness, N/m (force per unit width for unit strain).
+        compression: compression stiffness, N/m.
+        shear: in-plane shear stiffness, N/m.
+        bending: bending rigidity, N*m (silk ~1e-6, cotton ~1e-5, denim ~1e-4).
+        stretch_damping: damping of stretch, compression and shear velocities, 1/s (a relative
+            velocity along a spring decays at this rate).
+        bending_damping: damping of folding velocities, 1/s.
+        air_drag: linear air drag per unit area, N*s/m^3.
+        quality: solver steps per frame (the fewest, with ``adaptive_quality``).
+        adaptive_quality: raise the steps per frame so that the body near the garment moves at most
+            two collision distances per step (:func:`loosefit.sim.collider.steps_per_frame`).
+        collision_quality: collision iterations per solver step.
+        collision_distance: distance kept between cloth and body, m.
+        friction: cloth-body friction (Blender's 0-80 scale).
+        self_collision: resolve cloth-cloth contacts (slower).
+        self_collision_distance: distance kept between cloth layers, m.
+        time_scale: simulated seconds per real second (1 = real time; smaller = slower, heavier-looking).
+        preroll: seconds during which the body blends from the rest pose into the first motion
+            frame and the cloth settles; not stored.
+        collider: body mesh Blender collides with: ``"proxy"`` (1,229 vertices inflated to enclose
+            the full body, fast; :mod:`loosefit.sim.collider`) or ``"full"``.
+        gravity: m/s^2, along -Z.
+    """
+
+    density: float = 0.15
+    tension: float = 3000.0
+    compression: float = 3000.0
+    shear: float = 100.0
+    bending: float = 1e-5
+    stretch_damping: float = 200.0
+    bending_damping: float = 5.0
+    air_drag: float = 0.05
+    quality: int = 5
+    adaptive_quality: bool = True
+    collision_quality: int = 2
+    collision_distance: float = 0.004
+    friction: float = 5.0
+    self_collision: bool = False
+    self_collision_distance: float = 0.004
+    time_scale: float = 1.0
+    preroll: float = 1.0
+    collider: str = "proxy"
+    gravity: float = 9.81
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.type == "bool":
+                if not isinstance(value, bool):
+                    raise InputError(f"simulation parameter {f.name}={value!r} must be true or false")
+            elif f.type == "int":
+                if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                    raise InputError(f"simulation parameter {f.name}={value!r} must be a positive integer")
+            elif f.type == "float":
+                if isinstance(value, str):  # YAML 1.1 reads "1e-5" (no dot) as a string
+                    try:
+                        value = float(value)
+                    except ValueError:
+                        pass
+                number = isinstance(value, (int, float)) and not isinstance(value, bool)
+                if not number or not 0 <= value < float("inf"):
+                    raise InputError(f"simulation parameter {f.name}={value!r} must be a finite number >= 0")
+                object.__setattr__(self, f.name, float(value))
+        for name in ("density", "tension", "time_scale"):
+            if getattr(self, name) <= 0:
+                raise InputError(f"simulation parameter {name} must be > 0, got {getattr(self, name)}")
+        if self.collider not in COLLIDERS:
+            raise InputError(f"simulation parameter collider={self.collider!r} must be one of {list(COLLIDERS)}")
+
+    @classmethod
+    def names(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls)]
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any] | None, source: str | Path | None = None) -> "SimParams":
+        """Build from a mapping; unknown keys and bad values raise :class:`InputError` naming ``source``."""
+        values = dict(values or {})
+        unknown = sorted(set(values) - set(cls.names()))
+        if unknown:
+            raise InputError(f"unknown simulation parameters {unknown}; known: {cls.names()}", source)
+        try:
+            return cls(**values)
+        except InputError as e:
+            raise InputError(e.problem, source) from None
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def with_overrides(self, overrides: list[str] | dict[str, Any] | None) -> "SimParams":
+        """A copy with ``["bending=1e-5", "self_collision=true"]`` (YAML scalars) or a dict applied."""
+        if not overrides:
+            return self
+        if not isinstance(overrides, dict):
+            parsed = {}
+            for item in overrides:
+                key, sep, text = item.partition("=")
+                if not sep:
+                    raise InputError(f"bad simulation override {item!r}: expected NAME=VALUE")
+                parsed[key.strip()] = yaml.safe_load(text)
+            overrides = parsed
+        return SimParams.from_dict({**self.to_dict(), **overrides})
+
+    @classmethod
+    def load(cls, path: str | Path, overrides: list[str] | dict[str, Any] | None = None) -> "SimParams":
+        """Read a YAML mapping of parameters (missing ones keep their defaults), then apply overrides."""
+        path = Path(path)
+        try:
+            values = yaml.safe_load(path.read_text())
+        except (OSError, yaml.YAMLError) as e:
+            raise InputError(f"cannot read simulation parameters: {e}", path) from None
+        if values is not None and not isinstance(values, dict):
+            raise InputError("simulation parameters must be a YAML mapping of NAME: VALUE", path)
+        return cls.from_dict(values, path).with_overrides(overrides)

@@ -1,0 +1,255 @@
+"""Simulation plans: a YAML file listing garments, body shapes, motions, parameter sets and the split,
+expanded into sequence jobs with stable ids.
+
+Plan format (paths are relative to the plan file)::
+
+    name: demo
+    shapes:                        # body shapes (Anny phenotype values; missing ones are average)
+      average: {}
+      tall: {height: 0.8}
+    garments:                      # a template (loosefit.garment.make_garment) or a file
+      skirt: {template: skirt, seed: 0, edge_length: 0.03, params: {length: 0.5}}
+      mine: {file: garments/mine.obj, shape: average}   # a file fits one shape only
+    motions:                       # procedural (loosefit.motion.procedural) or a file
+      walk: {procedural: walk, seconds: 4, seed: 1}
+      clip: {file: ../mocap/005_02.bvh, joint_map: cc, start: 1, frames: 300}
+    sim_params:                    # named SimParams sets (missing fields keep their defaults)
+      default: {}
+      stiff: {bending: 1.0e-4}
+    gate: {max_penetration: 0.01}  # QualityGate limits (optional)
+    sequences:                     # groups; each is the product of its lists (missing list: all)
+      - {garments: [skirt], motions: [walk, clip]}
+    split:                         # a sequence using any listed item goes there; the rest is train
+      test: {motions: [clip]}
+      val: {}
+
+A job's id is ``<garment>+<shape>+<motion>+<sim_params>``; the garment entry in the dataset is
+``<garment>+<shape>`` (templates are fitted to each shape). Motions are generated on, or
+retargeted to, the average body and shared by all shapes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from loosefit.errors import InputError
+from loosefit.sim.params import SimParams
+from loosefit.sim.quality import QualityGate
+
+SEPARATOR = "+"
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.=-]{0,60}$")
+_TOP_KEYS = {"name", "shapes", "garments", "motions", "sim_params", "gate", "sequences", "split"}
+_GROUP_KEYS = ("garments", "shapes", "motions", "sim_params")
+_SPLITS = ("test", "val")
+
+
+@dataclass(frozen=True)
+class SequenceJob:
+    """One sequence to simulate.
+
+    Attributes:
+        id: ``<garment>+<shape>+<motion>+<sim_params>``: the sequence's name in the dataset.
+        garment, shape, motion, sim_params: names in the plan.
+        split: ``"train"``, ``"val"`` or ``"test"``.
+        hash: digest of everything that determines the result (specs and parameters); a stored
+            sequence with another hash is simulated again.
+    """
+
+    id: str
+    garment: str
+    shape: str
+    motion: str
+    sim_params: str
+    split: str
+    hash: str
+
+    @property
+    def garment_entry(self) -> str:
+        """Name of the (garment fitted to shape) entry in the dataset."""
+        return f"{self.garment}{SEPARATOR}{self.shape}"
+
+
+@dataclass
+class Plan:
+    """A parsed simulation plan (see the module docstring for the file format)."""
+
+    name: str
+    path: Path
+    shapes: dict[str, dict[str, float]]
+    garments: dict[str, dict[str, Any]]
+    motions: dict[str, dict[str, Any]]
+    sim_params: dict[str, SimParams]
+    gate: QualityGate
+    jobs: list[SequenceJob] = field(default_factory=list)
+
+    def resolve(self, value: str) -> Path:
+        """A path from the plan, relative to the plan's folder."""
+        path = Path(value).expanduser()
+        return path if path.is_absolute() else self.path.parent / path
+
+
+def _mapping(value, what: str, path: Path) -> dict:
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(f"{what} must be a mapping, got {type(value).__name__}", path)
+    return value
+
+
+def _named(section: dict, what: str, path: Path) -> dict:
+    for name in section:
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise InputError(f"{what} name {name!r} must be 1-61 characters from [A-Za-z0-9_.=-] (no '+')", path)
+    return section
+
+
+def _check_keys(spec: dict, allowed: set[str], what: str, path: Path) -> None:
+    unknown = sorted(set(spec) - allowed)
+    if unknown:
+        raise InputError(f"{what}: unknown keys {unknown}; allowed: {sorted(allowed)}", path)
+
+
+def _garment_spec(name: str, spec, path: Path) -> dict:
+    spec = _mapping(spec, f"garment {name!r}", path)
+    if ("template" in spec) == ("file" in spec):
+        raise InputError(f"garment {name!r} needs exactly one of 'template' or 'file'", path)
+    if "template" in spec:
+        _check_keys(spec, {"template", "seed", "edge_length", "params"}, f"garment {name!r}", path)
+        _mapping(spec.get("params"), f"garment {name!r} params", path)
+    else:
+        _check_keys(spec, {"file", "shape"}, f"garment {name!r}", path)
+    return spec
+
+
+def _motion_spec(name: str, spec, path: Path) -> dict:
+    spec = _mapping(spec, f"motion {name!r}", path)
+    if ("procedural" in spec) == ("file" in spec):
+        raise InputError(f"motion {name!r} needs exactly one of 'procedural' or 'file'", path)
+    if "procedural" in spec:
+        _check_keys(spec, {"procedural", "seconds", "seed"}, f"motion {name!r}", path)
+        seconds = spec.get("seconds")
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or seconds <= 0:
+            raise InputError(f"motion {name!r}: 'seconds' must be a positive number, got {seconds!r}", path)
+    else:
+        _check_keys(spec, {"file", "joint_map", "start", "frames"}, f"motion {name!r}", path)
+        for key in ("start", "frames"):
+            value = spec.get(key, 0 if key == "start" else None)
+            least = int(key == "frames")
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
+                raise InputError(f"motion {name!r}: {key!r} must be an integer >= {least}, got {value!r}", path)
+    return spec
+
+
+def _shape_spec(name: str, spec, path: Path) -> dict:
+    from loosefit.body import AnnyShape
+
+    spec = _mapping(spec, f"shape {name!r}", path)
+    try:
+        AnnyShape(**spec)
+    except TypeError:
+        raise InputError(f"shape {name!r}: unknown values {sorted(set(spec) - set(AnnyShape.names()))}", path) from None
+    except InputError as e:
+        raise InputError(f"shape {name!r}: {e.problem}", path) from None
+    return spec
+
+
+def load_plan(path: str | Path) -> Plan:
+    """Read and check a plan file; expand its sequence groups into :class:`SequenceJob` s.
+
+    Raises:
+        InputError: naming the plan file and the problem (unknown key, undefined name, bad value).
+    """
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise InputError(f"cannot read simulation plan: {e}", path) from None
+    raw = _mapping(raw, "a simulation plan", path)
+    _check_keys(raw, _TOP_KEYS, "plan", path)
+    shapes = _named(_mapping(raw.get("shapes"), "shapes", path), "shape", path) or {"average": {}}
+    shapes = {n: _shape_spec(n, s, path) for n, s in shapes.items()}
+    garments = _named(_mapping(raw.get("garments"), "garments", path), "garment", path)
+    garments = {n: _garment_spec(n, s, path) for n, s in garments.items()}
+    motions = _named(_mapping(raw.get("motions"), "motions", path), "motion", path)
+    motions = {n: _motion_spec(n, s, path) for n, s in motions.items()}
+    params_raw = _named(_mapping(raw.get("sim_params"), "sim_params", path), "sim_params", path) or {"default": {}}
+    sim_params = {n: SimParams.from_dict(_mapping(v, f"sim_params {n!r}", path), path) for n, v in params_raw.items()}
+    if not garments or not motions:
+        raise InputError("a plan needs at least one garment and one motion", path)
+    for name, spec in garments.items():
+        if "shape" in spec and spec["shape"] not in shapes:
+            raise InputError(f"garment {name!r}: shape {spec['shape']!r} is not in shapes {list(shapes)}", path)
+    plan = Plan(
+        name=str(raw.get("name", path.stem)),
+        path=path,
+        shapes=shapes,
+        garments=garments,
+        motions=motions,
+        sim_params=sim_params,
+        gate=QualityGate.from_dict(_mapping(raw.get("gate"), "gate", path), path),
+    )
+    plan.jobs = _expand(plan, raw.get("sequences"), _mapping(raw.get("split"), "split", path))
+    return plan
+
+
+def _expand(plan: Plan, groups, split: dict) -> list[SequenceJob]:
+    path = plan.path
+    available = {
+        "garments": plan.garments, "shapes": plan.shapes, "motions": plan.motions, "sim_params": plan.sim_params
+    }
+    if groups is None:
+        groups = [{}]
+    if not isinstance(groups, list):
+        raise InputError("sequences must be a list of groups", path)
+    _check_keys(split, set(_SPLITS), "split", path)
+    held_out = {}
+    for which, lists in split.items():
+        lists = _mapping(lists, f"split {which!r}", path)
+        _check_keys(lists, set(_GROUP_KEYS), f"split {which!r}", path)
+        for key, names in lists.items():
+            for name in names or []:
+                if name not in available[key]:
+                    raise InputError(f"split {which!r}: {key} {name!r} is not defined in the plan", path)
+                held_out.setdefault((key, name), which)
+    jobs: dict[str, SequenceJob] = {}
+    for i, group in enumerate(groups):
+        group = _mapping(group, f"sequences[{i}]", path)
+        _check_keys(group, set(_GROUP_KEYS), f"sequences[{i}]", path)
+        lists = []
+        for key in _GROUP_KEYS:
+            names = group.get(key, list(available[key]))
+            if not isinstance(names, list) or not names:
+                raise InputError(f"sequences[{i}].{key} must be a non-empty list of names", path)
+            for name in names:
+                if name not in available[key]:
+                    what = key if key == "sim_params" else key[:-1]
+                    raise InputError(f"sequences[{i}]: {what} {name!r} is not defined in the plan", path)
+            lists.append(names)
+        for garment, shape, motion, params in itertools.product(*lists):
+            fixed_shape = plan.garments[garment].get("shape")
+            if fixed_shape is not None and fixed_shape != shape:
+                continue  # a garment file fits its own shape only
+            names = {"garments": garment, "shapes": shape, "motions": motion, "sim_params": params}
+            splits = {held_out.get((key, name)) for key, name in names.items()}
+            job_split = "test" if "test" in splits else "val" if "val" in splits else "train"
+            job_id = SEPARATOR.join((garment, shape, motion, params))
+            content = {
+                "garment": plan.garments[garment],
+                "shape": plan.shapes[shape],
+                "motion": plan.motions[motion],
+                "sim_params": plan.sim_params[params].to_dict(),
+                "gate": vars(plan.gate),
+            }
+            digest = hashlib.sha256(json.dumps(content, sort_keys=True, default=str).encode()).hexdigest()[:16]
+            jobs[job_id] = SequenceJob(job_id, garment, shape, motion, params, job_split, digest)
+    if not jobs:
+        raise InputError("the plan's sequence groups select no sequence", path)
+    return list(jobs.values())

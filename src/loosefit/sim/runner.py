@@ -1,0 +1,287 @@
+"""Runs: one sequence from files, or a whole plan into a dataset store (resumable, in parallel with Ray).
+
+A plan run adds the plan's body shapes, garments and motions to the store, then simulates every
+job whose sequence is not already stored with the same content hash. Each finished sequence is
+written atomically, so an interrupted run loses at most the sequences in flight; running the
+plan again redoes only those. A job that raises (a crash, not a quality failure) is stored as
+failed with a reason starting with ``"crashed:"`` and retried by the next run; the other jobs go on.
+
+Workers: ``workers=1`` without ``address`` simulates in this process; otherwise every job is a Ray
+task (one CPU each), on a local Ray started with ``workers`` CPUs or on the cluster at ``address``.
+Each Ray worker is its own process with its own Blender.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+import traceback
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from tqdm import tqdm
+
+from loosefit.errors import InputError
+from loosefit.sim.params import SimParams
+from loosefit.sim.plan import Plan, SequenceJob, load_plan
+from loosefit.sim.quality import QualityGate
+from loosefit.sim.sequence import SimResult, save_result, simulate_sequence
+
+CRASHED = "crashed:"
+#: Object store of a local Ray: results (a few tens of MB each) pass through it.
+_OBJECT_STORE_BYTES = 300 * 1024**2
+
+
+@functools.lru_cache(maxsize=8)
+def _body(shape_values: tuple[float, ...]):
+    """The full-resolution Anny body of a shape, built once per process."""
+    from loosefit.body import AnnyBody, AnnyShape
+
+    return AnnyBody(AnnyShape(*shape_values))
+
+
+def simulate_file(
+    garment_path: str | Path,
+    motion_path: str | Path,
+    out_path: str | Path,
+    params: SimParams | None = None,
+    shape: str | None = None,
+    joint_map: str | None = None,
+) -> SimResult:
+    """Simulate one garment file on one motion file and write a mesh-sequence ``.npz``.
+
+    Args:
+        garment_path: a garment ``.obj`` with its sidecar (:meth:`Garment.load`), or any mesh for
+            :func:`loosefit.garment.import_garment`.
+        motion_path: any motion file :func:`loosefit.motion.io.load_motion` reads.
+        out_path: the ``.npz`` to write (garment ``verts``/``faces``, ``body_verts``/``body_faces``,
+            ``stats`` JSON, ``status``, ``reason``); written even when the quality gate fails.
+        params: simulation parameters (defaults when ``None``).
+        shape: body shape as ``"gender=0.8,height=0.3"`` (the average when ``None``).
+        joint_map: joint map for BVH files (see :func:`loosefit.motion.bvh.import_bvh`).
+    """
+    from loosefit.body import AnnyShape
+    from loosefit.garment import Garment, import_garment
+    from loosefit.motion.io import load_motion
+
+    body = _body(tuple(AnnyShape.parse(shape).to_array().tolist()))
+    garment_path = Path(garment_path)
+    if Garment.sidecar_path(garment_path).is_file():
+        garment = Garment.load(garment_path)
+    else:
+        garment = import_garment(garment_path, body)
+    motion = load_motion(motion_path, body, joint_map=joint_map)
+    result = simulate_sequence(garment, body, motion, params)
+    save_result(out_path, result, garment.faces, body.faces, motion.fps)
+    return result
+
+
+def _load_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
+    from loosefit.garment import Garment, import_garment, make_garment
+
+    spec = plan.garments[name]
+    body = _body(shape_values)
+    if "template" in spec:
+        return make_garment(
+            spec["template"],
+            body,
+            seed=int(spec.get("seed", 0)),
+            edge_length=float(spec.get("edge_length", 0.02)),
+            **spec.get("params", {}),
+        )
+    path = plan.resolve(spec["file"])
+    return Garment.load(path) if Garment.sidecar_path(path).is_file() else import_garment(path, body)
+
+
+def _load_motion(plan: Plan, name: str):
+    from loosefit.body import AnnyShape
+
+    spec = plan.motions[name]
+    body = _body(tuple(AnnyShape().to_array().tolist()))  # motions are made on the average body
+    if "procedural" in spec:
+        from loosefit.motion.procedural import generate
+
+        return generate(spec["procedural"], float(spec["seconds"]), int(spec.get("seed", 0)), body)
+    from loosefit.motion.io import load_motion
+
+    path = plan.resolve(spec["file"])
+    motion = load_motion(path, body, joint_map=spec.get("joint_map"))
+    start, frames = int(spec.get("start", 0)), spec.get("frames")
+    motion = motion.slice(start, None if frames is None else start + int(frames))
+    if motion.num_frames == 0:
+        raise InputError(f"motion {name!r}: no frames left after start={start}", path)
+    return motion
+
+
+def simulate_job(payload: dict[str, Any]) -> dict[str, Any]:
+    """Simulate one job (runs in a worker). ``payload``: ``garment``, ``motion``, ``shape`` values,
+    ``params`` and ``gate`` dicts. Returns ``verts``, ``stats``, ``status``, ``reason``; an exception
+    is returned as a ``"crashed: ..."`` failure."""
+    try:
+        result = simulate_sequence(
+            payload["garment"],
+            _body(payload["shape"]),
+            payload["motion"],
+            SimParams.from_dict(payload["params"]),
+            gate=QualityGate.from_dict(payload["gate"]),
+        )
+        return {"verts": result.verts, "stats": result.stats, "status": result.status, "reason": result.reason}
+    except Exception as e:  # one sequence's crash must not stop the others
+        where = traceback.extract_tb(e.__traceback__)[-1]
+        reason = f"{CRASHED} {type(e).__name__}: {e} (at {Path(where.filename).name}:{where.lineno})"
+        return {"verts": None, "stats": {}, "status": "failed", "reason": reason}
+
+
+def _done(store, job: SequenceJob) -> bool:
+    if not store.has_sequence(job.id):
+        return False
+    seq = store.sequence(job.id)
+    return seq.stats.get("job_hash") == job.hash and not seq.reason.startswith(CRASHED)
+
+
+def run_plan(
+    plan_path: str | Path,
+    out: str | Path,
+    workers: int = 1,
+    address: str | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Simulate a plan into a dataset store, resuming what an earlier run left.
+
+    Args:
+        plan_path: the plan YAML (:mod:`loosefit.sim.plan`).
+        out: the dataset store (``.zarr`` directory), created when missing.
+        workers: parallel simulations on a local Ray (1: in this process, no Ray).
+        address: address of an existing Ray cluster (``"auto"``, ``"ray://host:10001"``...).
+        progress: show a progress bar and a line per finished sequence.
+
+    Returns:
+        Summary: ``jobs``, ``skipped`` (already done), ``ok``, ``failed``, ``crashed``, ``wall_s``
+        and per sequence ``{id: {status, reason, ms_per_frame, wall_s}}``.
+    """
+    from loosefit.data.store import DatasetStore
+
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise InputError(f"workers must be a positive integer, got {workers!r}")
+    start = time.perf_counter()
+    plan = load_plan(plan_path)
+    out = Path(out)
+    store = DatasetStore.open(out, mode="a") if out.exists() else DatasetStore.create(out)
+    todo = [job for job in plan.jobs if not _done(store, job)]
+    summary: dict[str, Any] = {"plan": plan.name, "jobs": len(plan.jobs), "skipped": len(plan.jobs) - len(todo),
+                               "ok": 0, "failed": 0, "crashed": 0, "sequences": {}}
+    payloads = _inputs(plan, store, todo)  # made before simulating: a bad garment or motion stops the run at once
+    bar = tqdm(total=len(plan.jobs), initial=summary["skipped"], desc=plan.name, unit="seq", disable=not progress)
+
+    def record(job: SequenceJob, result: dict[str, Any]) -> None:
+        stats = {**result["stats"], "job_hash": job.hash}
+        verts = result["verts"]
+        if verts is None:
+            verts = np.zeros((0, store.garment_num_verts(job.garment_entry), 3), np.float32)
+        store.write_sequence(
+            job.id, verts, garment=job.garment_entry, body=job.shape, motion=job.motion,
+            sim_params=plan.sim_params[job.sim_params].to_dict(), stats=stats, split=job.split,
+            status=result["status"], reason=result["reason"],
+        )
+        kind = "crashed" if result["reason"].startswith(CRASHED) else result["status"]
+        summary[kind] += 1
+        summary["sequences"][job.id] = {"status": result["status"], "reason": result["reason"],
+                                        "ms_per_frame": stats.get("ms_per_frame"), "wall_s": stats.get("wall_s")}
+        if progress:
+            timing = f"{stats['ms_per_frame']:.0f} ms/frame, {stats['wall_s']:.1f} s" if "ms_per_frame" in stats else ""
+            bar.write(f"{job.id}: {result['status']} {timing} {result['reason']}".rstrip())
+        bar.update(1)
+
+    try:
+        if workers == 1 and address is None:
+            for job, payload in zip(todo, payloads):
+                record(job, simulate_job(payload))
+        else:
+            _run_ray(todo, payloads, workers, address, record)
+    finally:
+        bar.close()
+    summary["wall_s"] = time.perf_counter() - start
+    return summary
+
+
+def _inputs(plan: Plan, store, jobs: list[SequenceJob]) -> list[dict[str, Any]]:
+    """Make the bodies, garments and motions the jobs use and add them to the store (once each;
+    identical entries are left as they are); return each job's payload."""
+    from loosefit.body import AnnyShape
+
+    shapes = {name: tuple(AnnyShape(**spec).to_array().tolist()) for name, spec in plan.shapes.items()}
+    garments: dict[str, Any] = {}
+    motions: dict[str, Any] = {}
+    payloads = []
+    for job in jobs:
+        shape = shapes[job.shape]
+        if job.garment_entry not in garments:
+            store.add_body(job.shape, np.asarray(shape, np.float32))
+            garments[job.garment_entry] = _load_garment(plan, job.garment, shape)
+            store.add_garment(job.garment_entry, garments[job.garment_entry])
+        if job.motion not in motions:
+            motions[job.motion] = _load_motion(plan, job.motion)
+            store.add_motion(job.motion, motions[job.motion])
+        payloads.append({
+            "garment": garments[job.garment_entry],
+            "motion": motions[job.motion],
+            "shape": shape,
+            "params": plan.sim_params[job.sim_params].to_dict(),
+            "gate": vars(plan.gate),
+        })
+    return payloads
+
+
+def _run_ray(
+    jobs: list[SequenceJob],
+    payloads: list[dict[str, Any]],
+    workers: int,
+    address: str | None,
+    record: Callable[[SequenceJob, dict[str, Any]], None],
+) -> None:
+    """Run the jobs as Ray tasks, at most twice the worker count in flight, recording results in order of completion."""
+    import ray
+
+    started = not ray.is_initialized()
+    if started and address is not None:
+        ray.init(address=address, log_to_driver=False)
+    elif started:
+        ray.init(
+            num_cpus=workers, include_dashboard=False, object_store_memory=_OBJECT_STORE_BYTES, log_to_driver=False
+        )
+    try:
+        task = ray.remote(num_cpus=1, max_retries=0)(_simulate_parts)
+        capacity = 2 * (workers if address is None else max(1, int(ray.cluster_resources().get("CPU", workers))))
+        pending: dict[Any, SequenceJob] = {}
+        refs: dict[int, Any] = {}  # one object-store copy per garment / motion
+        for job, payload in zip(jobs, payloads):
+            for key in ("garment", "motion"):
+                if id(payload[key]) not in refs:
+                    refs[id(payload[key])] = ray.put(payload[key])
+            garment, motion = refs[id(payload["garment"])], refs[id(payload["motion"])]
+            rest = {k: v for k, v in payload.items() if k not in ("garment", "motion")}
+            pending[task.remote(garment, motion, rest)] = job
+            while len(pending) >= capacity:
+                _collect(ray, pending, record)
+        while pending:
+            _collect(ray, pending, record)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _simulate_parts(garment, motion, payload: dict[str, Any]) -> dict[str, Any]:
+    """Ray task: Ray resolves object refs passed as top-level arguments (garment, motion), not nested ones."""
+    return simulate_job({**payload, "garment": garment, "motion": motion})
+
+
+def _collect(ray, pending: dict, record) -> None:
+    (ready,), _ = ray.wait(list(pending), num_returns=1)
+    job = pending.pop(ready)
+    try:
+        result = ray.get(ready)
+    except Exception as e:  # the worker process died (Blender crash, out of memory)
+        reason = f"{CRASHED} worker lost: {type(e).__name__}: {e}"
+        result = {"verts": None, "stats": {}, "status": "failed", "reason": reason}
+    record(job, result)

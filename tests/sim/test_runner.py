@@ -1,0 +1,134 @@
+import numpy as np
+import pytest
+import yaml
+
+from loosefit.data.store import DatasetStore
+from loosefit.io.mesh_sequence import MeshSequence
+from loosefit.sim import runner
+from loosefit.sim.runner import CRASHED, run_plan, simulate_file
+from tests.sim.conftest import jump, ring_skirt, spin, walk
+
+FRAMES = 12
+
+
+@pytest.fixture(scope="module")
+def plan_path(tmp_path_factory, body):
+    """A plan of three tiny sequences: a 24 x 8 ring skirt on three 12-frame motions, 0.2 s pre-roll."""
+    root = tmp_path_factory.mktemp("plan")
+    ring_skirt(body, n_around=24, n_down=8, length=0.3).save(root / "skirt.obj")
+    for make in (walk, spin, jump):
+        make(body, FRAMES).save(root / f"{make.__name__}.npz")
+    plan = {
+        "name": "tiny",
+        "garments": {"skirt": {"file": "skirt.obj"}},
+        "motions": {m: {"file": f"{m}.npz"} for m in ("walk", "spin", "jump")},
+        "sim_params": {"quick": {"preroll": 0.2}},
+        "split": {"test": {"motions": ["jump"]}},
+    }
+    path = root / "tiny.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    return path
+
+
+@pytest.fixture(scope="module")
+def reference(plan_path, tmp_path_factory):
+    """The plan run in one go, in this process."""
+    out = tmp_path_factory.mktemp("ref") / "ref.zarr"
+    summary = run_plan(plan_path, out, progress=False)
+    assert (summary["jobs"], summary["ok"], summary["skipped"]) == (3, 3, 0)
+    return DatasetStore.open(out)
+
+
+def test_plan_run_fills_the_store(reference):
+    assert reference.sequence_names() == ["skirt+average+jump+quick", "skirt+average+spin+quick", "skirt+average+walk+quick"]
+    assert reference.sequence_names(split="test") == ["skirt+average+jump+quick"]
+    seq = reference.sequence("skirt+average+walk+quick")
+    assert seq.verts.shape == (FRAMES, 24 * 8, 3) and (seq.garment, seq.body, seq.motion) == ("skirt+average", "average", "walk")
+    assert seq.sim_params["preroll"] == 0.2 and seq.stats["ms_per_frame"] > 0 and seq.stats["penetration"] < 0.01
+    assert reference.garment("skirt+average").pinned.sum() == 24
+    np.testing.assert_allclose(reference.body("average"), 0.5)
+
+
+def test_interrupted_run_resumes_with_identical_results(plan_path, reference, tmp_path, monkeypatch):
+    out = tmp_path / "data.zarr"
+    real = runner.simulate_job
+    calls = []
+
+    def interrupt_second(payload):
+        calls.append(payload["motion"].name)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # killed mid-run: the sequence in flight is never written
+        return real(payload)
+
+    monkeypatch.setattr(runner, "simulate_job", interrupt_second)
+    with pytest.raises(KeyboardInterrupt):
+        run_plan(plan_path, out, progress=False)
+    monkeypatch.undo()
+    store = DatasetStore.open(out)
+    (first,) = store.sequence_names()
+    created = store.sequence(first).created
+    summary = run_plan(plan_path, out, progress=False)
+    assert (summary["skipped"], summary["ok"]) == (1, 2)
+    store = DatasetStore.open(out)
+    assert store.sequence(first).created == created  # kept, not redone
+    for name in reference.sequence_names():
+        np.testing.assert_array_equal(store.sequence(name).verts[:], reference.sequence(name).verts[:])
+    assert run_plan(plan_path, out, progress=False)["skipped"] == 3
+
+
+def test_a_crash_does_not_stop_the_others_and_is_retried(plan_path, tmp_path, monkeypatch):
+    out = tmp_path / "data.zarr"
+    real = runner.simulate_sequence
+
+    def crash_on_spin(garment, body, motion, params, **kw):
+        if motion.name == "spin":
+            raise RuntimeError("Blender fell over")
+        return real(garment, body, motion, params, **kw)
+
+    monkeypatch.setattr(runner, "simulate_sequence", crash_on_spin)
+    summary = run_plan(plan_path, out, progress=False)
+    assert (summary["ok"], summary["crashed"]) == (2, 1)
+    seq = DatasetStore.open(out).sequence("skirt+average+spin+quick")
+    assert seq.status == "failed" and seq.reason.startswith(CRASHED) and "Blender fell over" in seq.reason
+    monkeypatch.undo()
+    summary = run_plan(plan_path, out, progress=False)
+    assert (summary["skipped"], summary["ok"]) == (2, 1)
+    assert DatasetStore.open(out).sequence("skirt+average+spin+quick").status == "ok"
+
+
+def test_two_ray_workers(plan_path, reference, tmp_path):
+    plan = yaml.safe_load(plan_path.read_text())
+    plan["sequences"] = [{"motions": ["walk", "spin"]}]
+    path = plan_path.parent / "two.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    summary = run_plan(path, tmp_path / "ray.zarr", workers=2, progress=False)
+    assert (summary["jobs"], summary["ok"]) == (2, 2)
+    store = DatasetStore.open(tmp_path / "ray.zarr")
+    for name in store.sequence_names():
+        np.testing.assert_array_equal(store.sequence(name).verts[:], reference.sequence(name).verts[:])
+
+
+def test_simulate_file(plan_path, tmp_path):
+    result = simulate_file(plan_path.parent / "skirt.obj", plan_path.parent / "walk.npz", tmp_path / "seq.npz")
+    seq = MeshSequence.load(tmp_path / "seq.npz")
+    assert result.status == "ok" and seq.verts.shape == (FRAMES, 24 * 8, 3)
+    np.testing.assert_array_equal(seq.verts, result.verts)
+
+
+def test_template_garment_and_procedural_motion(tmp_path):
+    plan = {
+        "garments": {"skirt": {"template": "skirt", "seed": 3, "edge_length": 0.06, "params": {"length": 0.4}}},
+        "motions": {"sway": {"procedural": "sway", "seconds": 0.4, "seed": 1}},
+        "shapes": {"tall": {"height": 0.9}},
+        "sim_params": {"quick": {"preroll": 0.2}},
+    }
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    summary = run_plan(path, tmp_path / "d.zarr", progress=False)
+    assert summary["ok"] == 1, summary
+    store = DatasetStore.open(tmp_path / "d.zarr")
+    garment = store.garment("skirt+tall")
+    assert garment.kind == "skirt" and garment.params["length"] == 0.4 and garment.pinned.any()
+    assert store.motion("sway").num_frames == 12 and store.body("tall")[4] == np.float32(0.9)
+    seq = store.sequence("skirt+tall+sway+quick")
+    assert seq.verts.shape == (12, len(garment.verts), 3) and seq.split == "train"
