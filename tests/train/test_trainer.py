@@ -241,3 +241,19 @@ def test_nan_loss_keeps_last_checkpoint(data, tmp_path):
         train(model, train_set, val_set, quick_config(checkpoint_every=2), tmp_path / "run")
     saved = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
     assert (saved["stage_index"], saved["epoch"], saved["global_step"]) == (0, 2, 10)
+
+
+@pytest.mark.parametrize("optimizer, first_step", [("adam", 1.0), ("rmsprop", 10.0)])
+def test_optimizer_first_step_matches_closed_form(data, tmp_path, optimizer, first_step):
+    # One step on the head: Adam moves every weight by lr (m/sqrt(v) = sign g); RMSProp (smoothing
+    # 0.99) by lr * g / sqrt(0.01 g^2) = 10 lr.
+    train_set, _ = data
+    model = make_model()
+    before = model.head.weight.detach().clone()
+    config = quick_config(optimizer=optimizer, lr=1e-4, batch_size=20, schedule="none",
+                          stages={"encoder": StageConfig(epochs=0), "head": StageConfig(epochs=1)})
+    train(model, train_set, None, config, tmp_path / optimizer)
+    step = (model.head.weight.detach() - before).abs()
+    assert torch.allclose(step, torch.full_like(step, first_step * 1e-4), rtol=1e-3)
+    state = load_checkpoint(tmp_path / optimizer / "checkpoints" / "last.pt")["optimizer"]["state"]
+    assert ("square_avg" in state[0]) == (optimizer == "rmsprop")

@@ -64,9 +64,10 @@ class TrainConfig:
         seed: seeds every generator at the start, and each epoch's shuffling.
         epochs: epochs per stage (overridable per stage in ``stages``).
         batch_size: samples per batch (training and validation).
-        optimizer: ``"adam"`` or ``"adamw"`` (decoupled weight decay).
+        optimizer: ``"adam"``, ``"adamw"`` (decoupled weight decay) or ``"rmsprop"`` (torch's
+            defaults: smoothing 0.99, no momentum; JointNet's optimiser).
         lr: initial learning rate of each stage's optimiser.
-        weight_decay: L2 penalty (Adam) or decoupled decay (AdamW).
+        weight_decay: L2 penalty (Adam, RMSProp) or decoupled decay (AdamW).
         schedule: learning-rate schedule over a stage's epochs, stepped once per epoch:
             ``"cosine"`` (from ``lr`` to ``min_lr``), ``"step"`` (times ``step_gamma`` every
             ``step_epochs``) or ``"none"``.
@@ -92,7 +93,7 @@ class TrainConfig:
     seed: int = 0
     epochs: int = 10
     batch_size: int = 8
-    optimizer: Literal["adam", "adamw"] = "adam"
+    optimizer: Literal["adam", "adamw", "rmsprop"] = "adam"
     lr: float = 1e-3
     weight_decay: float = 0.0
     schedule: Literal["cosine", "step", "none"] = "cosine"
@@ -194,7 +195,7 @@ def _device(name: str) -> torch.device:
 
 
 def _optimizer(params: list[torch.nn.Parameter], config: TrainConfig, stage: StageConfig) -> torch.optim.Optimizer:
-    kind = torch.optim.AdamW if config.optimizer == "adamw" else torch.optim.Adam
+    kind = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW, "rmsprop": torch.optim.RMSprop}[config.optimizer]
     return kind(params, lr=stage.lr, weight_decay=stage.weight_decay)
 
 
