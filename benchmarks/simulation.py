@@ -19,7 +19,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_results  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 from loosefit.body import AnnyBody  # noqa: E402
+from loosefit.data import DatasetStore  # noqa: E402
 from loosefit.garment import make_garment  # noqa: E402
 from loosefit.motion.procedural import generate  # noqa: E402
 from loosefit.sim import SimParams, run_plan, simulate_sequence  # noqa: E402
@@ -56,15 +59,28 @@ def sizes(body, targets: list[int], seconds: float) -> list[dict]:
     return rows
 
 
-def plan_time(plan: str, workers: int) -> dict:
+def plan_time(plan: str, workers: int, out: str | None = None) -> dict:
+    """Simulate ``plan`` (into ``out``, resuming it, or a temporary store) and summarise time and quality."""
     with tempfile.TemporaryDirectory(prefix="loosefit-bench-") as tmp:
+        store_path = Path(out) if out else Path(tmp) / "data.zarr"
         start = time.perf_counter()
-        summary = run_plan(plan, Path(tmp) / "data.zarr", workers=workers)
+        summary = run_plan(plan, store_path, workers=workers)
         wall = time.perf_counter() - start
+        store = DatasetStore.open(store_path)
+        stats = [store.sequence(n).stats for n in store.sequence_names(status=None)]
     sequences = summary["sequences"].values()
-    return {"plan": plan, "workers": workers, "wall_s": wall, "jobs": summary["jobs"], "ok": summary["ok"],
-            "failed": summary["failed"], "crashed": summary["crashed"],
+
+    def spread(key):
+        values = np.array([s[key] for s in stats if s.get(key) is not None], float)
+        if not len(values):
+            return None
+        return {"mean": float(values.mean()), "median": float(np.median(values)), "max": float(values.max())}
+
+    return {"plan": plan, "workers": workers, "wall_s": wall, "jobs": summary["jobs"], "skipped": summary["skipped"],
+            "ok": summary["ok"], "failed": summary["failed"], "crashed": summary["crashed"],
             "ms_per_frame_mean": sum(s["ms_per_frame"] or 0 for s in sequences) / max(1, len(sequences)),
+            "penetration": spread("penetration"), "penetration_max": spread("penetration_max"),
+            "max_strain": spread("max_strain"), "strain_p99": spread("strain_p99"), "pinned_drift": spread("pinned_drift"),
             "failures": {k: s["reason"] for k, s in summary["sequences"].items() if s["status"] != "ok"}}
 
 
@@ -74,6 +90,7 @@ def main() -> None:
     parser.add_argument("--sizes", default="1000,3000,6000,12000", help="target vertex counts ('' to skip)")
     parser.add_argument("--plan", help="also time simulating this plan (e.g. configs/datasets/bench.yaml)")
     parser.add_argument("--workers", type=int, default=1, help="Ray workers for --plan")
+    parser.add_argument("--out", default=None, help="keep (and resume) the plan's dataset here instead of a temporary folder")
     args = parser.parse_args()
     targets = [int(s) for s in args.sizes.split(",") if s.strip()]
     if targets:
@@ -83,7 +100,7 @@ def main() -> None:
         save_results("simulation", results)
     if args.plan:
         load = os.getloadavg()
-        timing = plan_time(args.plan, args.workers)
+        timing = plan_time(args.plan, args.workers, args.out)
         save_results(f"simulation-plan-{Path(args.plan).stem}", {"load_average": [load, os.getloadavg()], **timing})
 
 

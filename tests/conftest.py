@@ -17,3 +17,70 @@ def body():
 def proxy_body(body):
     """The low-resolution collision proxy of the default body (1,229 vertices)."""
     return body.collision_proxy()
+
+
+# Small real datasets for the model, training and animation tests: simulated by Blender and prepared
+# by the real ``prepare`` stage, once per session (about 15-30 s in all on 2 cores).
+
+TINY_PLAN = """
+name: tiny
+garments:
+  skirt: {template: skirt, seed: 0, edge_length: 0.05, params: {length: 0.45, flare: 25}}
+motions:
+  walk: {procedural: walk, seconds: 1.5, seed: 0}
+  spin: {procedural: spin, seconds: 1.5, seed: 1}
+  sway: {procedural: sway, seconds: 1.5, seed: 2}
+sim_params:
+  default: {preroll: 0.5}
+split:
+  test: {motions: [sway]}
+"""
+
+SECOND_PLAN = """
+name: second
+garments:
+  dress: {template: dress, seed: 1, edge_length: 0.06, params: {length: 0.5}}
+motions:
+  walk: {procedural: walk, seconds: 1.0, seed: 3}
+sim_params:
+  default: {preroll: 0.5}
+"""
+
+
+def _build(tmp_root, name: str, plan_text: str, bones: int):
+    from loosefit.rig.prepare import prepare
+    from loosefit.sim import run_plan
+
+    plan = tmp_root / f"{name}.yaml"
+    plan.write_text(plan_text)
+    store = tmp_root / f"{name}.zarr"
+    summary = run_plan(plan, store, progress=False)
+    assert summary["failed"] == 0 and summary["crashed"] == 0, summary
+    prepare(store, bones=bones, progress=False)
+    return store
+
+
+@pytest.fixture(scope="session")
+def tiny_store(tmp_path_factory):
+    """A prepared store: one skirt (a few hundred vertices), walk + spin for training, sway for test, 8 bones."""
+    return _build(tmp_path_factory.mktemp("models"), "tiny", TINY_PLAN, bones=8)
+
+
+@pytest.fixture(scope="session")
+def second_store(tmp_path_factory):
+    """A prepared store with a dress of a different vertex count (training sequences only), 6 bones."""
+    return _build(tmp_path_factory.mktemp("models2"), "second", SECOND_PLAN, bones=6)
+
+
+@pytest.fixture(scope="session")
+def tiny_train(tiny_store):
+    from loosefit.models.dataset import GarmentSequences
+
+    return GarmentSequences(tiny_store, "skirt+average", "train")
+
+
+@pytest.fixture(scope="session")
+def tiny_test(tiny_store):
+    from loosefit.models.dataset import GarmentSequences
+
+    return GarmentSequences(tiny_store, "skirt+average", "test", bones=False)

@@ -1,0 +1,123 @@
+"""``loosefit animate``: a trained run folder + new motions -> garment mesh sequences.
+
+:class:`Animator` rebuilds the model from the run folder alone (``model.json``, ``method.yaml`` and a
+checkpoint), turns motions into features, runs the network and puts the canonical result back into the
+world. Motions are animated in batches (padded at the end: the models are causal, so padding never
+changes earlier frames), or streamed one frame at a time with :class:`AnimationStream` for real-time use.
+Both give the same vertices.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from loosefit.config import load_config
+from loosefit.errors import InputError
+from loosefit.models.motion_features import FeatureStream, heading_frames, motion_features, to_world
+from loosefit.models.registry import model_class, run_config_class
+from loosefit.motion.motion import Motion
+from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
+from loosefit.train.run import RunDir, load_weights
+
+
+class Animator:
+    """A trained garment model ready to animate.
+
+    Args:
+        run_dir: a folder written by :func:`loosefit.train.pipeline.train_model`.
+        checkpoint: ``"best"`` (falls back to ``"last"`` when absent) or ``"last"``, or a checkpoint path.
+        threads: torch CPU threads used while animating (1 is fastest for the graph layers here).
+    """
+
+    def __init__(self, run_dir: str | Path, checkpoint: str = "best", threads: int | None = 1):
+        run = RunDir(run_dir)
+        meta_path = run.path / MODEL_META
+        if not meta_path.is_file():
+            raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
+        self.meta = json.loads(meta_path.read_text())
+        cls = model_class(self.meta["method"])
+        cfg = load_config(run_config_class(self.meta["method"]), run.path / METHOD_CONFIG)
+        self.model = cls(self.meta["sizes"], cfg.model)
+        path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
+        if checkpoint == "best" and not path.is_file():
+            path = run.last_checkpoint
+        load_weights(self.model, path)
+        self.model.eval()
+        self.threads = threads
+        self.faces = self.model.faces.numpy()
+
+    @property
+    def method(self) -> str:
+        return self.meta["method"]
+
+    @property
+    def num_joints(self) -> int:
+        return int(self.meta["sizes"]["num_joints"])
+
+    def _check(self, motion: Motion) -> None:
+        if motion.num_joints != self.num_joints:
+            raise InputError(f"motion {motion.name!r} has {motion.num_joints} joints, the model was trained on {self.num_joints}")
+
+    def animate(self, motion: Motion) -> np.ndarray:
+        """World garment vertices ``(T, V, 3)`` float32 for one motion."""
+        return self.animate_batch([motion])[0]
+
+    def animate_batch(self, motions: list[Motion]) -> list[np.ndarray]:
+        """World vertices ``(T_i, V, 3)`` for several motions, run as one batch."""
+        for m in motions:
+            self._check(m)
+        feats = [motion_features(m) for m in motions]
+        T = max(m.num_frames for m in motions)
+
+        def padded(key):
+            return torch.from_numpy(np.stack([np.concatenate([f[key], np.repeat(f[key][-1:], T - len(f[key]), 0)]) for f in feats]))
+
+        with _threads(self.threads), torch.no_grad():
+            canonical = self.model(padded("root"), padded("joints"))["verts"].numpy()
+        out = []
+        for m, c in zip(motions, canonical):
+            rot, origin = heading_frames(m)
+            out.append(to_world(c[: m.num_frames], rot, origin))
+        return out
+
+    def stream(self) -> "AnimationStream":
+        """A frame-by-frame animator carrying the recurrent state (see :class:`AnimationStream`)."""
+        return AnimationStream(self)
+
+
+class AnimationStream:
+    """Real-time use: ``step(rotations (J, 3), translation (3,)) -> vertices (V, 3)`` world, one frame at a time."""
+
+    def __init__(self, animator: Animator):
+        self.animator = animator
+        self.features = FeatureStream()
+        self.state = None
+
+    def step(self, rotations: np.ndarray, translation: np.ndarray) -> np.ndarray:
+        rotations = np.asarray(rotations, np.float32)
+        if rotations.shape != (self.animator.num_joints, 3):
+            raise InputError(f"a frame needs rotations of shape ({self.animator.num_joints}, 3), got {rotations.shape}")
+        root, joints, (rot, origin) = self.features.step(rotations, translation)
+        with _threads(self.animator.threads), torch.no_grad():
+            out = self.animator.model(torch.from_numpy(root)[None, None], torch.from_numpy(joints)[None, None], self.state)
+        self.state = out["state"]
+        return to_world(out["verts"][0].numpy(), rot[None], origin[None])[0]
+
+
+class _threads:
+    """Temporarily set torch's CPU thread count (None: leave it)."""
+
+    def __init__(self, n: int | None):
+        self.n = n
+
+    def __enter__(self):
+        self.saved = torch.get_num_threads()
+        if self.n:
+            torch.set_num_threads(self.n)
+
+    def __exit__(self, *exc):
+        torch.set_num_threads(self.saved)

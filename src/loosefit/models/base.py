@@ -1,0 +1,126 @@
+"""What every per-garment model shares: sizes read from the data, feature normalisation, the trainer
+protocol (:mod:`loosefit.train.protocol`) and the canonical-frame prediction interface used by animation.
+
+A model predicts *canonical* garment vertices (heading frame, :mod:`loosefit.models.motion_features`)
+from normalised motion features, frame by frame with a recurrent state::
+
+    out = model(root (B, T, 11), joints (B, T, J-1, 6), state=None)
+    out["verts"]  (B, T, V, 3) canonical vertices, metres;  out["state"]  the recurrent state after frame T-1
+
+so that running ``T`` frames at once or one frame at a time (passing the state along) gives the same
+vertices. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
+checkpoint plus :meth:`GarmentModel.sizes` rebuild it without the dataset.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch import nn
+
+from loosefit.models.dataset import GarmentSequences
+from loosefit.train.losses import frame_mask
+
+
+class GarmentModel(nn.Module):
+    """Base class of the per-garment methods.
+
+    Subclasses set ``method`` (the CLI name) and ``Config`` (their hyper-parameter dataclass), implement
+    ``__init__(sizes, config)``, :meth:`forward`, :meth:`training_loss`, and may override :meth:`stages`,
+    :meth:`stage_parameters`, :meth:`init_from_data`.
+
+    ``sizes`` (JSON-able dict) holds at least ``num_verts`` (V), ``num_joints`` (J, root included) and
+    ``num_faces`` (F); methods add theirs (``num_bones``...). Never hard-code them.
+    """
+
+    method: ClassVar[str] = ""
+    Config: ClassVar[type] = object
+    #: Whether the method needs the virtual-bone rig of a prepared store.
+    needs_rig: ClassVar[bool] = False
+
+    def __init__(self, sizes: dict, config):
+        super().__init__()
+        self._sizes = dict(sizes)
+        self.config = config
+        J, V, F = sizes["num_joints"], sizes["num_verts"], sizes["num_faces"]
+        self.register_buffer("root_mean", torch.zeros(11))
+        self.register_buffer("root_std", torch.ones(11))
+        self.register_buffer("joints_mean", torch.zeros(J - 1, 6))
+        self.register_buffer("joints_std", torch.ones(J - 1, 6))
+        self.register_buffer("faces", torch.zeros(F, 3, dtype=torch.long))
+        self.register_buffer("template", torch.zeros(V, 3))  # the garment's rest mesh
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def data_sizes(cls, data: GarmentSequences) -> dict:
+        """The sizes of ``data``; subclasses add their own (call ``super()``)."""
+        first = data.sequences[0]
+        return {"num_verts": int(first.verts.shape[1]), "num_joints": int(first.joints.shape[1] + 1),
+                "num_faces": int(len(data.faces))}
+
+    @classmethod
+    def from_data(cls, data: GarmentSequences, config) -> "GarmentModel":
+        """A model sized for ``data`` with its buffers (statistics, faces, rig...) filled from it."""
+        model = cls(cls.data_sizes(data), config)
+        model.init_from_data(data)
+        return model
+
+    def init_from_data(self, data: GarmentSequences) -> None:
+        """Fill the buffers from the training data (subclasses extend, calling ``super()``)."""
+        stats = data.feature_stats()
+        with torch.no_grad():
+            for key in ("root", "joints"):
+                getattr(self, f"{key}_mean").copy_(torch.from_numpy(stats[key][0]))
+                getattr(self, f"{key}_std").copy_(torch.from_numpy(stats[key][1]))
+            self.faces.copy_(torch.from_numpy(data.faces))
+            self.template.copy_(torch.from_numpy(data.garment.verts))
+
+    def sizes(self) -> dict:
+        return dict(self._sizes)
+
+    # ------------------------------------------------------------------ prediction
+
+    def normalise(self, root: torch.Tensor, joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Standardised features: ``root (B,T,11)``, ``joints (B,T,J-1,6)``."""
+        return (root - self.root_mean) / self.root_std, (joints - self.joints_mean) / self.joints_std
+
+    def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None) -> dict:
+        """Raw (un-normalised) features -> ``{"verts": (B,T,V,3) canonical, "state": ..., other outputs}``."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ trainer protocol
+
+    def stages(self) -> list[str]:
+        return ["all"]
+
+    def stage_parameters(self, stage: str):
+        return self.parameters()
+
+    def training_loss(self, batch: dict, stage: str):
+        raise NotImplementedError
+
+    @staticmethod
+    def mask(batch: dict) -> torch.Tensor:
+        """``(B, T)`` frames that count in losses and metrics (burn-in frames excluded)."""
+        return frame_mask(batch["burn_in"], batch["verts"].shape[1])
+
+    def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
+        """``rmse_mm`` (true root mean square) and ``mean_vertex_error_mm`` over the counted frames."""
+        with torch.no_grad():
+            pred = self(batch["root"], batch["joints"])["verts"]
+            mask = self.mask(batch)
+            sq = ((pred - batch["verts"]) ** 2).sum(-1).mean(-1)  # (B, T) mean squared vertex error
+            dist = (pred - batch["verts"]).norm(dim=-1).mean(-1)
+            n = mask.sum().clamp_min(1)
+            return {"rmse_mm": float(((sq * mask).sum() / n).sqrt() * 1e3),
+                    "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3)}
+
+    def batch_size(self, batch: dict) -> int:
+        return int(batch["root"].shape[0])
+
+
+def parameter_count(model: nn.Module) -> int:
+    return int(sum(np.prod(p.shape) for p in model.parameters()))

@@ -1,0 +1,355 @@
+"""JointNet (Diao et al. 2024): joint-wise motion features, a sparse joint-to-bone association and
+joint-specific pose-space deformation, on top of the garment's virtual bones.
+
+Per frame ``t``, in the canonical heading frame (:mod:`loosefit.models.motion_features`):
+
+1. **Joint-wise encoding.** Each selected body joint ``j`` (by default every non-root joint but the
+   fingers and thumbs) sees the root features, its own rotation and those of its skeleton neighbours
+   (its parent, the root's tilt for children of the root, and its selected children, zero-padded to a
+   fixed count). One GRU per joint (hidden 600) and one linear layer per joint (480) give its feature
+   ``psi_j (K,)``. The ``J_s`` GRUs run together as one grouped GRU (:class:`JointGRU`).
+2. **Association.** A learnt matrix ``A (B, J_s)`` (``B`` virtual bones) through a ReLU maps joint
+   features to bones: ``relu(A) @ psi``. An L1 penalty keeps it sparse, so a bone listens to few joints
+   (an arm does not swing the hem of a skirt).
+3. **Garment prior.** Fourier features of each bone's rest position, ``[alpha_m cos(2 pi c_m . p),
+   alpha_m sin(2 pi c_m . p)]`` with fixed random frequencies ``c_m`` and learnt ``alpha_m``, are added.
+4. **Bone transforms.** A per-bone (shared) MLP ``F`` (K, 1024, 2048, 1024, 6) gives three Euler angles
+   and a three-vector offset, both standardised by the training statistics of the rig's bone
+   transforms. The bone rotates about its rest position ``c`` and moves by the offset, so
+   ``R = euler(angles)``, ``T = c + offset - R c`` (``v = R p + T`` takes ``c`` to ``c + offset``);
+   the rotation and the translation are thereby decoupled.
+5. **Joint-specific PSD.** A shared MLP ``phi`` (K, 480, 128, |X|) gives ``|X|`` blend weights per
+   joint; with a learnt displacement basis ``D_j (|X|, V, 3)`` per joint, the rest mesh becomes
+   ``U + sum_j phi(psi_j) D_j`` in the canonical (rest) space, before the skinning.
+6. **Skinning.** Linear blend skinning of that mesh by the bones with the rig's SSDR weights.
+
+Loss: ``L1(vertices) + lambda_norm * normal loss + lambda_s * ||relu(A)||_1``, against the full
+simulated garment. Training has two stages (paper Sec. 4.2): ``stage1`` without the PSD (its output is
+zero and its parameters are not optimised), ``stage2`` everything.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Optional
+
+import numpy as np
+import torch
+from torch import nn
+
+from loosefit.errors import InputError
+from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
+from loosefit.models.base import GarmentModel
+from loosefit.models.body_lbs import training_body
+from loosefit.models.config import WindowConfig
+from loosefit.models.dataset import GarmentSequences
+from loosefit.models.layers.mlp import mlp
+from loosefit.rig.prepare import load_rig
+from loosefit.rig.virtual_bones import skin_bones
+from loosefit.train import StageConfig, TrainConfig
+from loosefit.train.losses import normal_loss, vertex_l1
+
+STAGES = ("stage1", "stage2")
+#: Standard deviation of the initial PSD displacement bases, metres: small enough to leave the
+#: skinned garment as it is (about 0.1 mm in all), non-zero so that gradients reach ``phi`` at once.
+PSD_INIT_STD = 1e-5
+#: Smallest standard deviation of a bone output (radians or metres): bones that barely move in the
+#: training data still get a usable output scale.
+MIN_OUTPUT_STD = 1e-3
+
+
+@dataclass(frozen=True)
+class JointNetConfig:
+    """JointNet's hyper-parameters (defaults from the paper, Sec. 3 and 4.2, unless noted).
+
+    Attributes:
+        joints: names of the body joints that get a GRU; ``None``: every non-root joint of the rig
+            whose name contains none of ``exclude_joints`` (the paper drops the hand joints).
+        exclude_joints: name fragments of the joints left out when ``joints`` is ``None``.
+        gru_hidden: hidden size of each joint's GRU (600).
+        features: ``K``, the per-joint feature size after the per-joint linear layer (480); also the
+            size of the bone features and of the Fourier features (``K / 2`` frequencies), so even.
+        bone_mlp: hidden sizes of the per-bone MLP ``F`` (1024, 2048, 1024; LeakyReLU, as every
+            MLP of :mod:`loosefit.models.layers.mlp`: the paper does not name the activation).
+        psd_mlp: hidden sizes of the PSD weight MLP ``phi`` (480, 128).
+        psd_shapes: ``|X|``, displacement bases per joint (64 in the authors' code; not in the paper).
+        fourier_scale: standard deviation of the Fourier frequencies ``c_m``, cycles per metre (not in
+            the paper; 2 separates bones about 10 cm apart on a garment about 1 m across).
+        euler_order: intrinsic axis order of the predicted Euler angles.
+        lambda_norm: weight of the normal loss (not in the paper: the normal term is then roughly a
+            third of the L1 vertex term, in metres, at a few millimetres of error).
+        lambda_sparse: weight of the L1 norm of ``relu(A)`` (not in the paper; at the initial
+            association, whose rows sum to 1, it costs ``B * 1e-5`` m, 0.8 mm of L1 for 80 bones).
+    """
+
+    joints: Optional[list[str]] = None
+    exclude_joints: list[str] = field(default_factory=lambda: ["Finger", "Thumb"])
+    gru_hidden: int = 600
+    features: int = 480
+    bone_mlp: list[int] = field(default_factory=lambda: [1024, 2048, 1024])
+    psd_mlp: list[int] = field(default_factory=lambda: [480, 128])
+    psd_shapes: int = 64
+    fourier_scale: float = 2.0
+    euler_order: str = "xyz"
+    lambda_norm: float = 0.05
+    lambda_sparse: float = 1e-5
+
+    def __post_init__(self):
+        sizes = [self.gru_hidden, self.features, self.psd_shapes, *self.bone_mlp, *self.psd_mlp]
+        if min(sizes) < 1:
+            raise InputError(f"JointNet layer sizes must be >= 1, got {sizes}")
+        if self.features % 2:
+            raise InputError(f"features must be even (half cosines, half sines), got {self.features}")
+        if sorted(self.euler_order.lower()) != ["x", "y", "z"]:
+            raise InputError(f"euler_order must be a permutation of 'xyz', got {self.euler_order!r}")
+        if not (self.fourier_scale > 0 and self.lambda_norm >= 0 and self.lambda_sparse >= 0):
+            raise InputError("fourier_scale must be > 0, lambda_norm and lambda_sparse >= 0")
+
+
+def _paper_training() -> TrainConfig:
+    # RMSProp, batch 8, lr 1e-3 times 0.7 every 30 epochs (paper Sec. 4.2 and the authors' code); the
+    # epochs per stage are not in the paper.
+    return TrainConfig(optimizer="rmsprop", lr=1e-3, batch_size=8, schedule="step", step_epochs=30, step_gamma=0.7,
+                       stages={"stage1": StageConfig(epochs=150), "stage2": StageConfig(epochs=60)})
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything ``loosefit train --method jointnet`` reads (``configs/models/jointnet.yaml``).
+
+    ``data``: windows of 60 frames every 50, the first 10 of a window warming the GRUs up: 50 frames of
+    loss per window, the paper's truncation length.
+    """
+
+    model: JointNetConfig = field(default_factory=JointNetConfig)
+    train: TrainConfig = field(default_factory=_paper_training)
+    data: WindowConfig = field(default_factory=lambda: WindowConfig(window=60, stride=50, burn_in=10))
+
+
+def select_joints(names: list[str], config: JointNetConfig) -> list[int]:
+    """Indices (into ``names``, root excluded) of the joints that get a GRU, in rig order."""
+    if config.joints is None:
+        excluded = [e.lower() for e in config.exclude_joints]
+        return [j for j, n in enumerate(names) if j > 0 and not any(e in n.lower() for e in excluded)]
+    unknown = sorted(set(config.joints) - set(names[1:]))
+    if unknown:
+        raise InputError(f"joints {unknown} are not non-root joints of the rig ({names[1:]})")
+    return [j for j, n in enumerate(names) if j > 0 and n in config.joints]
+
+
+def neighbour_table(selected: list[int], parents: list[int]) -> np.ndarray:
+    """``(J_s, 2 + C)`` int64 rows of the rotation table each joint reads: itself, its parent, its
+    selected children padded to the largest count ``C``. Rotation table rows: 0 the root's tilt, ``j``
+    joint ``j``, ``J`` zeros (padding). A parent outside the selection (and not the root) is padding
+    too: left-out joints are not inputs at all."""
+    J = len(parents)
+    chosen = set(selected)
+    children = {j: [c for c in selected if parents[c] == j] for j in selected}
+    width = max(len(c) for c in children.values())
+    rows = []
+    for j in selected:
+        p = parents[j]
+        parent = p if p == 0 or p in chosen else J
+        rows.append([j, parent] + children[j] + [J] * (width - len(children[j])))
+    return np.asarray(rows, np.int64)
+
+
+class JointGRU(nn.Module):
+    """``G`` independent single-layer GRUs (torch's gate equations) evaluated together.
+
+    ``forward(x (B, T, G, C), h (B, G, H) or None) -> (outputs (B, T, G, H), last state (B, G, H))``.
+    """
+
+    def __init__(self, groups: int, input_size: int, hidden: int):
+        super().__init__()
+        bound = 1.0 / math.sqrt(hidden)  # torch.nn.GRU's initialisation
+        self.hidden = hidden
+        self.weight_ih = nn.Parameter(torch.empty(groups, 3 * hidden, input_size).uniform_(-bound, bound))
+        self.weight_hh = nn.Parameter(torch.empty(groups, 3 * hidden, hidden).uniform_(-bound, bound))
+        self.bias_ih = nn.Parameter(torch.empty(groups, 1, 3 * hidden).uniform_(-bound, bound))
+        self.bias_hh = nn.Parameter(torch.empty(groups, 1, 3 * hidden).uniform_(-bound, bound))
+
+    def forward(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        B, T, G, _ = x.shape
+        h = x.new_zeros(G, B, self.hidden) if h is None else h.transpose(0, 1)  # (G, B, H)
+        # every frame's input gates at once: (G, T, B, 3H)
+        gates_x = (grouped_linear(self.weight_ih, x.permute(2, 1, 0, 3).flatten(1, 2)) + self.bias_ih).unflatten(1, (T, B))
+        outputs = []
+        for t in range(T):
+            gates_h = grouped_linear(self.weight_hh, h) + self.bias_hh
+            xr, xz, xn = gates_x[:, t].chunk(3, -1)
+            hr, hz, hn = gates_h.chunk(3, -1)
+            r, z = torch.sigmoid(xr + hr), torch.sigmoid(xz + hz)
+            n = torch.tanh(xn + r * hn)
+            h = n + z * (h - n)  # (1 - z) n + z h
+            outputs.append(h)
+        return torch.stack(outputs, 2).permute(1, 2, 0, 3), h.transpose(0, 1)
+
+
+def grouped_linear(weight: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """``x (G, N, I)`` times each group's ``weight (G, O, I)`` transposed -> ``(G, N, O)``.
+
+    Written as ``weight @ x^T``: in streaming (``N = 1``) this reads each matrix row by row, measured 1.5x
+    faster than ``x @ weight^T`` on one CPU thread (the weights, not the arithmetic, bound the time).
+    """
+    return torch.bmm(weight, x.transpose(1, 2)).transpose(1, 2)
+
+
+class JointNet(GarmentModel):
+    """JointNet on one garment (see the module doc).
+
+    ``sizes`` adds to the base sizes ``num_bones`` (B, the rig's bones), ``joint_names`` (the ``J``
+    names of the body rig, in the order of the features) and ``parents`` (``J`` parent indices, -1 for
+    the root); the selected joints follow from them and the config.
+
+    Buffers (filled by :meth:`init_from_data`): ``rig_rest (V, 3)`` the rig's rest mesh, ``skin_weights
+    (V, B)``, ``bone_rest (B, 3)`` bone rest positions, ``euler_mean/std (B, 3)`` radians and
+    ``offset_mean/std (B, 3)`` metres (the bone outputs' training statistics), ``fourier_freqs (K/2, 3)``.
+    """
+
+    method: ClassVar[str] = "jointnet"
+    Config: ClassVar[type] = JointNetConfig
+    needs_rig: ClassVar[bool] = True
+
+    def __init__(self, sizes: dict, config: JointNetConfig):
+        super().__init__(sizes, config)
+        V, B, J = sizes["num_verts"], sizes["num_bones"], sizes["num_joints"]
+        names, parents = list(sizes["joint_names"]), [int(p) for p in sizes["parents"]]
+        if len(names) != J or len(parents) != J:
+            raise InputError(f"sizes give {len(names)} joint names and {len(parents)} parents for {J} joints")
+        self.selected = select_joints(names, config)
+        if not self.selected:
+            raise InputError(f"no joint is selected from {names[1:]} (config joints / exclude_joints)")
+        self.joint_names = [names[j] for j in self.selected]
+        self.register_buffer("neighbours", torch.from_numpy(neighbour_table(self.selected, parents)), persistent=False)
+        G, K, H = len(self.selected), config.features, config.gru_hidden
+        input_size = 11 + 6 * self.neighbours.shape[1]
+
+        self.gru = JointGRU(G, input_size, H)
+        bound = 1.0 / math.sqrt(H)
+        self.joint_out_weight = nn.Parameter(torch.empty(G, K, H).uniform_(-bound, bound))
+        self.joint_out_bias = nn.Parameter(torch.empty(G, 1, K).uniform_(-bound, bound))
+        # Rows summing to 1 on average: a bone starts from the mean of the joint features.
+        self.association = nn.Parameter(torch.rand(B, G) * (2.0 / G))
+        self.fourier_alpha = nn.Parameter(torch.randn(K // 2))
+        self.register_buffer("fourier_freqs", torch.randn(K // 2, 3) * config.fourier_scale)
+        self.bone_mlp = mlp([K, *config.bone_mlp, 6])
+        self.psd_mlp = mlp([K, *config.psd_mlp, config.psd_shapes])
+        self.psd_basis = nn.Parameter(torch.randn(G, config.psd_shapes, V, 3) * PSD_INIT_STD)
+
+        self.register_buffer("rig_rest", torch.zeros(V, 3))
+        self.register_buffer("skin_weights", torch.zeros(V, B))
+        self.register_buffer("bone_rest", torch.zeros(B, 3))
+        for name in ("euler", "offset"):
+            self.register_buffer(f"{name}_mean", torch.zeros(B, 3))
+            self.register_buffer(f"{name}_std", torch.ones(B, 3))
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def data_sizes(cls, data: GarmentSequences) -> dict:
+        body = training_body(data)
+        return {**super().data_sizes(data), "num_bones": load_rig(data.store, data.garment_name).num_bones,
+                "joint_names": list(body.joint_names), "parents": [int(p) for p in body.parents]}
+
+    def init_from_data(self, data: GarmentSequences) -> None:
+        """Rig buffers and the statistics of the bone outputs over every training frame."""
+        super().init_from_data(data)
+        if any(s.bone_rot is None for s in data.sequences):
+            raise InputError("JointNet trains on the bone transforms of a prepared store's training sequences "
+                             "(load the data with bones=True)", data.store.path)
+        rig = load_rig(data.store, data.garment_name)
+        centre = rig.bone_rest_positions.astype(np.float64)
+        rot = np.concatenate([s.bone_rot for s in data.sequences]).astype(np.float64)
+        trans = np.concatenate([s.bone_trans for s in data.sequences]).astype(np.float64)
+        euler = matrix_to_euler(torch.from_numpy(rot), self.config.euler_order).numpy()
+        offset = np.einsum("tbij,bj->tbi", rot, centre) + trans - centre  # where each bone's rest position went
+        with torch.no_grad():
+            self.rig_rest.copy_(torch.from_numpy(rig.rest_verts))
+            self.skin_weights.copy_(torch.from_numpy(rig.dense_weights()))
+            self.bone_rest.copy_(torch.from_numpy(rig.bone_rest_positions))
+            for name, values in (("euler", euler), ("offset", offset)):
+                getattr(self, f"{name}_mean").copy_(torch.from_numpy(values.mean(0)))
+                getattr(self, f"{name}_std").copy_(torch.from_numpy(np.maximum(values.std(0), MIN_OUTPUT_STD)))
+
+    # ------------------------------------------------------------------ prediction
+
+    def association_matrix(self) -> torch.Tensor:
+        """``relu(A)`` ``(B, J_s)``: how much each bone listens to each selected joint (``self.joint_names``)."""
+        return torch.relu(self.association)
+
+    def fourier_features(self) -> torch.Tensor:
+        """Garment prior ``(B, K)`` from the bone rest positions (paper Eq. 3)."""
+        phase = 2 * math.pi * self.bone_rest @ self.fourier_freqs.T  # (B, K/2)
+        return torch.cat([self.fourier_alpha * torch.cos(phase), self.fourier_alpha * torch.sin(phase)], -1)
+
+    def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+        """Raw features -> ``(B, T, J_s, 11 + 6 * (2 + C))`` per-joint GRU inputs (standardised)."""
+        root, joints = self.normalise(root, joints)
+        pad = joints.new_zeros(joints.shape[:2] + (1, 6))
+        table = torch.cat([root[:, :, None, 5:11], joints, pad], 2)  # (B, T, J + 1, 6): rows as in neighbour_table
+        gathered = table[:, :, self.neighbours].flatten(-2)  # (B, T, J_s, 6 * (2 + C))
+        return torch.cat([root[:, :, None].expand(-1, -1, gathered.shape[2], -1), gathered], -1)
+
+    def bone_transforms(self, bone_features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(B, T, Nb, K)`` bone features -> rotations ``(B, T, Nb, 3, 3)`` and translations ``(B, T, Nb, 3)``."""
+        out = self.bone_mlp(bone_features)
+        euler = self.euler_mean + self.euler_std * out[..., :3]
+        offset = self.offset_mean + self.offset_std * out[..., 3:]
+        R = euler_to_matrix(euler, self.config.euler_order)
+        return R, self.bone_rest + offset - (R @ self.bone_rest[:, :, None])[..., 0]
+
+    def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None, psd: bool = True) -> dict:
+        """Raw features ``root (B, T, 11)``, ``joints (B, T, J-1, 6)`` and the GRU state ``(B, J_s, H)`` (None:
+        zeros, the start of a motion) -> ``{"verts": (B, T, V, 3) canonical, "bones": (rotations (B, T, Nb,
+        3, 3), translations (B, T, Nb, 3)), "association": (Nb, J_s), "displacement": (B, T, V, 3) PSD
+        offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state": (B, J_s, H)}``."""
+        hidden, state = self.gru(self.joint_inputs(root, joints), state)
+        B, T, G, _ = hidden.shape
+        psi = grouped_linear(self.joint_out_weight, hidden.transpose(0, 2).flatten(1, 2)) + self.joint_out_bias
+        psi = psi.unflatten(1, (T, B)).permute(2, 1, 0, 3)  # (B, T, J_s, K)
+        association = self.association_matrix()
+        bone_features = association @ psi + self.fourier_features()  # (B, T, Nb, K)
+        R, T = self.bone_transforms(bone_features)
+        rest, displacement = self.rig_rest, None
+        if psd:
+            weights = self.psd_mlp(psi)  # (B, T, J_s, |X|)
+            displacement = (weights.flatten(-2) @ self.psd_basis.flatten(0, 1).flatten(-2)).unflatten(-1, (-1, 3))
+            rest = rest + displacement
+        verts = skin_bones(rest, self.skin_weights, R, T)
+        return {"verts": verts, "bones": (R, T), "association": association, "displacement": displacement, "state": state}
+
+    # ------------------------------------------------------------------ trainer protocol
+
+    def stages(self) -> list[str]:
+        return list(STAGES)
+
+    def stage_parameters(self, stage: str):
+        """``stage1``: everything but the PSD (``psd_mlp``, ``psd_basis``); ``stage2``: everything."""
+        if stage == "stage2":
+            return self.parameters()
+        return [p for n, p in self.named_parameters() if not n.startswith(("psd_mlp.", "psd_basis"))]
+
+    def sparsity_loss(self) -> torch.Tensor:
+        """``||relu(A)||_1`` (paper Eq. 8)."""
+        return self.association_matrix().sum()
+
+    def training_loss(self, batch: dict, stage: str):
+        pred = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"]
+        mask = self.mask(batch)
+        l1 = vertex_l1(pred, batch["verts"], mask)
+        normal = normal_loss(pred, batch["verts"], self.faces, mask)
+        sparse = self.sparsity_loss()
+        loss = l1 + self.config.lambda_norm * normal + self.config.lambda_sparse * sparse
+        return loss, {"l1_mm": l1.item() * 1e3, "normal": normal.item(), "sparsity": sparse.item()}
+
+    def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
+        """The base metrics (``rmse_mm``, ``mean_vertex_error_mm``), with the PSD only once it trains (``stage2``)."""
+        with torch.no_grad():
+            err = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"] - batch["verts"]
+            mask = self.mask(batch)
+            n = mask.sum().clamp_min(1)
+            sq, dist = (err**2).sum(-1).mean(-1), err.norm(dim=-1).mean(-1)  # (B, T)
+            return {"rmse_mm": float(((sq * mask).sum() / n).sqrt() * 1e3),
+                    "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3)}

@@ -1,0 +1,111 @@
+"""Body-motion features for the networks, in a heading-invariant canonical frame.
+
+Garment networks must not have to learn every heading and position of the body separately: a spin
+is a spin whichever way the body faces. So the garment and the body are expressed in the *heading
+frame* of each frame ``t``: origin under the root joint on the floor plane, rotated about Z by the
+root's heading (yaw) ``psi_t`` so that the body faces -Y, as at rest::
+
+    F_t = [Rz(psi_t) | (x_t, y_t, 0)]          canonical point  p_c = Rz(psi_t)^T (p - (x_t, y_t, 0))
+
+The per-frame motion features (all in the heading frame of that frame) are:
+
+- ``root`` ``(T, 11)``: root height (m), root displacement since the previous frame (m, 3), heading
+  change since the previous frame (rad, 1, wrapped to (-pi, pi]), root orientation without its
+  heading (6D, 6). Frame 0 has zero displacement and heading change (the simulator starts from rest).
+- ``joints`` ``(T, J-1, 6)``: the local rotation of every non-root joint, 6D (continuous, unlike axis-angle).
+
+Streaming use: :class:`FeatureStream` computes the same features one frame at a time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_sixd
+from loosefit.motion.motion import Motion
+
+ROOT_FEATURES = 11
+#: The body's forward direction at rest (Anny and every loosefit body face -Y).
+FORWARD = np.array([0.0, -1.0, 0.0])
+
+
+def heading_angles(root_rot: np.ndarray) -> np.ndarray:
+    """Heading ``psi (T,)`` radians of root rotations ``(T, 3, 3)``: the rotation about Z that takes the
+    rest forward (-Y) to the horizontal projection of the rotated forward direction."""
+    fwd = root_rot @ FORWARD
+    return np.arctan2(fwd[:, 0], -fwd[:, 1])
+
+
+def rot_z(psi: np.ndarray) -> np.ndarray:
+    """``(T, 3, 3)`` rotations about Z by ``psi (T,)``."""
+    c, s = np.cos(psi), np.sin(psi)
+    R = np.zeros(psi.shape + (3, 3))
+    R[..., 0, 0], R[..., 0, 1], R[..., 1, 0], R[..., 1, 1], R[..., 2, 2] = c, -s, s, c, 1
+    return R
+
+
+def heading_frames(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """Heading frames of a motion: rotations ``(T, 3, 3)`` float64 and origins ``(T, 3)`` (z = 0)."""
+    root_rot = axis_angle_to_matrix(torch.from_numpy(motion.rotations[:, 0]).double()).numpy()
+    origin = motion.translation.astype(np.float64).copy()
+    origin[:, 2] = 0.0
+    return rot_z(heading_angles(root_rot)), origin
+
+
+def to_canonical(points: np.ndarray, rot: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """World points ``(T, N, 3)`` -> canonical ``(T, N, 3)`` float32 with frames ``rot (T,3,3)``, ``origin (T,3)``."""
+    return np.einsum("tji,tnj->tni", rot, points - origin[:, None]).astype(np.float32)
+
+
+def to_world(points, rot, origin):
+    """Canonical points ``(T, N, 3)`` -> world; numpy or torch (then ``rot``/``origin`` may be numpy)."""
+    if isinstance(points, torch.Tensor):
+        rot = torch.as_tensor(rot, dtype=points.dtype, device=points.device)
+        origin = torch.as_tensor(origin, dtype=points.dtype, device=points.device)
+        return torch.einsum("tij,tnj->tni", rot, points) + origin[:, None]
+    return (np.einsum("tij,tnj->tni", rot, points) + origin[:, None]).astype(np.float32)
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def motion_features(motion: Motion) -> dict[str, np.ndarray]:
+    """Features of a whole motion: ``root (T, 11)`` and ``joints (T, J-1, 6)`` float32 (see module doc)."""
+    R = axis_angle_to_matrix(torch.from_numpy(motion.rotations).double())  # (T, J, 3, 3)
+    root_rot = R[:, 0].numpy()
+    psi = heading_angles(root_rot)
+    Rh = rot_z(psi)
+    trans = motion.translation.astype(np.float64)
+    disp = np.zeros_like(trans)
+    disp[1:] = trans[1:] - trans[:-1]
+    dpsi = np.zeros_like(psi)
+    dpsi[1:] = _wrap(psi[1:] - psi[:-1])
+    tilt = np.einsum("tji,tjk->tik", Rh, root_rot)  # heading removed: Rz(psi)^T R_root
+    root = np.concatenate(
+        [trans[:, 2:3], np.einsum("tji,tj->ti", Rh, disp), dpsi[:, None], matrix_to_sixd(torch.from_numpy(tilt)).numpy()], 1
+    )
+    joints = matrix_to_sixd(R[:, 1:]).numpy()
+    return {"root": root.astype(np.float32), "joints": joints.astype(np.float32)}
+
+
+class FeatureStream:
+    """Motion features one frame at a time, equal to :func:`motion_features` on the whole motion.
+
+    ``step(rotations (J, 3), translation (3,))`` returns ``root (11,)``, ``joints (J-1, 6)`` and the frame's
+    heading frame ``(rot (3, 3), origin (3,))``.
+    """
+
+    def __init__(self):
+        self._prev: Motion | None = None  # the previous frame: differences need it
+
+    def step(self, rotations: np.ndarray, translation: np.ndarray):
+        frame = Motion(np.asarray(rotations)[None], np.asarray(translation)[None], rig="stream")
+        pair = frame if self._prev is None else Motion(
+            np.concatenate([self._prev.rotations, frame.rotations]),
+            np.concatenate([self._prev.translation, frame.translation]), rig="stream")
+        feats = motion_features(pair)
+        rot, origin = heading_frames(frame)
+        self._prev = frame
+        return feats["root"][-1], feats["joints"][-1], (rot[0], origin[0])

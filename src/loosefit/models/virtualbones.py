@@ -1,0 +1,323 @@
+"""VirtualBones (Pan et al. 2022): bone-driven motion networks for loose garments.
+
+The garment's low-frequency shape is carried by free virtual bones fitted by SSDR
+(:mod:`loosefit.rig.virtual_bones`); a network maps body motion to their motion, and a second one adds
+the high-frequency detail. Everything happens in the canonical heading frame
+(:mod:`loosefit.models.motion_features`); shapes below for a batch of ``N`` windows of ``T`` frames,
+``V`` vertices, ``B`` bones, ``J`` body joints.
+
+Low-frequency module (Sec. 4.2): a GRU and a linear layer map the normalised motion features (root
+height, root displacement and heading change since the previous frame, root tilt, joint rotations)
+to each bone's rotation, a 6D residual on the identity (the rest transform), and position, the place
+its rest centroid ``c_j`` moves to as an offset from that bone's mean position over the training
+frames in units of the pooled standard deviation. The translation follows: ``T_j = c'_j - R_j c_j``
+(a rotation error then does not move the bone). Linear blend skinning of the rig's rest mesh with
+the SSDR weights gives the canonical low-frequency mesh. Loss (Eq. 2): mean vertex distance to the
+low-frequency target plus ``laplacian_weight`` times the mean distance between the uniform-Laplacian
+coordinates of the two meshes; optionally ``bone_weight`` times the mean squared difference between
+the network's normalised outputs and those of the SSDR bone transforms (not in the paper: off by default).
+
+High-frequency module (Sec. 4.3): a GRU over the predicted bone motions (the low-frequency module's
+normalised outputs) and a linear layer give a global feature for every vertex; EdgeConv layers over
+the mesh edges of the low-frequency mesh (vertex positions in) give local features; a shared per-vertex
+MLP maps both to a displacement (in units of the training high-frequency offsets' standard deviation)
+added to the low-frequency mesh. Loss: mean vertex distance to the simulated mesh plus
+``collision_weight`` times the body penetration term ``max(margin - n_k . (v_i - b_k), 0)``.
+
+Training (trainer stages ``["low", "high"]``): "low" optimises the low-frequency module alone; "high"
+optimises the high-frequency module with the low-frequency module frozen and its output detached.
+Windows with a burn-in give truncated back-propagation through time over long sequences.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import nn
+
+from loosefit.errors import InputError
+from loosefit.geometry.rotations import matrix_to_sixd, sixd_to_matrix
+from loosefit.models.base import GarmentModel
+from loosefit.models.config import WindowConfig
+from loosefit.models.dataset import GarmentSequences
+from loosefit.models.ensemble import EnsembleConfig
+from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
+from loosefit.models.layers.gru import GRUHead
+from loosefit.models.layers.mlp import NEGATIVE_SLOPE, mlp
+from loosefit.rig.normalization import RunningStats
+from loosefit.rig.prepare import load_rig
+from loosefit.rig.virtual_bones import skin_bones
+from loosefit.train import StageConfig, TrainConfig
+from loosefit.train.losses import collision_loss, laplacian_difference, laplacian_operator, vertex_distance
+
+#: The identity rotation in the 6D representation (its first two columns).
+IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+#: Per bone, the low-frequency module outputs a 6D rotation residual and a 3D position offset.
+BONE_OUTPUTS = 9
+#: Initial scale of the read-out layers: the networks start near the mean bone motion and a zero offset.
+OUT_SCALE = 0.1
+#: Floors of the output scales, metres (a bone or an offset that never moves must not get a zero scale).
+MIN_POSITION_STD = 1e-3
+MIN_OFFSET_STD = 1e-4
+
+
+@dataclass(frozen=True)
+class VirtualBonesConfig:
+    """VirtualBones hyper-parameters.
+
+    Attributes:
+        lf_hidden: GRU units of the low-frequency module. The paper gives one GRU layer and a linear
+            layer (Sec. 5); the size, 600, is that of the authors' released networks.
+        hf_hidden: GRU units of the high-frequency module ("a similar structure", Sec. 5; 600 released).
+        global_channels: global feature channels per vertex (10 in the released networks).
+        global_rank: 0 maps the high-frequency GRU state to every vertex's global feature by one
+            linear layer, as released; its ``hf_hidden x V x global_channels`` weights dominate the
+            streaming cost (3.7k vertices: 89 MB read per frame, about 60% of the time). ``r > 0``
+            factorises that layer through ``r`` channels (not in the paper).
+        edge_channels: output channels of the EdgeConv layers. The paper stacks three (Sec. 5); the
+            released networks' widths are 8 and 16, the third keeps 16.
+        head_hidden: hidden widths of the shared per-vertex MLP on [local, global]; empty for a single
+            linear layer, as released.
+        laplacian_weight: lambda_Lap of Eq. 2. The paper does not give it; 1.0 here (both terms are
+            mean distances in metres).
+        collision_weight: weight of the collision term of Sec. 4.3 (not given in the paper).
+        collision_margin: distance below which a vertex counts as penetrating, metres (0 in the paper).
+        bone_weight: weight of the optional supervision of the bone transforms by their SSDR values
+            (0: not used, as in the paper).
+    """
+
+    lf_hidden: int = 600
+    hf_hidden: int = 600
+    global_channels: int = 10
+    global_rank: int = 0
+    edge_channels: tuple[int, ...] = (8, 16, 16)
+    head_hidden: tuple[int, ...] = ()
+    laplacian_weight: float = 1.0
+    collision_weight: float = 1.0
+    collision_margin: float = 0.0
+    bone_weight: float = 0.0
+
+    def __post_init__(self):
+        sizes = (self.lf_hidden, self.hf_hidden, self.global_channels, *self.edge_channels, *self.head_hidden)
+        if min(sizes) < 1 or not self.edge_channels or self.global_rank < 0:
+            raise InputError(f"layer sizes must be >= 1 (global_rank >= 0) and edge_channels non-empty, got {self}")
+        for name in ("laplacian_weight", "collision_weight", "collision_margin", "bone_weight"):
+            if not getattr(self, name) >= 0:
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+
+
+def _default_train() -> TrainConfig:
+    return TrainConfig(grad_clip=1.0, stages={"low": StageConfig(epochs=50), "high": StageConfig(epochs=50)})
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything ``loosefit train --method virtualbones`` reads (``configs/models/virtualbones.yaml``).
+
+    Attributes:
+        model: the network (:class:`VirtualBonesConfig`).
+        train: the trainer (stages ``low`` and ``high``).
+        data: the training windows.
+        ensemble: the simulation-parameter ensemble (Sec. 4.4) over networks trained per parameter set.
+    """
+
+    model: VirtualBonesConfig = field(default_factory=VirtualBonesConfig)
+    train: TrainConfig = field(default_factory=_default_train)
+    data: WindowConfig = field(default_factory=WindowConfig)
+    ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
+
+
+class VirtualBones(GarmentModel):
+    """The VirtualBones motion network of one garment (see the module docstring).
+
+    ``forward(root (N,T,11), joints (N,T,J-1,6), state)`` returns ``verts`` and ``lf`` ``(N,T,V,3)``
+    canonical metres, ``bones`` = (rotations ``(N,T,B,3,3)``, translations ``(N,T,B,3)``) mapping rest
+    mesh points ``p`` to ``R p + T``, and ``state`` = (low-frequency GRU state, high-frequency GRU state).
+    """
+
+    method = "virtualbones"
+    Config = VirtualBonesConfig
+    needs_rig = True
+
+    def __init__(self, sizes: dict, config: VirtualBonesConfig):
+        super().__init__(sizes, config)
+        V, J, B = sizes["num_verts"], sizes["num_joints"], sizes["num_bones"]
+        self.register_buffer("rest_verts", torch.zeros(V, 3))  # the rig's (smoothed) rest mesh
+        self.register_buffer("skin_weights", torch.zeros(V, B))
+        self.register_buffer("bone_rest", torch.zeros(B, 3))  # rest centroid of each bone
+        self.register_buffer("position_mean", torch.zeros(B, 3))  # mean canonical bone position
+        self.register_buffer("position_std", torch.ones(3))
+        self.register_buffer("offset_std", torch.ones(3))  # high-frequency offsets
+        self.register_buffer("lf_mean", torch.zeros(3))  # low-frequency vertices, for the EdgeConv input
+        self.register_buffer("lf_std", torch.ones(()))
+        self.register_buffer("neighbours", torch.zeros(V, sizes["max_degree"], dtype=torch.long))
+        self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D))
+        c = config
+        self.low = GRUHead(11 + 6 * (J - 1), c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
+        self.high_gru = GRUHead(BONE_OUTPUTS * B, c.hf_hidden, c.global_rank or V * c.global_channels)
+        self.global_out = nn.Linear(c.global_rank, V * c.global_channels) if c.global_rank else nn.Identity()
+        widths = (3, *c.edge_channels)
+        self.edge_convs = nn.ModuleList(EdgeConv(a, b) for a, b in zip(widths[:-1], widths[1:]))
+        self.head = mlp((c.edge_channels[-1] + c.global_channels, *c.head_hidden, 3))
+        with torch.no_grad():
+            self.head[-1].weight.mul_(OUT_SCALE)
+            self.head[-1].bias.mul_(OUT_SCALE)
+        self._laplacian: torch.Tensor | None = None  # built from the faces when a loss first needs it
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def data_sizes(cls, data: GarmentSequences) -> dict:
+        sizes = super().data_sizes(data)
+        sizes["num_bones"] = load_rig(data.store, data.garment_name).num_bones
+        sizes["max_degree"] = int(neighbour_table(data.faces, sizes["num_verts"]).shape[1])
+        return sizes
+
+    def init_from_data(self, data: GarmentSequences) -> None:
+        """Rig, output scales and mesh graph from the training data (which must carry bone transforms)."""
+        super().init_from_data(data)
+        rig = load_rig(data.store, data.garment_name)
+        V, B = self._sizes["num_verts"], self._sizes["num_bones"]
+        if rig.num_verts != V or rig.num_bones != B:
+            raise InputError(f"the rig of {data.garment_name!r} has {rig.num_verts} vertices and {rig.num_bones} "
+                             f"bones, the model {V} and {B}", data.store.path)
+        if any(s.bone_rot is None for s in data.sequences):
+            raise InputError("VirtualBones trains on sequences with bone transforms: load the training split "
+                             "with bones=True", data.store.path)
+        # one pass over the sequences (no concatenated copy of every frame)
+        positions, offsets = RunningStats.empty((B, 3)), RunningStats.empty((3,))
+        lf_axes, lf_all = RunningStats.empty((3,)), RunningStats.empty(())
+        for s in data.sequences:
+            positions.update((s.bone_rot @ rig.bone_rest_positions[:, :, None])[..., 0] + s.bone_trans)
+            offsets.update(s.verts - s.lf)
+            lf_axes.update(s.lf)
+            lf_all.update(s.lf.reshape(-1))
+        pooled = np.sqrt((positions.std**2).mean(0))  # per axis, over bones (each bone about its own mean)
+        with torch.no_grad():
+            self.rest_verts.copy_(torch.from_numpy(rig.rest_verts))
+            self.skin_weights.copy_(torch.from_numpy(rig.dense_weights()))
+            self.bone_rest.copy_(torch.from_numpy(rig.bone_rest_positions))
+            self.position_mean.copy_(torch.from_numpy(positions.mean))
+            self.position_std.copy_(torch.from_numpy(np.maximum(pooled, MIN_POSITION_STD)))
+            self.offset_std.copy_(torch.from_numpy(np.maximum(offsets.std, MIN_OFFSET_STD)))
+            self.lf_mean.copy_(torch.from_numpy(lf_axes.mean))
+            self.lf_std.fill_(float(lf_all.std))
+            self.neighbours.copy_(torch.from_numpy(neighbour_table(data.faces, V)))
+        self._laplacian = None
+
+    # ------------------------------------------------------------------ prediction
+
+    def _inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+        """Normalised features ``(N, T, 11 + 6(J-1))``."""
+        root, joints = self.normalise(root, joints)
+        return torch.cat([root, joints.flatten(-2)], -1)
+
+    def low_frequency(self, x: torch.Tensor, h: torch.Tensor | None = None):
+        """Low-frequency module: features ``x (N,T,F)`` -> ``(raw (N,T,B,9), rotations, translations, lf, h)``.
+
+        ``raw`` holds the normalised outputs (6D residual, position offset), the bone motion that the
+        high-frequency module reads.
+        """
+        out, h = self.low(x, h)
+        raw = out.unflatten(-1, (-1, BONE_OUTPUTS))
+        rot, trans = self.decode_bones(raw)
+        return raw, rot, trans, skin_bones(self.rest_verts, self.skin_weights, rot, trans), h
+
+    def decode_bones(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised outputs ``(..., B, 9)`` -> bone rotations ``(..., B, 3, 3)`` and translations ``(..., B, 3)``."""
+        rot = sixd_to_matrix(self.identity_6d + raw[..., :6])
+        position = self.position_mean + raw[..., 6:] * self.position_std
+        return rot, position - (rot @ self.bone_rest[:, :, None])[..., 0]
+
+    def encode_bones(self, rotations: torch.Tensor, translations: torch.Tensor) -> torch.Tensor:
+        """The inverse of :meth:`decode_bones`: the normalised outputs that give these bone transforms."""
+        position = (rotations @ self.bone_rest[:, :, None])[..., 0] + translations
+        offset = (position - self.position_mean) / self.position_std
+        return torch.cat([matrix_to_sixd(rotations) - self.identity_6d, offset], -1)
+
+    def high_frequency(self, raw: torch.Tensor, lf: torch.Tensor, h: torch.Tensor | None = None):
+        """High-frequency module: bone motion ``raw (N,T,B,9)`` and mesh ``lf (N,T,V,3)`` -> ``(offsets (N,T,V,3), h)``."""
+        out, h = self.high_gru(raw.flatten(-2), h)
+        glob = nn.functional.leaky_relu(self.global_out(out).unflatten(-1, (lf.shape[-2], -1)), NEGATIVE_SLOPE)
+        local = (lf - self.lf_mean) / self.lf_std
+        for conv in self.edge_convs:
+            local = conv(local, self.neighbours)
+        return self.head(torch.cat([local, glob], -1)) * self.offset_std, h
+
+    def forward(self, root: torch.Tensor, joints: torch.Tensor, state=None) -> dict:
+        h_low, h_high = (None, None) if state is None else state
+        raw, rot, trans, lf, h_low = self.low_frequency(self._inputs(root, joints), h_low)
+        offsets, h_high = self.high_frequency(raw, lf, h_high)
+        return {"verts": lf + offsets, "lf": lf, "bones": (rot, trans), "state": (h_low, h_high)}
+
+    # ------------------------------------------------------------------ training
+
+    def stages(self) -> list[str]:
+        return ["low", "high"]
+
+    def stage_parameters(self, stage: str):
+        if stage == "low":
+            return list(self.low.parameters())
+        if stage == "high":
+            return [*self.high_gru.parameters(), *self.global_out.parameters(), *self.edge_convs.parameters(),
+                    *self.head.parameters()]
+        raise ValueError(f"VirtualBones has stages 'low' and 'high', not {stage!r}")
+
+    def laplacian(self) -> torch.Tensor:
+        """The garment's uniform Laplacian (sparse ``(V, V)``), built once from the faces."""
+        if self._laplacian is None or self._laplacian.device != self.faces.device:
+            self._laplacian = laplacian_operator(self.faces.cpu().numpy(), self._sizes["num_verts"]).to(self.faces.device)
+        return self._laplacian
+
+    def training_loss(self, batch: dict, stage: str):
+        mask = self.mask(batch)
+        x = self._inputs(batch["root"], batch["joints"])
+        c = self.config
+        if stage == "low":
+            raw, _, _, lf, _ = self.low_frequency(x)
+            vertex = vertex_distance(lf, batch["lf"], mask)
+            lap = laplacian_difference(lf, batch["lf"], self.laplacian(), mask)
+            loss = vertex + c.laplacian_weight * lap
+            terms = {"vertex": vertex.item(), "laplacian": lap.item()}
+            if c.bone_weight > 0:
+                sq = ((raw - self.encode_bones(batch["bone_rot"], batch["bone_trans"])) ** 2).mean((-1, -2))
+                bone = (sq * mask).sum() / mask.sum().clamp_min(1.0)
+                loss = loss + c.bone_weight * bone
+                terms["bone"] = bone.item()
+            return loss, terms
+        if stage == "high":
+            with torch.no_grad():  # the low-frequency module is frozen in this stage
+                raw, _, _, lf, _ = self.low_frequency(x)
+            offsets, _ = self.high_frequency(raw, lf)
+            verts = lf + offsets
+            vertex = vertex_distance(verts, batch["verts"], mask)
+            loss, terms = vertex, {"vertex": vertex.item()}
+            if c.collision_weight > 0:
+                if "body" not in batch:
+                    raise InputError("the collision term needs the posed body: load the data with body=True "
+                                     "or set collision_weight to 0")
+                coll = collision_loss(verts, batch["body"], batch["body_normals"], batch["body_nearest"],
+                                      c.collision_margin, mask)
+                loss = loss + c.collision_weight * coll
+                terms["collision"] = coll.item()
+            return loss, terms
+        raise ValueError(f"VirtualBones has stages 'low' and 'high', not {stage!r}")
+
+    def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
+        """``rmse_mm`` and ``mean_vertex_error_mm`` of the output against the simulated mesh (in stage
+        "low" the output is the low-frequency mesh alone: the high-frequency module is not trained
+        yet), and ``lf_rmse_mm`` of the low-frequency mesh against the low-frequency target."""
+        with torch.no_grad():
+            out = self(batch["root"], batch["joints"])
+            pred = out["lf"] if stage == "low" else out["verts"]
+            mask = self.mask(batch)
+            n = mask.sum().clamp_min(1)
+
+            def rmse(a, b):
+                return float((((a - b) ** 2).sum(-1).mean(-1) * mask).sum().div(n).sqrt() * 1e3)
+
+            dist = (pred - batch["verts"]).norm(dim=-1).mean(-1)
+            return {"rmse_mm": rmse(pred, batch["verts"]), "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3),
+                    "lf_rmse_mm": rmse(out["lf"], batch["lf"])}

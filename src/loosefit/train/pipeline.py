@@ -1,0 +1,85 @@
+"""``loosefit train``: data -> model -> trained run folder, for any per-garment method.
+
+The run folder holds, besides the trainer's files (:mod:`loosefit.train.run`), ``model.json`` (method,
+garment, sizes, dataset) and ``method.yaml`` (the method's full config: model, train and data sections),
+so that :mod:`loosefit.animate` rebuilds the model from the folder alone.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from loosefit.config import load_config, save_config
+from loosefit.errors import InputError
+from loosefit.models.dataset import GarmentSequences
+from loosefit.models.registry import model_class, run_config_class
+from loosefit.paths import atomic_path
+from loosefit.train.run import RunDir, save_checkpoint
+from loosefit.train.seeding import rng_state, seed_everything
+from loosefit.train.trainer import TrainResult, train
+
+MODEL_META = "model.json"
+METHOD_CONFIG = "method.yaml"
+
+
+def train_model(
+    method: str,
+    data: str | Path,
+    garment: str,
+    out: str | Path,
+    config: str | Path | None = None,
+    overrides: tuple[str, ...] | list[str] = (),
+    resume: bool = False,
+    val_split: str | None = "test",
+    sim_params: dict | None = None,
+) -> TrainResult | None:
+    """Train ``method`` on the training sequences of ``garment`` in dataset ``data``; validate on ``val_split``.
+
+    Args:
+        config: the method's YAML config (``configs/models/<method>.yaml``); None: the built-in defaults
+            (on ``resume``: the run folder's own ``method.yaml``).
+        overrides: ``"section.key=value"`` strings, e.g. ``"train.epochs=5"``, ``"model.hidden=64"``.
+        sim_params: train only on sequences simulated with these parameters (pivot networks).
+
+    Returns:
+        The trainer's result, or None for a method without trainable parameters (its run folder then holds
+        a checkpoint of its fixed weights).
+    """
+    cls = model_class(method)
+    run = RunDir(out)
+    saved = run.path / METHOD_CONFIG
+    if config is None and resume and saved.exists():
+        config = saved
+    cfg = load_config(run_config_class(method), config, overrides)
+    trained = hasattr(cfg, "train")
+    if trained:
+        seed_everything(cfg.train.seed)
+    train_data = GarmentSequences(data, garment, "train", sim_params=sim_params, bones=cls.needs_rig)
+    val_data = None
+    if val_split is not None:
+        try:
+            val_data = GarmentSequences(data, garment, val_split, sim_params=sim_params, bones=False, body=False)
+        except InputError:
+            val_data = None  # no held-out sequences of this garment: train without validation
+    model = cls.from_data(train_data, cfg.model)
+    meta = {"method": method, "garment": garment, "data": str(Path(data).resolve()), "sizes": model.sizes(),
+            "sim_params": sim_params, "train_sequences": [s.name for s in train_data.sequences],
+            "val_sequences": [s.name for s in val_data.sequences] if val_data else []}
+    run.path.mkdir(parents=True, exist_ok=True)
+    with atomic_path(run.path / MODEL_META) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2))
+    save_config(saved, cfg)
+    if not trained:
+        _save_fixed(model, run)
+        return None
+    return train(model, cfg.data.dataset(train_data), cfg.data.dataset(val_data) if val_data else None,
+                 cfg.train, run.path, resume=resume)
+
+
+def _save_fixed(model, run: RunDir) -> None:
+    """A method without trainable parameters (the body-LBS baseline) still gets a loadable checkpoint."""
+    state = {"model": model.state_dict(), "optimizer": None, "scheduler": None, "stages": ["fixed"], "stage_index": 0,
+             "epoch": 0, "global_step": 0, "best_metric": None, "rng": rng_state(),
+             "config": {}, "history": [], "elapsed_s": 0.0, "complete": True}
+    save_checkpoint(run.last_checkpoint, state)

@@ -1,0 +1,159 @@
+"""VirtualBones: overfitting a simulated sequence, gradients per stage, sizes from the data, streaming."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import torch
+
+from loosefit.config import load_config
+from loosefit.models.dataset import GarmentSequences, WindowDataset
+from loosefit.models.virtualbones import Config, VirtualBones, VirtualBonesConfig
+from loosefit.rig.prepare import load_rig
+from loosefit.train import StageConfig, TrainConfig, seed_everything, train
+
+TINY = VirtualBonesConfig(lf_hidden=32, hf_hidden=32, global_channels=8, edge_channels=(16, 16))
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def _model(data, seed=0, config=TINY):
+    seed_everything(seed)
+    return VirtualBones.from_data(data, config)
+
+
+def _batch(dataset) -> dict:
+    return torch.utils.data.default_collate([dataset[i] for i in range(len(dataset))])
+
+
+def _one_sequence(data: GarmentSequences, index: int) -> GarmentSequences:
+    one = copy.copy(data)
+    one.sequences = [data.sequences[index]]
+    return one
+
+
+def _rmse_mm(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float(((a - b) ** 2).sum(-1).mean().sqrt() * 1e3)
+
+
+def test_overfits_one_sequence_low_then_high(tiny_train, tmp_path):
+    one = _one_sequence(tiny_train, 0)
+    frames = one.sequences[0].num_frames
+    windows = WindowDataset(one, window=frames, stride=frames, burn_in=0)
+    batch = _batch(windows)
+    model = _model(one)
+
+    # the best the rig can do on this sequence: the SSDR bone transforms, skinned
+    ssdr = load_rig(tiny_train.store, tiny_train.garment_name).skin(batch["bone_rot"], batch["bone_trans"])
+    ssdr_mm = _rmse_mm(ssdr, batch["lf"])
+    with torch.no_grad():
+        lf0 = _rmse_mm(model(batch["root"], batch["joints"])["lf"], batch["lf"])
+
+    common = dict(batch_size=1, schedule="none", progress=False, tensorboard=False,
+                  checkpoint_every=1000, validate_every=1000)
+    low = TrainConfig(lr=1e-2, stages={"low": StageConfig(epochs=100), "high": StageConfig(epochs=0)}, **common)
+    result = train(model, windows, windows, low, tmp_path / "low")
+    lf_mm = result.val_metrics["lf_rmse_mm"]
+    after_low = {k: v.clone() for k, v in model.state_dict().items()}
+    full0 = result.val_metrics["rmse_mm"]  # the low-frequency mesh against the simulated one
+
+    high = TrainConfig(lr=2e-2, stages={"low": StageConfig(epochs=0), "high": StageConfig(epochs=60)}, **common)
+    result = train(model, windows, windows, high, tmp_path / "high")
+    full_mm = result.val_metrics["rmse_mm"]
+
+    print(f"SSDR {ssdr_mm:.2f} mm; LF {lf0:.1f} -> {lf_mm:.2f} mm; full {full0:.1f} -> {full_mm:.2f} mm")
+    assert lf0 > 10 * ssdr_mm
+    assert lf_mm < ssdr_mm + 2.0
+    assert full_mm < full0 / 4
+    # stage "high" leaves the low-frequency module as it was, and trains the high-frequency one
+    state = model.state_dict()
+    low_names = [n for n in state if n.startswith("low.")]
+    assert low_names and all(torch.equal(state[n], after_low[n]) for n in low_names)
+    assert not torch.equal(state["head.0.weight"], after_low["head.0.weight"])
+    assert result.val_metrics["lf_rmse_mm"] == pytest.approx(lf_mm, abs=1e-4)
+
+
+@pytest.mark.parametrize("stage, rank", [("low", 0), ("high", 0), ("high", 3)])
+def test_gradients_reach_every_parameter_of_the_stage(tiny_train, stage, rank):
+    model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "global_rank": rank}))
+    batch = _batch(WindowDataset(tiny_train, window=20, stride=20, burn_in=5))
+    loss, terms = model.training_loss(batch, stage)
+    loss.backward()
+    active = {id(p) for p in model.stage_parameters(stage)}
+    assert active
+    for name, p in model.named_parameters():
+        if id(p) in active:
+            assert p.grad is not None and p.grad.abs().sum() > 0, name
+        else:
+            assert p.grad is None, name
+    expected = {"low": {"vertex", "laplacian"}, "high": {"vertex", "collision"}}[stage]
+    assert set(terms) == expected and all(np.isfinite(v) and v >= 0 for v in terms.values())
+
+
+def test_bone_supervision_term_is_zero_at_the_ssdr_bones(tiny_train):
+    model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "bone_weight": 1.0}))
+    batch = _batch(WindowDataset(tiny_train, window=20, stride=20, burn_in=5))
+    raw = model.encode_bones(batch["bone_rot"], batch["bone_trans"])
+    rot, trans = model.decode_bones(raw)
+    assert torch.allclose(rot, batch["bone_rot"], atol=1e-5) and torch.allclose(trans, batch["bone_trans"], atol=1e-5)
+    loss, terms = model.training_loss(batch, "low")
+    assert terms["bone"] > 0
+    loss.backward()
+    assert model.low.out.weight.grad.abs().sum() > 0
+
+
+def test_sizes_follow_the_data(tiny_train, second_store):
+    second = GarmentSequences(second_store, "dress+average", "train", body=False)
+    a, b = _model(tiny_train), _model(second)
+    for model, data in ((a, tiny_train), (b, second)):
+        rig = load_rig(data.store, data.garment_name)
+        sizes = model.sizes()
+        assert sizes["num_verts"] == len(data.garment.verts) == rig.num_verts
+        assert sizes["num_bones"] == rig.num_bones
+        seq = data.sequences[0]
+        out = model(torch.from_numpy(seq.root)[None, :7], torch.from_numpy(seq.joints)[None, :7])
+        assert out["verts"].shape == out["lf"].shape == (1, 7, sizes["num_verts"], 3)
+        assert out["bones"][0].shape == (1, 7, rig.num_bones, 3, 3) and out["bones"][1].shape == (1, 7, rig.num_bones, 3)
+    assert a.sizes()["num_verts"] != b.sizes()["num_verts"] and a.sizes()["num_bones"] != b.sizes()["num_bones"]
+    # a checkpoint rebuilds the model from its sizes alone
+    rebuilt = VirtualBones(b.sizes(), TINY)
+    rebuilt.load_state_dict(b.state_dict())
+    seq = second.sequences[0]
+    x = torch.from_numpy(seq.root)[None, :5], torch.from_numpy(seq.joints)[None, :5]
+    assert torch.equal(rebuilt(*x)["verts"], b(*x)["verts"])
+
+
+def test_streaming_equals_batched(tiny_test, tiny_train):
+    model = _model(tiny_train)
+    with torch.no_grad():  # move the networks off their near-rest start
+        for p in model.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    seq = tiny_test.sequences[0]
+    root, joints = torch.from_numpy(seq.root)[None], torch.from_numpy(seq.joints)[None]
+    with torch.no_grad():
+        whole = model(root, joints)
+        state, frames = None, []
+        for t in range(seq.num_frames):
+            out = model(root[:, t:t + 1], joints[:, t:t + 1], state)
+            state = out["state"]
+            frames.append(out["verts"])
+    streamed = torch.cat(frames, 1)
+    assert (streamed - whole["verts"]).abs().max() < 1e-5
+    assert (whole["verts"][0, 1:] - whole["verts"][0, :-1]).norm(dim=-1).max() > 1e-3  # it does move
+    assert (whole["verts"] - whole["lf"]).norm(dim=-1).max() > 1e-4  # with a high-frequency part
+
+
+def test_yaml_config_mirrors_the_defaults():
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "configs" / "models" / "virtualbones.yaml"
+    assert load_config(Config, path) == Config()
+    assert Config().train.stage("low").epochs == Config().train.stage("high").epochs == 50
