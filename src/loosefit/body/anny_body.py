@@ -144,15 +144,6 @@ class AnnyBody(BodyModel):
             self._rest[shape] = ((verts + offset).astype(np.float32), (joints + offset).astype(np.float32))
         return self._rest[shape]
 
-    def rest_verts(self, shape=None) -> np.ndarray:
-        return self._rest_geometry(shape)[0]
-
-    def rest_joints(self, shape=None) -> np.ndarray:
-        return self._rest_geometry(shape)[1]
-
-    def skinning_weights(self) -> np.ndarray:
-        return self._weights
-
     def anny_offset(self, shape=None) -> np.ndarray:
         """``(3,)`` float64: loosefit frame = Anny frame + this offset."""
         return floor_offset(self.rig, self._resolve(shape))

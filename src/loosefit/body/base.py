@@ -49,17 +49,23 @@ class BodyModel(ABC):
     parents: np.ndarray  # (J,) int64, -1 for the root
     faces: np.ndarray  # (F, 3) int64
 
+    _weights: np.ndarray  # (V, J) float32 skinning weights, set by subclasses
+
     @abstractmethod
+    def _rest_geometry(self, shape) -> tuple[np.ndarray, np.ndarray]:
+        """Rest vertices ``(V, 3)`` and joints ``(J, 3)`` float32 for ``shape`` (cached by subclasses)."""
+
     def rest_verts(self, shape=None) -> np.ndarray:
         """``(V, 3)`` float32 rest-pose vertices, metres, Z up, feet on ``z = 0``."""
+        return self._rest_geometry(shape)[0]
 
-    @abstractmethod
     def rest_joints(self, shape=None) -> np.ndarray:
         """``(J, 3)`` float32 rest-pose joint positions, metres, in the frame of :meth:`rest_verts`."""
+        return self._rest_geometry(shape)[1]
 
-    @abstractmethod
     def skinning_weights(self) -> np.ndarray:
         """``(V, J)`` float32 skinning weights, rows summing to 1."""
+        return self._weights
 
     @property
     def num_joints(self) -> int:

@@ -106,7 +106,8 @@ class SMPLBody(BodyModel):
         self._parents_t = torch.from_numpy(data["kintree_table"][0].copy())
         self._weights = data["weights"].astype(np.float32)
         self.betas = self._betas(betas)
-        self._rest: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._rest: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        self._offsets: dict[bytes, np.ndarray] = {}
 
     def _betas(self, shape) -> np.ndarray:
         if shape is None:
@@ -133,23 +134,16 @@ class SMPLBody(BodyModel):
                 v, j = self._smpl_lbs(betas, torch.zeros(1, 3 * J, dtype=torch.float64))
             v, j = v[0].numpy() @ Y_UP_TO_Z_UP.T, j[0].numpy() @ Y_UP_TO_Z_UP.T
             offset = np.array([-j[0, 0], -j[0, 1], -v[:, 2].min()])
-            self._rest[key] = ((v + offset).astype(np.float32), (j + offset).astype(np.float32), offset)
+            self._rest[key] = ((v + offset).astype(np.float32), (j + offset).astype(np.float32))
+            self._offsets[key] = offset
         return self._rest[key]
-
-    def rest_verts(self, shape=None) -> np.ndarray:
-        return self._rest_geometry(shape)[0]
-
-    def rest_joints(self, shape=None) -> np.ndarray:
-        return self._rest_geometry(shape)[1]
-
-    def skinning_weights(self) -> np.ndarray:
-        return self._weights
 
     def pose(self, motion: Motion, shape=None, batch: int = 128) -> PosedBody:
         """Pose with smplx's full forward pass (pose-corrective blend shapes included)."""
         self.check_motion(motion)
         betas = self._betas(shape)
-        _, rest_j, offset = self._rest_geometry(shape)
+        _, rest_j = self._rest_geometry(shape)
+        offset = self._offsets[betas.tobytes()]
         C = torch.from_numpy(Y_UP_TO_Z_UP)
         R = axis_angle_to_matrix(torch.from_numpy(motion.rotations).double())
         # A rotation R in loosefit's frame is C^T R C in SMPL's frame.

@@ -44,7 +44,7 @@ def write_alembic(path: str | Path, seq: MeshSequence) -> None:
         scene = _reset_scene(bpy, seq.fps)
         scene.frame_start, scene.frame_end = 1, num_frames
         for name, verts, faces in meshes:
-            obj = _mesh_object(bpy, scene, name, verts[0], faces)
+            obj = mesh_object(bpy, scene, name, verts[0], faces)
             cache_path = Path(workdir) / f"{name}.pc2"
             write_pc2(cache_path, verts)
             cache = obj.modifiers.new("cache", "MESH_CACHE")
@@ -116,7 +116,7 @@ def _reset_scene(bpy, fps: float):
     return scene
 
 
-def _mesh_object(bpy, scene, name: str, verts: np.ndarray, faces: np.ndarray):
+def mesh_object(bpy, scene, name: str, verts: np.ndarray, faces: np.ndarray):
     """A mesh object ``name`` with ``verts (V, 3)`` and triangles ``faces (F, 3)``, linked to ``scene``."""
     mesh = bpy.data.meshes.new(name)
     mesh.from_pydata(np.asarray(verts, np.float64).tolist(), [], np.asarray(faces).tolist())

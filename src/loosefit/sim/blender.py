@@ -33,8 +33,9 @@ import numpy as np
 
 from loosefit.geometry.laplacian import edges
 from loosefit.geometry.normals import face_areas
-from loosefit.sim.params import SimParams
+from loosefit.io.alembic import mesh_object
 from loosefit.io.pc2 import write_pc2
+from loosefit.sim.params import SimParams
 
 #: Smallest collision thickness Blender accepts on a collider, m; the rest of the distance is the cloth's.
 _BODY_THICKNESS = 0.001
@@ -112,7 +113,7 @@ def run_cloth(
     scene.frame_start, scene.frame_end = 1, num_frames
     scene.gravity = (0.0, 0.0, -scene_gravity(params, fps))
 
-    body = _mesh_object(bpy, scene, "body", collider_frames[0], collider_faces)
+    body = mesh_object(bpy, scene, "body", collider_frames[0], collider_faces)
     _mesh_cache(body, workdir / "body.pc2")
     body.modifiers.new("collision", "COLLISION")
     body.collision.thickness_outer = _BODY_THICKNESS
@@ -120,7 +121,7 @@ def run_cloth(
     body.collision.cloth_friction = params.friction
     body.collision.damping = 0.0
 
-    garment = _mesh_object(bpy, scene, "garment", garment_frames[0], faces)
+    garment = mesh_object(bpy, scene, "garment", garment_frames[0], faces)
     group = garment.vertex_groups.new(name="pin")
     group.add(np.flatnonzero(pinned).tolist(), 1.0, "REPLACE")
     _mesh_cache(garment, workdir / "garment.pc2")
@@ -151,15 +152,6 @@ def run_cloth(
         out[frame] = buf.reshape(num_verts, 3)
     bpy.ops.wm.read_factory_settings(use_empty=True)  # free the point cache before returning
     return out, seconds
-
-
-def _mesh_object(bpy, scene, name: str, verts: np.ndarray, faces: np.ndarray):
-    mesh = bpy.data.meshes.new(name)
-    mesh.from_pydata(np.asarray(verts, np.float64).tolist(), [], np.asarray(faces).tolist())
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    scene.collection.objects.link(obj)
-    return obj
 
 
 def _mesh_cache(obj, path: Path) -> None:
