@@ -48,7 +48,8 @@ def test_rest_pose_frame_and_skinning_weights(body):
     verts, joints = body.rest_verts(), body.rest_joints()
     assert verts[:, 2].min() == pytest.approx(0.0, abs=1e-6)  # soles on the floor
     assert np.allclose(joints[0, :2], 0.0, atol=1e-6)  # root above the origin
-    assert 1.5 < verts[:, 2].max() < 1.9  # an adult, metres
+    height = verts[:, 2].max()
+    assert height > 1.5 and height < 1.9  # an adult, metres
     assert joints[body.joint_names.index("LeftArm"), 0] > 0  # body left is +X
     assert joints[body.joint_names.index("LeftToeBase"), 1] < joints[body.joint_names.index("LeftFoot"), 1]  # faces -Y
     w = body.skinning_weights()

@@ -34,14 +34,6 @@ PARAMS = [
 ]
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 @pytest.fixture(scope="module")
 def networks(tiny_train):
     """Four small VirtualBones networks of the tiny skirt, differently initialised and shaken off their rest start."""

@@ -24,14 +24,6 @@ TINY = JointNetConfig(gru_hidden=32, features=32, bone_mlp=[64, 64], psd_mlp=[32
 PSD_PARAMS = ("psd_mlp.", "psd_basis")
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def _model(data, config=TINY, seed=0) -> JointNet:
     seed_everything(seed)
     return JointNet.from_data(data, config)

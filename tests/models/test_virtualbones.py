@@ -17,14 +17,6 @@ from loosefit.train import StageConfig, TrainConfig, seed_everything, train
 TINY = VirtualBonesConfig(lf_hidden=32, hf_hidden=32, global_channels=8, edge_channels=(16, 16))
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def _model(data, seed=0, config=TINY):
     seed_everything(seed)
     return VirtualBones.from_data(data, config)
