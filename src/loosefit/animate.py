@@ -41,14 +41,27 @@ class Animator:
         self.meta = json.loads(meta_path.read_text())
         cls = model_class(self.meta["method"])
         cfg = load_config(run_config_class(self.meta["method"]), run.path / METHOD_CONFIG)
-        self.model = cls(self.meta["sizes"], cfg.model)
+        model = cls(self.meta["sizes"], cfg.model)
         path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
         if checkpoint == "best" and not path.is_file():
             path = run.last_checkpoint
-        load_weights(self.model, path)
-        self.model.eval()
+        load_weights(model, path)
+        self._use(model, threads)
+
+    @classmethod
+    def from_model(cls, model, threads: int | None = 1) -> "Animator":
+        """An animator around an in-memory :class:`~loosefit.models.base.GarmentModel` (just built or
+        trained), without a run folder; ``meta`` then holds only its method and sizes."""
+        animator = cls.__new__(cls)
+        animator.meta = {"method": model.method, "sizes": model.sizes()}
+        animator._use(model, threads)
+        return animator
+
+    def _use(self, model, threads: int | None) -> None:
+        model.eval()
+        self.model = model
         self.threads = threads
-        self.faces = self.model.faces.numpy()
+        self.faces = model.faces.numpy()
 
     @property
     def method(self) -> str:
@@ -62,12 +75,16 @@ class Animator:
         if motion.num_joints != self.num_joints:
             raise InputError(f"motion {motion.name!r} has {motion.num_joints} joints, the model was trained on {self.num_joints}")
 
-    def animate(self, motion: Motion) -> np.ndarray:
-        """World garment vertices ``(T, V, 3)`` float32 for one motion."""
-        return self.animate_batch([motion])[0]
+    def animate(self, motion: Motion, output: str = "verts") -> np.ndarray:
+        """World garment vertices ``(T, V, 3)`` float32 for one motion (``output``: see :meth:`animate_batch`)."""
+        return self.animate_batch([motion], output)[0]
 
-    def animate_batch(self, motions: list[Motion]) -> list[np.ndarray]:
-        """World vertices ``(T_i, V, 3)`` for several motions, run as one batch."""
+    def animate_batch(self, motions: list[Motion], output: str = "verts") -> list[np.ndarray]:
+        """World vertices ``(T_i, V, 3)`` for several motions, run as one batch.
+
+        ``output`` names the model output returned: ``"verts"`` (the garment), or another canonical
+        ``(B, T, V, 3)`` vertex output of the model, such as VirtualBones' low-frequency mesh ``"lf"``.
+        """
         for m in motions:
             self._check(m)
         feats = [motion_features(m) for m in motions]
@@ -77,7 +94,12 @@ class Animator:
             return torch.from_numpy(np.stack([np.concatenate([f[key], np.repeat(f[key][-1:], T - len(f[key]), 0)]) for f in feats]))
 
         with _threads(self.threads), torch.no_grad():
-            canonical = self.model(padded("root"), padded("joints"))["verts"].numpy()
+            outputs = self.model(padded("root"), padded("joints"))
+        shape = outputs["verts"].shape
+        vertex_outputs = sorted(k for k, v in outputs.items() if isinstance(v, torch.Tensor) and v.shape == shape)
+        if output not in vertex_outputs:
+            raise InputError(f"{self.method} has no vertex output {output!r} (it has {vertex_outputs})")
+        canonical = outputs[output].numpy()
         out = []
         for m, c in zip(motions, canonical):
             rot, origin = heading_frames(m)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from loosefit.body import AnnyBody, AnnyShape
+from loosefit.body import AnnyShape
 from loosefit.body.anny_body import load_anny
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix, rigid
