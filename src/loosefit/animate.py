@@ -29,11 +29,13 @@ class Animator:
 
     Args:
         run_dir: a folder written by :func:`loosefit.train.pipeline.train_model`.
-        checkpoint: ``"best"`` (falls back to ``"last"`` when absent) or ``"last"``, or a checkpoint path.
+        checkpoint: ``"last"`` (the end of training), ``"best"`` (the best validation epoch; it falls back to
+            ``"last"`` when absent) or a checkpoint path. ``"last"`` is the default because validation runs on
+            the held-out motions: picking the epoch by them would flatter any accuracy measured on them.
         threads: torch CPU threads used while animating (1 is fastest for the graph layers here).
     """
 
-    def __init__(self, run_dir: str | Path, checkpoint: str = "best", threads: int | None = 1):
+    def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1):
         run = RunDir(run_dir)
         meta_path = run.path / MODEL_META
         if not meta_path.is_file():

@@ -296,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
     sp.add_argument("--with-body", action="store_true", help="export the posed body too")
-    sp.add_argument("--checkpoint", default="best", help="best, last or a checkpoint path")
+    sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
     sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     sp.set_defaults(func=cmd_animate)
 

