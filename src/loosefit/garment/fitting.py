@@ -7,7 +7,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from loosefit.garment.mesh_checks import unique_edges
-from loosefit.garment.remesh import vertex_normals
+from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.signed_distance import BodySDF
 
 

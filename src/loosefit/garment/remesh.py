@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from loosefit.garment.mesh_checks import boundary_loops, unique_edges
+from loosefit.geometry.normals import vertex_normals
 
 
 class ReferenceSurface:
@@ -256,16 +257,6 @@ def flip_edges(verts: np.ndarray, faces: np.ndarray, criterion: str = "valence")
         faces[f1[i]] = new1[i]
         faces[f2[i]] = new2[i]
     return faces
-
-
-def vertex_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``(V, 3)`` area-weighted unit vertex normals."""
-    tri = verts[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    out = np.zeros_like(verts)
-    for k in range(3):
-        np.add.at(out, faces[:, k], n)
-    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-30)
 
 
 def relax(verts: np.ndarray, faces: np.ndarray, surface: ReferenceSurface | None, steps: int = 2, rate: float = 0.6):
