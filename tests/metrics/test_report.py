@@ -38,6 +38,8 @@ def test_overall_pools_all_frames_and_table_lists_sequences(tmp_path):
     assert ev.overall["frames"] == 9
     table = ev.table()
     assert "overall" in table and "STED" in table and "collision" not in table
+    per_method = ev.table(overall=False).splitlines()
+    assert len(per_method) == 4 and "overall" not in "\n".join(per_method)  # header, rule, a, b
     ev.write_csv(tmp_path / "m.csv")
     ev.write_json(tmp_path / "m.json")
     rows = list(csv.DictReader(open(tmp_path / "m.csv")))

@@ -85,12 +85,13 @@ class Evaluation:
         present = {k for row in self.rows for k, v in row.items() if v is not None}
         return [c for c in COLUMNS if c[0] in present]
 
-    def table(self) -> str:
-        """A fixed-width text table: one line per sequence, then ``overall``."""
+    def table(self, overall: bool = True) -> str:
+        """A fixed-width text table: one line per sequence, then ``overall`` (leave it out with
+        ``overall=False`` when the rows are not one population, e.g. several methods on one sequence)."""
         cols = self._columns()
         header = ["sequence"] + [h for _, h, _ in cols]
         lines = []
-        for row in self.rows + [self.overall]:
+        for row in self.rows + ([self.overall] if overall else []):
             lines.append([row["name"]] + [_fmt(row.get(k), f) for k, _, f in cols])
         widths = [max(len(header[i]), *(len(line[i]) for line in lines)) for i in range(len(header))]
 
@@ -99,7 +100,8 @@ class Evaluation:
             return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
 
         rule = "-" * len(fmt_line(header))
-        return "\n".join([fmt_line(header), rule] + [fmt_line(x) for x in lines[:-1]] + [rule, fmt_line(lines[-1])])
+        body = [fmt_line(x) for x in lines]
+        return "\n".join([fmt_line(header), rule] + (body[:-1] + [rule, body[-1]] if overall else body))
 
     def write_csv(self, path: str | Path) -> None:
         """One row per sequence, then the ``overall`` row; empty cells for metrics that do not apply."""
