@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
-from loosefit.paths import atomic_path
+from loosefit.io.npz import load_npz, save_npz
 
 
 @dataclass
@@ -38,17 +38,12 @@ class MeshSequence:
             raise InputError(f"faces index vertices outside [0, {self.verts.shape[1]})")
 
     def save(self, path: str | Path) -> None:
-        with atomic_path(path, suffix=".npz") as tmp:
-            np.savez_compressed(tmp, verts=self.verts, faces=self.faces, fps=np.float64(self.fps), **self.extra)
+        save_npz(path, {"verts": self.verts, "faces": self.faces, "fps": np.float64(self.fps), **self.extra}, compressed=True)
 
     @classmethod
     def load(cls, path: str | Path) -> "MeshSequence":
         path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as e:
-            raise InputError(f"cannot read mesh sequence: {e}", path) from None
+        arrays = load_npz(path, "mesh sequence")
         missing = {"verts", "faces"} - set(arrays)
         if missing:
             raise InputError(f"not a mesh sequence, missing arrays {sorted(missing)}", path)

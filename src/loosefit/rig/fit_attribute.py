@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 
 from loosefit.errors import InputError
 from loosefit.geometry.features import nearest_body_vertex
-from loosefit.paths import atomic_path
+from loosefit.io.npz import load_npz, save_npz
 
 #: Factors kept unless told otherwise (FitGar feeds the first one to its coarse network).
 DEFAULT_FACTORS = 4
@@ -180,16 +180,13 @@ class FitAttributeModel:
 
     def save(self, path: str | Path) -> None:
         """Write the model to an ``.npz`` file, atomically."""
-        with atomic_path(path, suffix=".npz") as tmp:
-            np.savez(tmp, **self.to_arrays())
+        save_npz(path, self.to_arrays())
 
     @classmethod
     def load(cls, path: str | Path) -> "FitAttributeModel":
         """Read a model written by :meth:`save`; a bad file raises :class:`InputError` naming it."""
-        path = Path(path)
+        arrays = load_npz(path, "a fit attribute model")
         try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
             return cls.from_arrays(arrays)
-        except (OSError, ValueError, KeyError) as e:
-            raise InputError(f"cannot read a fit attribute model: {e}", path) from None
+        except (ValueError, KeyError) as e:
+            raise InputError(f"cannot read a fit attribute model: {e}", Path(path)) from None

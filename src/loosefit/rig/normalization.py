@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
-from loosefit.paths import atomic_path
+from loosefit.io.npz import load_npz, save_npz
 
 #: Standard deviations below this are treated as 1 by :meth:`RunningStats.normalize` (constant features).
 MIN_STD = 1e-6
@@ -140,16 +140,13 @@ class NormalizationStats(dict):
 
     def save(self, path: str | Path) -> None:
         """Write to an ``.npz`` file, atomically."""
-        with atomic_path(path, suffix=".npz") as tmp:
-            np.savez(tmp, **self.to_arrays())
+        save_npz(path, self.to_arrays())
 
     @classmethod
     def load(cls, path: str | Path) -> "NormalizationStats":
         """Read statistics written by :meth:`save`; a bad file raises :class:`InputError` naming it."""
-        path = Path(path)
+        arrays = load_npz(path, "normalisation statistics")
         try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
             return cls.from_arrays(arrays)
-        except (OSError, ValueError) as e:
-            raise InputError(f"cannot read normalisation statistics: {e}", path) from None
+        except ValueError as e:
+            raise InputError(f"cannot read normalisation statistics: {e}", Path(path)) from None

@@ -43,7 +43,7 @@ import torch
 from threadpoolctl import threadpool_limits
 
 from loosefit.errors import InputError
-from loosefit.paths import atomic_path
+from loosefit.io.npz import load_npz, save_npz
 
 #: Dem Bones' translation-affinity weight used by default (see the module docstring for its cost).
 DEFAULT_TRANS_AFFINE = 0.1
@@ -131,18 +131,13 @@ class VirtualBoneRig:
 
     def save(self, path: str | Path) -> None:
         """Write the rig to an ``.npz`` file, atomically."""
-        with atomic_path(path, suffix=".npz") as tmp:
-            np.savez_compressed(tmp, **self.to_arrays())
+        save_npz(path, self.to_arrays(), compressed=True)
 
     @classmethod
     def load(cls, path: str | Path) -> "VirtualBoneRig":
         """Read a rig written by :meth:`save`; a bad file raises :class:`InputError` naming it."""
         path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as e:
-            raise InputError(f"cannot read a virtual bone rig: {e}", path) from None
+        arrays = load_npz(path, "a virtual bone rig")
         try:
             return cls.from_arrays(arrays)
         except InputError as e:
