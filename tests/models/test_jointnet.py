@@ -120,6 +120,21 @@ def test_gradients_reach_every_parameter_of_each_stage(tiny_train):
         n for n, _ in model.named_parameters() if n.startswith(PSD_PARAMS)}
 
 
+def test_losses_on_sampled_frames_are_the_full_losses_restricted_to_them(tiny_train):
+    model = _model(tiny_train, config=JointNetConfig(**{**TINY.__dict__, "loss_frames": 5}))
+    batch = default_collate([WindowDataset(tiny_train, 20, 20, 6)[i] for i in range(2)])
+    torch.manual_seed(7)
+    frames = model.loss_frames(model.mask(batch), 5)
+    assert len(set(frames.tolist())) == 5 and frames.min() >= 6
+    torch.manual_seed(7)
+    _, terms = model.training_loss(batch, "stage2")
+    with torch.no_grad():  # the reference: every frame predicted, the losses on the drawn frames only
+        pred = model(batch["root"], batch["joints"])["verts"][:, frames]
+    target = batch["verts"][:, frames]
+    assert terms["l1_mm"] == pytest.approx(float((pred - target).abs().mean()) * 1e3, rel=1e-5)
+    assert terms["normal"] == pytest.approx(float(normal_loss(pred, target, model.faces)), rel=1e-5)
+
+
 def test_stage1_trains_everything_but_the_psd(tiny_train, tmp_path):
     model = _model(tiny_train)
     before = {k: v.clone() for k, v in model.state_dict().items()}

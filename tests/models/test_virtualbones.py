@@ -90,6 +90,26 @@ def test_gradients_reach_every_parameter_of_the_stage(tiny_train, stage, rank):
     assert set(terms) == expected and all(np.isfinite(v) and v >= 0 for v in terms.values())
 
 
+def test_high_frequency_loss_on_sampled_frames_is_the_full_loss_restricted_to_them(tiny_train):
+    model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "hf_loss_frames": 4}))
+    batch = _batch(WindowDataset(tiny_train, window=20, stride=20, burn_in=5))
+    torch.manual_seed(3)
+    frames = model.loss_frames(model.mask(batch), 4)
+    assert len(frames) == 4 and len(set(frames.tolist())) == 4 and frames.min() >= 5
+    torch.manual_seed(3)
+    _, terms = model.training_loss(batch, "high")
+    with torch.no_grad():
+        out = model(batch["root"], batch["joints"])
+    # the reference: every frame predicted, then the vertex and collision terms on the drawn ones only
+    pred = out["verts"][:, frames]
+    vertex = (pred - batch["verts"][:, frames]).norm(dim=-1).mean()
+    idx = batch["body_nearest"][:, frames, :, None].expand(-1, -1, -1, 3)
+    depth = -((pred - torch.gather(batch["body"][:, frames], 2, idx))
+              * torch.gather(batch["body_normals"][:, frames], 2, idx)).sum(-1)
+    assert terms["vertex"] == pytest.approx(float(vertex), rel=1e-5)
+    assert terms["collision"] == pytest.approx(float(torch.relu(depth).mean()), rel=1e-4, abs=1e-9)
+
+
 def test_bone_supervision_term_is_zero_at_the_ssdr_bones(tiny_train):
     model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "bone_weight": 1.0}))
     batch = _batch(WindowDataset(tiny_train, window=20, stride=20, burn_in=5))

@@ -107,6 +107,20 @@ class GarmentModel(nn.Module):
         """``(B, T)`` frames that count in losses and metrics (burn-in frames excluded)."""
         return frame_mask(batch["burn_in"], batch["verts"].shape[1])
 
+    @staticmethod
+    def loss_frames(mask: torch.Tensor, count: int) -> torch.Tensor:
+        """Indices ``(T',)`` of the window frames a training loss sees this step: all ``T`` of them when
+        ``count`` is 0, else ``count`` drawn (from torch's global generator, which checkpoints save, so a
+        resumed run draws the same) among the frames that count in every window of the ``mask (B, T)``.
+
+        The models' per-frame, per-vertex work then runs on those frames only: an unbiased estimate
+        of the full loss for a fraction of the cost (recurrent layers still run over every frame).
+        """
+        counted = torch.nonzero(mask.bool().all(0)).flatten()
+        if count == 0 or count >= len(counted):
+            return torch.arange(mask.shape[1], device=mask.device)
+        return counted[torch.randperm(len(counted))[:count].sort().values.to(counted.device)]
+
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
         """``rmse_mm`` (true root mean square) and ``mean_vertex_error_mm`` over the counted frames."""
         with torch.no_grad():

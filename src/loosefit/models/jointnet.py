@@ -81,6 +81,9 @@ class JointNetConfig:
             third of the L1 vertex term, in metres, at a few millimetres of error).
         lambda_sparse: weight of the L1 norm of ``relu(A)`` (not in the paper; at the initial
             association, whose rows sum to 1, it costs ``B * 1e-5`` m, 0.8 mm of L1 for 80 bones).
+        loss_frames: frames of each training window (after the burn-in) that the losses see, drawn at
+            random each step (:meth:`GarmentModel.loss_frames`); 0 for all. Not in the paper: on a CPU
+            the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
     """
 
     joints: Optional[list[str]] = None
@@ -94,6 +97,7 @@ class JointNetConfig:
     euler_order: str = "xyz"
     lambda_norm: float = 0.05
     lambda_sparse: float = 1e-5
+    loss_frames: int = 0
 
     def __post_init__(self):
         sizes = [self.gru_hidden, self.features, self.psd_shapes, *self.bone_mlp, *self.psd_mlp]
@@ -103,8 +107,8 @@ class JointNetConfig:
             raise InputError(f"features must be even (half cosines, half sines), got {self.features}")
         if sorted(self.euler_order.lower()) != ["x", "y", "z"]:
             raise InputError(f"euler_order must be a permutation of 'xyz', got {self.euler_order!r}")
-        if not (self.fourier_scale > 0 and self.lambda_norm >= 0 and self.lambda_sparse >= 0):
-            raise InputError("fourier_scale must be > 0, lambda_norm and lambda_sparse >= 0")
+        if not (self.fourier_scale > 0 and self.lambda_norm >= 0 and self.lambda_sparse >= 0 and self.loss_frames >= 0):
+            raise InputError("fourier_scale must be > 0, lambda_norm, lambda_sparse and loss_frames >= 0")
 
 
 def _paper_training() -> TrainConfig:
@@ -300,12 +304,16 @@ class JointNet(GarmentModel):
         R = euler_to_matrix(euler, self.config.euler_order)
         return R, self.bone_rest + offset - (R @ self.bone_rest[:, :, None])[..., 0]
 
-    def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None, psd: bool = True) -> dict:
+    def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None, psd: bool = True,
+                frames: torch.Tensor | None = None) -> dict:
         """Raw features ``root (B, T, 11)``, ``joints (B, T, J-1, 6)`` and the GRU state ``(B, J_s, H)`` (None:
         zeros, the start of a motion) -> ``{"verts": (B, T, V, 3) canonical, "bones": (rotations (B, T, Nb,
         3, 3), translations (B, T, Nb, 3)), "association": (Nb, J_s), "displacement": (B, T, V, 3) PSD
-        offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state": (B, J_s, H)}``."""
+        offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state": (B, J_s, H)}``.
+        With ``frames`` (``(T',)`` indices) the outputs hold those frames only; the GRUs run over all ``T``."""
         hidden, state = self.gru(self.joint_inputs(root, joints), state)
+        if frames is not None:
+            hidden = hidden[:, frames]
         B, T, G, _ = hidden.shape
         psi = grouped_linear(self.joint_out_weight, hidden.transpose(0, 2).flatten(1, 2)) + self.joint_out_bias
         psi = psi.unflatten(1, (T, B)).permute(2, 1, 0, 3)  # (B, T, J_s, K)
@@ -336,10 +344,12 @@ class JointNet(GarmentModel):
         return self.association_matrix().sum()
 
     def training_loss(self, batch: dict, stage: str):
-        pred = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"]
         mask = self.mask(batch)
-        l1 = vertex_l1(pred, batch["verts"], mask)
-        normal = normal_loss(pred, batch["verts"], self.faces, mask)
+        frames = self.loss_frames(mask, self.config.loss_frames)
+        pred = self(batch["root"], batch["joints"], psd=stage == "stage2", frames=frames)["verts"]
+        target, mask = batch["verts"][:, frames], mask[:, frames]
+        l1 = vertex_l1(pred, target, mask)
+        normal = normal_loss(pred, target, self.faces, mask)
         sparse = self.sparsity_loss()
         loss = l1 + self.config.lambda_norm * normal + self.config.lambda_sparse * sparse
         return loss, {"l1_mm": l1.item() * 1e3, "normal": normal.item(), "sparsity": sparse.item()}
