@@ -12,6 +12,14 @@ from loosefit.paths import atomic_path
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
+#: The CPU-sized networks that the speed and accuracy benchmarks share (the paper sizes train only on a
+#: GPU in reasonable time and miss the streaming targets on a CPU): VirtualBones with its per-vertex global
+#: layer factorised through 64 channels, JointNet with narrower GRUs, features, bone MLP and PSD basis.
+CPU_MODEL = {
+    "virtualbones": ["model.global_rank=64"],
+    "jointnet": ["model.gru_hidden=256", "model.features=256", "model.bone_mlp=[512,512,256]", "model.psd_shapes=32"],
+}
+
 
 def machine() -> dict:
     """What the numbers were measured on."""

@@ -22,8 +22,13 @@ the RBF ensemble fitted on them (:func:`loosefit.models.ensemble.fit_ensemble`, 
 the VirtualBones config) and RBF against the inverse-distance (linear) baseline on the held-out sets
 (:func:`loosefit.models.ensemble.evaluate_parameter_sets`).
 
+The networks are those of :data:`CPU_TRAINING` (``--preset cpu``, the default: CPU-sized layers and
+fewer epochs, about 45 min per garment on one core) or the paper's (``--preset paper``: the YAML configs
+as they are, for a GPU); ``--set`` overrides come after the preset's.
+
 Run: .venv/bin/python benchmarks/accuracy.py --data DATA.zarr --runs RUNS [--garments skirt+average,...]
          [--set virtualbones:train.stages.low.epochs=2 ...] [--simparams DATA2.zarr] [--bones 80] [--name accuracy]
+     (``--data`` may be left out with ``--simparams``: the ensemble alone)
 (writes benchmarks/results/<name>.json)
 """
 
@@ -41,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import save_results  # noqa: E402
+from _common import CPU_MODEL, save_results  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402
 from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
@@ -68,6 +73,19 @@ KNEES = ("LeftLeg", "RightLeg")
 VB_OVER_LBS = 0.7
 JN_OVER_VB = 0.95
 ROBUSTNESS = 0.5
+#: ``--preset cpu``: the CPU-sized networks of the speed benchmark, trained for a few tens of epochs, with the
+#: losses on 12 random frames of each window (:meth:`loosefit.models.base.GarmentModel.loss_frames`) and,
+#: for VirtualBones, windows that do not overlap outside the burn-in. JointNet trains with Adam here (RMSprop
+#: in the paper): in this few epochs it converged faster.
+CPU_TRAINING = {
+    "body-lbs": [],
+    "virtualbones": CPU_MODEL["virtualbones"] + [
+        "model.hf_loss_frames=12", "data.stride=48", "train.stages.low.epochs=60", "train.stages.high.epochs=40",
+        "train.progress=false"],
+    "jointnet": CPU_MODEL["jointnet"] + [
+        "model.loss_frames=12", "train.optimizer=adam", "train.stages.stage1.epochs=40",
+        "train.stages.stage2.epochs=25", "train.progress=false"],
+}
 
 
 # ---------------------------------------------------------------- data
@@ -272,9 +290,9 @@ def ensemble_benchmark(data: Path, runs: Path, overrides: list[str], bones: int)
 # ---------------------------------------------------------------- main
 
 
-def parse_sets(values: list[str]) -> dict[str, list[str]]:
-    """``METHOD:key=value`` strings -> per-method override lists."""
-    sets = {m: [] for m in ORDER}
+def parse_sets(values: list[str], preset: str) -> dict[str, list[str]]:
+    """The preset's overrides followed by the ``METHOD:key=value`` strings -> per-method override lists."""
+    sets = {m: list(CPU_TRAINING[m]) if preset == "cpu" else [] for m in ORDER}
     for value in values:
         method, sep, override = value.partition(":")
         if not sep or method not in METHODS or "=" not in override:
@@ -285,9 +303,11 @@ def parse_sets(values: list[str]) -> dict[str, list[str]]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", required=True, help="a simulated dataset (e.g. of configs/datasets/bench.yaml)")
+    parser.add_argument("--data", default=None, help="a simulated dataset (e.g. of configs/datasets/bench.yaml)")
     parser.add_argument("--runs", required=True, help="folder of the run folders (resumed when present)")
     parser.add_argument("--garments", default=None, help="comma-separated garment names (default: all with test sequences)")
+    parser.add_argument("--preset", choices=("cpu", "paper"), default="cpu",
+                        help="network sizes and training: CPU_TRAINING, or the paper's (the YAML configs)")
     parser.add_argument("--set", action="append", default=[], help="METHOD:section.key=value config override (repeatable)")
     parser.add_argument("--simparams", default=None, help="a simulated configs/datasets/simparams.yaml dataset")
     parser.add_argument("--bones", type=int, default=80, help="virtual bones per garment when preparing")
@@ -295,25 +315,31 @@ def main() -> None:
     parser.add_argument("--perturb-degrees", default="30,45", help="range of the perturbation angle, degrees")
     parser.add_argument("--name", default="accuracy", help="results name: benchmarks/results/<name>.json")
     args = parser.parse_args()
-    sets = parse_sets(args.set)
+    if args.data is None and args.simparams is None:
+        parser.error("give --data, --simparams or both")
+    sets = parse_sets(args.set, args.preset)
     degrees = tuple(float(d) for d in args.perturb_degrees.split(","))
     if len(degrees) != 2 or not 0 <= degrees[0] <= degrees[1]:
         parser.error("--perturb-degrees takes LOW,HIGH with 0 <= LOW <= HIGH")
-    data, runs = Path(args.data), Path(args.runs)
+    runs = Path(args.runs)
     started = time.perf_counter()
-    results: dict = {"load_average_at_start": os.getloadavg(), "data": str(data.resolve()), "runs": str(runs.resolve()),
+    results: dict = {"load_average_at_start": os.getloadavg(), "runs": str(runs.resolve()), "preset": args.preset,
                      "overrides": sets, "checkpoint": "last (no model selection on test motions)"}
-    results["prepare"] = prepare(data, bones=args.bones)
-    store = DatasetStore.open(data)
-    garments = args.garments.split(",") if args.garments else garments_with_test(store)
-    missing = sorted(set(garments) - set(garments_with_test(store)))
-    if missing or not garments:
-        raise InputError(f"garments {missing or garments} lack training or test sequences "
-                         f"(usable: {garments_with_test(store)})", data)
     results["garments"], targets = {}, []
-    for garment in garments:
-        results["garments"][garment] = garment_benchmark(data, store, garment, runs, sets, args.perturb_joint, degrees)
-        targets += garment_targets(garment, results["garments"][garment])
+    if args.data is not None:
+        data = Path(args.data)
+        results["data"] = str(data.resolve())
+        results["prepare"] = prepare(data, bones=args.bones)
+        store = DatasetStore.open(data)
+        garments = args.garments.split(",") if args.garments else garments_with_test(store)
+        missing = sorted(set(garments) - set(garments_with_test(store)))
+        if missing or not garments:
+            raise InputError(f"garments {missing or garments} lack training or test sequences "
+                             f"(usable: {garments_with_test(store)})", data)
+        for garment in garments:
+            results["garments"][garment] = garment_benchmark(data, store, garment, runs, sets, args.perturb_joint,
+                                                             degrees)
+            targets += garment_targets(garment, results["garments"][garment])
     if args.simparams:
         results["ensemble"], ensemble_targets = ensemble_benchmark(Path(args.simparams), runs, sets["virtualbones"],
                                                                    args.bones)

@@ -57,10 +57,9 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 VARIANTS = {
     "body-lbs": ("body-lbs", []),
     "virtualbones": ("virtualbones", []),
-    "virtualbones-rank64": ("virtualbones", ["model.global_rank=64"]),
+    "virtualbones-rank64": ("virtualbones", CPU_MODEL["virtualbones"]),
     "jointnet": ("jointnet", []),
-    "jointnet-reduced": ("jointnet", ["model.gru_hidden=256", "model.features=256", "model.bone_mlp=[512,512,256]",
-                                      "model.psd_shapes=32"]),
+    "jointnet-reduced": ("jointnet", CPU_MODEL["jointnet"]),
 }
 BATCH_KINDS = ("walk", "spin", "mix", "sway", "run", "kick")
 TARGET_SPEEDUP = 50.0
