@@ -147,6 +147,26 @@ def test_training_g_puts_each_set_on_its_best_pivot():
     assert (np.diag(w) > 0.9).all()
 
 
+def test_leave_one_out_fit_learns_the_neighbours_mixture():
+    # three pivots on a line of parameters; pivot 1 sits in the middle and its set is reproduced exactly
+    # by the even mixture of pivots 0 and 2 (error Gram of two errors e and -e): the leave-one-out fit
+    # must learn weights (1/2, 0, 1/2) there, and the weights of every set leave its own pivot out
+    params = [{**PARAMS[0], "bending": b} for b in (1e-6, 1e-5, 1e-4)]
+    space = ParamSpace.fit(params, ("bending",))
+    theta = space.transform(params)
+    middle = np.array([[1.0, 0.0, -1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 1.0]]) * 1e-4
+    grams = np.stack([np.diag([0.0, 1e-4, 1e-4]), middle, np.diag([1e-4, 1e-4, 0.0])])
+    counts = np.ones(3, np.int64)
+    ensemble = RBFEnsemble([torch.nn.Linear(1, 1) for _ in range(3)], params, space, EnsembleConfig(steps=300, lr=2e-2))
+    history = ensemble.fit(grams, counts, theta, own=[0, 1, 2])
+    with torch.no_grad():
+        w = ensemble.weights(torch.tensor(theta, dtype=torch.float32), torch.arange(3)).numpy()
+    assert np.allclose(np.diag(w), 0) and np.allclose(w.sum(1), 1)
+    assert w[1] == pytest.approx([0.5, 0.0, 0.5], abs=0.02)
+    assert history[-1] == pytest.approx(np.mean([w[0] @ grams[0] @ w[0], w[1] @ middle @ w[1], w[2] @ grams[2] @ w[2]]),
+                                        rel=0.05, abs=1e-9)
+
+
 def test_fit_evaluate_save_and_load(networks, tiny_train, tiny_test, tmp_path):
     config = EnsembleConfig(pivots=3, steps=50)
     ensemble, report = fit_ensemble(networks, PARAMS, [tiny_train] * 4, config)

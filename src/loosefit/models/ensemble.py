@@ -9,7 +9,10 @@ parameters ``theta`` the garment is a convex combination of the outputs of ``K``
 where ``theta`` is the parameter vector normalised by :class:`ParamSpace` (chosen keys, log10 of the
 stiffness-like ones, standardised over the training sets) and ``g`` an MLP into a latent space. The
 pivot networks stay frozen; ``g`` is trained so that the combination matches the simulations of every
-training parameter set.
+training parameter set. By default each set is fitted *leaving out its own network* (when that network
+is a pivot): a set's own network always fits it best, so fitting with it only teaches ``g`` to put each
+set on itself (one-hot weights), which says nothing about the parameters in between; left out, every
+set teaches ``g`` how its neighbours combine into it, which is what a new parameter set needs.
 
 Error Gram matrices make that cheap and exact: because the weights sum to one,
 ``sum_k w_k G_k - Y = sum_k w_k (G_k - Y)``, so the mean squared vertex error of any weights on a
@@ -57,6 +60,8 @@ class EnsembleConfig:
         hidden: hidden widths of ``g`` (not given in the paper).
         log_params: parameters compared on a log10 scale (stiffness spans orders of magnitude).
         steps, lr: Adam steps and learning rate training ``g`` (full batch: all training sets).
+        leave_one_out: fit each training set without its own pivot network (see the module doc; the
+            paper does not say how its ``g`` is trained).
         seed: seeds ``g``'s initial weights.
         threads: torch CPU threads while fitting and evaluating (restored afterwards; 1 is fastest on
             small shared machines, as for training).
@@ -69,6 +74,7 @@ class EnsembleConfig:
     log_params: tuple[str, ...] = ("bending",)
     steps: int = 2000
     lr: float = 1e-2
+    leave_one_out: bool = True
     seed: int = 0
     threads: int = 1
 
@@ -325,11 +331,17 @@ class RBFEnsemble(nn.Module):
     def num_pivots(self) -> int:
         return len(self.pivots)
 
-    def weights(self, theta: torch.Tensor) -> torch.Tensor:
+    def weights(self, theta: torch.Tensor, exclude: torch.Tensor | None = None) -> torch.Tensor:
         """Normalised RBF weights ``(..., K)`` of normalised parameters ``theta (..., P)`` (a softmax of
-        the log-kernel: equal to Eq. 4 normalised, without underflow for a sharp kernel)."""
-        d2 = ((self.g(theta)[..., None, :] - self.g(self.pivot_theta)) ** 2).sum(-1)
-        return torch.softmax(-d2 / (2 * self.config.sigma**2), -1)
+        the log-kernel: equal to Eq. 4 normalised, without underflow for a sharp kernel).
+
+        ``exclude`` (``(...,)`` int64, -1 for none) names one pivot per row whose weight is forced to 0
+        (the others renormalised): the leave-one-out fit."""
+        logits = -((self.g(theta)[..., None, :] - self.g(self.pivot_theta)) ** 2).sum(-1) / (2 * self.config.sigma**2)
+        if exclude is not None:
+            hit = torch.arange(self.num_pivots, device=logits.device) == exclude[..., None]
+            logits = logits.masked_fill(hit, float("-inf"))
+        return torch.softmax(logits, -1)
 
     def weights_for(self, params: Mapping) -> torch.Tensor:
         """RBF weights ``(K,)`` of one parameter dict."""
@@ -347,7 +359,7 @@ class RBFEnsemble(nn.Module):
         verts = sum(wk * o["verts"] for wk, o in zip(w, outs))
         return {"verts": verts, "weights": w, "state": [o["state"] for o in outs]}
 
-    def fit(self, grams: np.ndarray, counts: np.ndarray, theta: np.ndarray) -> list[float]:
+    def fit(self, grams: np.ndarray, counts: np.ndarray, theta: np.ndarray, own: Sequence[int] | None = None) -> list[float]:
         """Train ``g`` on ``S`` parameter sets: minimise the mean over sets of the mean squared vertex
         error ``w(theta_s)^T E_s w(theta_s) / n_s``.
 
@@ -355,6 +367,8 @@ class RBFEnsemble(nn.Module):
             grams: ``(S, K, K)`` error Grams of the pivots on each set (:func:`error_grams`).
             counts: ``(S,)`` vertex samples per set.
             theta: ``(S, P)`` normalised parameters of the sets.
+            own: ``(S,)`` the pivot trained on each set, -1 where none: left out of that set's weights
+                (with more than one pivot). None: every pivot takes part everywhere.
 
         Returns:
             The loss (mean squared error, m^2) at every step.
@@ -365,10 +379,13 @@ class RBFEnsemble(nn.Module):
         th = torch.tensor(np.asarray(theta), dtype=torch.float32, device=device)
         if E.shape[1:] != (self.num_pivots, self.num_pivots) or len(th) != len(E):
             raise InputError(f"grams {tuple(E.shape)} and parameters {tuple(th.shape)} do not fit {self.num_pivots} pivots")
+        exclude = None
+        if own is not None and self.num_pivots > 1:
+            exclude = torch.tensor(np.asarray(own, np.int64), device=device)
         optimizer = torch.optim.Adam(self.g.parameters(), lr=self.config.lr)
         history = []
         for _ in range(self.config.steps):
-            w = self.weights(th).double()
+            w = self.weights(th, exclude).double()
             loss = torch.einsum("sk,skl,sl->s", w, E, w).mean()
             optimizer.zero_grad()
             loss.backward()
@@ -429,7 +446,8 @@ def fit_ensemble(models: Sequence[nn.Module], params: Sequence[Mapping], data: S
 
     Returns:
         The ensemble and a report: ``space`` (names), ``pivots`` (indices in selection order),
-        ``fit_rmse_mm`` (per set, the RBF ensemble after training), ``loss`` (first and last).
+        ``fit_rmse_mm`` (per set, the RBF ensemble after training, all pivots taking part), ``loss``
+        (first and last of the fit, leave-one-out when configured).
     """
     if not len(models) == len(params) == len(data):
         raise InputError(f"got {len(models)} networks, {len(params)} parameter sets and {len(data)} data sets")
@@ -440,7 +458,8 @@ def fit_ensemble(models: Sequence[nn.Module], params: Sequence[Mapping], data: S
         pivots = select_pivots(theta, config.pivots, convex_fit_error(grams, counts))
         ensemble = RBFEnsemble([models[i] for i in pivots], [params[i] for i in pivots], space, config)
         sub = grams[:, pivots][:, :, pivots]
-        history = ensemble.fit(sub, counts, theta)
+        own = [pivots.index(s) if s in pivots else -1 for s in range(len(data))] if config.leave_one_out else None
+        history = ensemble.fit(sub, counts, theta, own)
         with torch.no_grad():
             w = ensemble.weights(torch.tensor(theta, dtype=torch.float32, device=ensemble.pivot_theta.device)).cpu().numpy()
     report = {
