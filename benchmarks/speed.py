@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import save_results  # noqa: E402
+from _common import CPU_MODEL, save_results  # noqa: E402
 
 import torch  # noqa: E402
 
