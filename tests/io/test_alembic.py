@@ -5,22 +5,11 @@ import pytest
 
 from loosefit.errors import InputError
 from loosefit.io.alembic import read_alembic, write_alembic
-from loosefit.io.mesh_sequence import MeshSequence
-
-
-def _sequence(seed=0, frames=10, verts=50, fps=24.0):
-    """A random garment (``verts`` vertices) and body (20 vertices) over ``frames`` frames."""
-    rng = np.random.default_rng(seed)
-    faces = np.argsort(rng.random((80, verts)), axis=1)[:, :3]
-    body = {
-        "body_verts": rng.normal(size=(frames, 20, 3)).astype(np.float32),
-        "body_faces": np.argsort(rng.random((30, 20)), axis=1)[:, :3],
-    }
-    return MeshSequence(rng.normal(size=(frames, verts, 3)), faces, fps, body)
+from tests.io.conftest import random_sequence
 
 
 def test_round_trip_is_exact(tmp_path):
-    seq = _sequence(fps=29.97)
+    seq = random_sequence(fps=29.97)
     write_alembic(tmp_path / "a.abc", seq)
     assert (tmp_path / "a.abc").read_bytes()[:5] == b"Ogawa"
     back = read_alembic(tmp_path / "a.abc")
@@ -31,7 +20,7 @@ def test_round_trip_is_exact(tmp_path):
 
 
 def test_single_frame(tmp_path):
-    seq = _sequence(frames=1, fps=30.0)
+    seq = random_sequence(frames=1, fps=30.0)
     seq.extra.clear()
     write_alembic(tmp_path / "one.abc", seq)
     back = read_alembic(tmp_path / "one.abc")

@@ -11,17 +11,7 @@ from pygltflib.validator import validate
 from loosefit.errors import InputError
 from loosefit.io.gltf import from_y_up, read_glb, to_y_up, write_glb
 from loosefit.io.mesh_sequence import MeshSequence
-
-
-def _sequence(seed=0, frames=10, verts=50, fps=24.0, body=True):
-    """A random garment (``verts`` vertices, 80 triangles) and body (20 vertices) over ``frames`` frames."""
-    rng = np.random.default_rng(seed)
-    faces = np.argsort(rng.random((80, verts)), axis=1)[:, :3]
-    extra = {
-        "body_verts": rng.normal(size=(frames, 20, 3)).astype(np.float32),
-        "body_faces": np.argsort(rng.random((30, 20)), axis=1)[:, :3],
-    }
-    return MeshSequence(rng.normal(size=(frames, verts, 3)), faces, fps, extra if body else {})
+from tests.io.conftest import random_sequence
 
 
 def _one_step(a, b):
@@ -47,7 +37,7 @@ def test_axis_conversion_is_a_proper_rotation():
 
 @pytest.mark.parametrize("interpolation", ["STEP", "LINEAR"])
 def test_round_trip(tmp_path, interpolation):
-    seq = _sequence()
+    seq = random_sequence()
     write_glb(tmp_path / "a.glb", seq, interpolation=interpolation)
     back = read_glb(tmp_path / "a.glb")
     assert _one_step(back.verts, seq.verts) and back.verts.max() > 1.0  # tolerance 2 ulp, i.e. < 1e-6 m here
@@ -59,7 +49,7 @@ def test_round_trip(tmp_path, interpolation):
 
 
 def test_document_structure(tmp_path):
-    seq = _sequence(frames=6, fps=30.0)
+    seq = random_sequence(frames=6, fps=30.0)
     write_glb(tmp_path / "a.glb", seq)
     raw = (tmp_path / "a.glb").read_bytes()
     assert raw[:4] == b"glTF" and struct.unpack("<II", raw[4:12]) == (2, len(raw))
@@ -92,7 +82,7 @@ def test_document_structure(tmp_path):
 
 
 def test_given_rest_mesh_is_the_base(tmp_path):
-    seq = _sequence(body=False)
+    seq = random_sequence(body=False)
     rest = seq.verts.mean(axis=0)
     write_glb(tmp_path / "a.glb", seq, rest=rest)
     gltf = GLTF2.load_binary(tmp_path / "a.glb")
@@ -121,7 +111,7 @@ def test_blender_importer_plays_the_animation(tmp_path):
     import bpy
     import addon_utils  # importable once bpy is
 
-    seq = _sequence(body=False)
+    seq = random_sequence(body=False)
     write_glb(tmp_path / "a.glb", seq)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     try:
@@ -143,9 +133,9 @@ def test_blender_importer_plays_the_animation(tmp_path):
 
 def test_errors_name_the_file(tmp_path):
     with pytest.raises(InputError, match="a.glb: interpolation must be one of"):
-        write_glb(tmp_path / "a.glb", _sequence(), interpolation="CUBICSPLINE")
+        write_glb(tmp_path / "a.glb", random_sequence(), interpolation="CUBICSPLINE")
     with pytest.raises(InputError, match="a.glb: rest mesh must be finite"):
-        write_glb(tmp_path / "a.glb", _sequence(), rest=np.zeros((3, 3)))
+        write_glb(tmp_path / "a.glb", random_sequence(), rest=np.zeros((3, 3)))
     assert not (tmp_path / "a.glb").exists()
     (tmp_path / "junk.glb").write_bytes(b"junk" * 10)
     with pytest.raises(InputError, match="junk.glb: cannot read glTF binary"):

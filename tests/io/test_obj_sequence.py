@@ -6,19 +6,8 @@ import trimesh
 
 from loosefit.errors import InputError
 from loosefit.io import obj_sequence
-from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.io.obj_sequence import read_obj_sequence, write_obj_sequence
-
-
-def _sequence(seed=0, frames=10, verts=50, fps=24.0):
-    """A random garment (``verts`` vertices) and body (20 vertices) over ``frames`` frames."""
-    rng = np.random.default_rng(seed)
-    faces = np.argsort(rng.random((80, verts)), axis=1)[:, :3]  # three distinct corners per triangle
-    body = {
-        "body_verts": rng.normal(size=(frames, 20, 3)).astype(np.float32),
-        "body_faces": np.argsort(rng.random((30, 20)), axis=1)[:, :3],
-    }
-    return MeshSequence(rng.normal(size=(frames, verts, 3)), faces, fps, body)
+from tests.io.conftest import random_sequence
 
 
 def _close(a, b):
@@ -27,7 +16,7 @@ def _close(a, b):
 
 
 def test_round_trip_and_layout(tmp_path):
-    seq = _sequence(fps=29.97)
+    seq = random_sequence(fps=29.97)
     write_obj_sequence(tmp_path / "anim", seq)
     names = sorted(p.name for p in (tmp_path / "anim").iterdir())
     assert names == sorted([f"frame_{t:05d}.obj" for t in range(10)] + [f"body_{t:05d}.obj" for t in range(10)])
@@ -42,8 +31,8 @@ def test_round_trip_and_layout(tmp_path):
 
 
 def test_rewrite_replaces_all_frames(tmp_path):
-    write_obj_sequence(tmp_path / "anim", _sequence(frames=10))
-    shorter = _sequence(seed=1, frames=4)
+    write_obj_sequence(tmp_path / "anim", random_sequence(frames=10))
+    shorter = random_sequence(seed=1, frames=4)
     shorter.extra.clear()
     write_obj_sequence(tmp_path / "anim", shorter)
     assert sorted(p.name for p in (tmp_path / "anim").iterdir()) == [f"frame_{t:05d}.obj" for t in range(4)]
@@ -52,7 +41,7 @@ def test_rewrite_replaces_all_frames(tmp_path):
 
 
 def test_failed_write_keeps_the_old_folder(tmp_path, monkeypatch):
-    old = _sequence(frames=3)
+    old = random_sequence(frames=3)
     write_obj_sequence(tmp_path / "anim", old)
     calls = []
 
@@ -63,7 +52,7 @@ def test_failed_write_keeps_the_old_folder(tmp_path, monkeypatch):
 
     monkeypatch.setattr(obj_sequence, "write_obj", failing_write_obj)
     with pytest.raises(OSError, match="disk full"):
-        write_obj_sequence(tmp_path / "anim", _sequence(seed=1, frames=5))
+        write_obj_sequence(tmp_path / "anim", random_sequence(seed=1, frames=5))
     monkeypatch.undo()
     assert _close(read_obj_sequence(tmp_path / "anim").verts, old.verts)
     assert [p.name for p in tmp_path.iterdir()] == ["anim"]
@@ -73,26 +62,26 @@ def test_refuses_to_replace_a_foreign_folder(tmp_path):
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "todo.txt").write_text("keep me")
     with pytest.raises(InputError, match="notes: .*todo.txt"):
-        write_obj_sequence(tmp_path / "notes", _sequence())
+        write_obj_sequence(tmp_path / "notes", random_sequence())
     assert (tmp_path / "notes" / "todo.txt").read_text() == "keep me"
     (tmp_path / "file").write_text("x")
     with pytest.raises(InputError, match="file: exists and is not a folder"):
-        write_obj_sequence(tmp_path / "file", _sequence())
+        write_obj_sequence(tmp_path / "file", random_sequence())
 
 
 def test_read_errors_name_the_folder_or_file(tmp_path):
-    write_obj_sequence(tmp_path / "gap", _sequence(frames=4))
+    write_obj_sequence(tmp_path / "gap", random_sequence(frames=4))
     (tmp_path / "gap" / "frame_00002.obj").unlink()
     with pytest.raises(InputError, match="gap: frame files are not numbered 0..2: frame_00002.obj is missing"):
         read_obj_sequence(tmp_path / "gap")
-    write_obj_sequence(tmp_path / "topo", _sequence(frames=3))
+    write_obj_sequence(tmp_path / "topo", random_sequence(frames=3))
     (tmp_path / "topo" / "frame_00001.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     with pytest.raises(InputError, match="frame_00001.obj: topology differs from frame_00000.obj"):
         read_obj_sequence(tmp_path / "topo")
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match="empty: no frame_"):
         read_obj_sequence(tmp_path / "empty")
-    write_obj_sequence(tmp_path / "bodies", _sequence(frames=3))
+    write_obj_sequence(tmp_path / "bodies", random_sequence(frames=3))
     (tmp_path / "bodies" / "body_00002.obj").unlink()
     with pytest.raises(InputError, match="bodies: 3 garment frames but 2 body frames"):
         read_obj_sequence(tmp_path / "bodies")

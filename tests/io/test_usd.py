@@ -5,24 +5,13 @@ import pytest
 from pxr import Gf, Usd, UsdGeom, Vt
 
 from loosefit.errors import InputError
-from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.io.usd import read_usd, write_usd
-
-
-def _sequence(seed=0, frames=10, verts=50, fps=24.0):
-    """A random garment (``verts`` vertices) and body (20 vertices) over ``frames`` frames."""
-    rng = np.random.default_rng(seed)
-    faces = np.argsort(rng.random((80, verts)), axis=1)[:, :3]
-    body = {
-        "body_verts": rng.normal(size=(frames, 20, 3)).astype(np.float32),
-        "body_faces": np.argsort(rng.random((30, 20)), axis=1)[:, :3],
-    }
-    return MeshSequence(rng.normal(size=(frames, verts, 3)), faces, fps, body)
+from tests.io.conftest import random_sequence
 
 
 @pytest.mark.parametrize("suffix", [".usdc", ".usda"])
 def test_round_trip_is_exact(tmp_path, suffix):
-    seq = _sequence()
+    seq = random_sequence()
     write_usd(tmp_path / f"a{suffix}", seq)
     back = read_usd(tmp_path / f"a{suffix}")
     assert np.array_equal(back.verts, seq.verts) and np.array_equal(back.faces, seq.faces) and back.fps == 24.0
@@ -33,7 +22,7 @@ def test_round_trip_is_exact(tmp_path, suffix):
 
 
 def test_stage_layout(tmp_path):
-    seq = _sequence(frames=6, fps=30.0)
+    seq = random_sequence(frames=6, fps=30.0)
     write_usd(tmp_path / "a.usdc", seq)
     stage = Usd.Stage.Open(str(tmp_path / "a.usdc"))
     assert UsdGeom.GetStageUpAxis(stage) == "Z" and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
@@ -79,9 +68,9 @@ def test_reads_y_up_centimetre_stage_with_transform(tmp_path):
 
 def test_rewrite_is_read_fresh(tmp_path):
     """USD caches opened layers per process: a stage still open must not hide the new file."""
-    write_usd(tmp_path / "a.usdc", _sequence(seed=0))
+    write_usd(tmp_path / "a.usdc", random_sequence(seed=0))
     still_open = Usd.Stage.Open(str(tmp_path / "a.usdc"))
-    second = _sequence(seed=1, frames=3)
+    second = random_sequence(seed=1, frames=3)
     write_usd(tmp_path / "a.usdc", second)
     assert np.array_equal(read_usd(tmp_path / "a.usdc").verts, second.verts)
     assert still_open.GetPrimAtPath("/loosefit/garment").IsValid()

@@ -220,15 +220,16 @@ class VirtualBones(GarmentModel):
         root, joints = self.normalise(root, joints)
         return torch.cat([root, joints.flatten(-2)], -1)
 
-    def low_frequency(self, x: torch.Tensor, h: torch.Tensor | None = None):
+    def low_frequency(self, x: torch.Tensor, h: torch.Tensor | None = None, frames: torch.Tensor | None = None):
         """Low-frequency module: features ``x (N,T,F)`` -> ``(raw (N,T,B,9), rotations, translations, lf, h)``.
 
         ``raw`` holds the normalised outputs (6D residual, position offset), the bone motion that the
-        high-frequency module reads.
+        high-frequency module reads. With ``frames`` (``(T',)`` indices) the bone transforms and the
+        mesh are those of these frames only; ``raw`` keeps all ``T``.
         """
         out, h = self.low(x, h)
         raw = out.unflatten(-1, (-1, BONE_OUTPUTS))
-        rot, trans = self.decode_bones(raw)
+        rot, trans = self.decode_bones(raw if frames is None else raw[:, frames])
         return raw, rot, trans, skin_bones(self.rest_verts, self.skin_weights, rot, trans), h
 
     def decode_bones(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -303,9 +304,7 @@ class VirtualBones(GarmentModel):
         if stage == "high":
             frames = self.loss_frames(mask, self.config.hf_loss_frames)
             with torch.no_grad():  # the low-frequency module is frozen in this stage
-                out, _ = self.low(x)
-                raw = out.unflatten(-1, (-1, BONE_OUTPUTS))
-                lf = skin_bones(self.rest_verts, self.skin_weights, *self.decode_bones(raw[:, frames]))
+                raw, _, _, lf, _ = self.low_frequency(x, frames=frames)
             offsets, _ = self.high_frequency(raw, lf, frames=frames)
             verts = lf + offsets
             mask = mask[:, frames]
