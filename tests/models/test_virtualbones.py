@@ -90,8 +90,9 @@ def test_gradients_reach_every_parameter_of_the_stage(tiny_train, stage, rank):
     assert set(terms) == expected and all(np.isfinite(v) and v >= 0 for v in terms.values())
 
 
-def test_high_frequency_loss_on_sampled_frames_is_the_full_loss_restricted_to_them(tiny_train):
-    model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "hf_loss_frames": 4}))
+@pytest.mark.parametrize("target", ["residual", "simulation"])
+def test_high_frequency_loss_on_sampled_frames_is_the_full_loss_restricted_to_them(tiny_train, target):
+    model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "hf_loss_frames": 4, "hf_target": target}))
     batch = _batch(WindowDataset(tiny_train, window=20, stride=20, burn_in=5))
     torch.manual_seed(3)
     frames = model.loss_frames(model.mask(batch), 4)
@@ -102,7 +103,10 @@ def test_high_frequency_loss_on_sampled_frames_is_the_full_loss_restricted_to_th
         out = model(batch["root"], batch["joints"])
     # the reference: every frame predicted, then the vertex and collision terms on the drawn ones only
     pred = out["verts"][:, frames]
-    vertex = (pred - batch["verts"][:, frames]).norm(dim=-1).mean()
+    if target == "residual":  # the offsets against the simulation's high-frequency part
+        vertex = ((pred - out["lf"][:, frames]) - (batch["verts"] - batch["lf"])[:, frames]).norm(dim=-1).mean()
+    else:
+        vertex = (pred - batch["verts"][:, frames]).norm(dim=-1).mean()
     idx = batch["body_nearest"][:, frames, :, None].expand(-1, -1, -1, 3)
     depth = -((pred - torch.gather(batch["body"][:, frames], 2, idx))
               * torch.gather(batch["body_normals"][:, frames], 2, idx)).sum(-1)

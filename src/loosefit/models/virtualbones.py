@@ -21,7 +21,8 @@ High-frequency module (Sec. 4.3): a GRU over the predicted bone motions (the low
 normalised outputs) and a linear layer give a global feature for every vertex; EdgeConv layers over
 the mesh edges of the low-frequency mesh (vertex positions in) give local features; a shared per-vertex
 MLP maps both to a displacement (in units of the training high-frequency offsets' standard deviation)
-added to the low-frequency mesh. Loss: mean vertex distance to the simulated mesh plus
+added to the low-frequency mesh. Loss: mean vertex distance between the offsets and the simulation's
+high-frequency part (``hf_target="residual"``; or between the final and the simulated mesh) plus
 ``collision_weight`` times the body penetration term ``max(margin - n_k . (v_i - b_k), 0)``.
 
 Training (trainer stages ``["low", "high"]``): "low" optimises the low-frequency module alone; "high"
@@ -61,6 +62,8 @@ OUT_SCALE = 0.1
 #: Floors of the output scales, metres (a bone or an offset that never moves must not get a zero scale).
 MIN_POSITION_STD = 1e-3
 MIN_OFFSET_STD = 1e-4
+#: What the high-frequency stage's position term compares with (see ``VirtualBonesConfig.hf_target``).
+HF_TARGETS = ("residual", "simulation")
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,12 @@ class VirtualBonesConfig:
             a CPU the per-vertex part (skinning, EdgeConv, head) over every frame dominates a step, and
             a random subset gives an unbiased estimate of the same loss for a fraction of the cost. The
             GRU still runs over the whole window.
+        hf_target: what the high-frequency stage's position term compares with. ``"residual"``: the
+            predicted offsets against the simulation's own high-frequency part ``G - G_LF`` (Sec. 4.1's
+            split; the module "estimates the high-frequency deformation"). ``"simulation"``: the final mesh
+            (predicted low-frequency mesh plus offsets) against the simulated mesh, which also asks the
+            module to undo the low-frequency module's errors on the training motions, errors that do not
+            recur on new motions.
     """
 
     lf_hidden: int = 600
@@ -104,6 +113,7 @@ class VirtualBonesConfig:
     collision_margin: float = 0.0
     bone_weight: float = 0.0
     hf_loss_frames: int = 0
+    hf_target: str = "residual"
 
     def __post_init__(self):
         sizes = (self.lf_hidden, self.hf_hidden, self.global_channels, *self.edge_channels, *self.head_hidden)
@@ -112,6 +122,8 @@ class VirtualBonesConfig:
         for name in ("laplacian_weight", "collision_weight", "collision_margin", "bone_weight", "hf_loss_frames"):
             if not getattr(self, name) >= 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.hf_target not in HF_TARGETS:
+            raise InputError(f"hf_target must be one of {HF_TARGETS}, got {self.hf_target!r}")
 
 
 def _default_train() -> TrainConfig:
@@ -308,8 +320,11 @@ class VirtualBones(GarmentModel):
             offsets, _ = self.high_frequency(raw, lf, frames=frames)
             verts = lf + offsets
             mask = mask[:, frames]
-            batch = {k: batch[k][:, frames] for k in ("verts", "body", "body_normals", "body_nearest") if k in batch}
-            vertex = vertex_distance(verts, batch["verts"], mask)
+            batch = {k: batch[k][:, frames] for k in ("verts", "lf", "body", "body_normals", "body_nearest") if k in batch}
+            if c.hf_target == "residual":
+                vertex = vertex_distance(offsets, batch["verts"] - batch["lf"], mask)
+            else:
+                vertex = vertex_distance(verts, batch["verts"], mask)
             loss, terms = vertex, {"vertex": vertex.item()}
             if c.collision_weight > 0:
                 if "body" not in batch:
