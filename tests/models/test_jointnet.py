@@ -33,11 +33,13 @@ def _batch(data, frames: int = 16) -> dict:
     return default_collate([WindowDataset(data, frames, frames, 4)[0]])
 
 
-def test_grouped_gru_equals_one_torch_gru_per_joint():
+@pytest.mark.parametrize("order", ["joint_by_joint", "all_joints_per_frame"])
+def test_grouped_gru_equals_one_torch_gru_per_joint(order):
     torch.manual_seed(0)
     gru = JointGRU(3, 5, 7)
     x, h0 = torch.randn(2, 6, 3, 5), torch.randn(2, 3, 7)
-    out, last = gru(x, h0)
+    out, last = getattr(gru, order)(x, h0)
+    (out.square().sum() + last.sum()).backward()
     for g in range(3):
         ref = torch.nn.GRU(5, 7, batch_first=True)
         with torch.no_grad():
@@ -48,6 +50,13 @@ def test_grouped_gru_equals_one_torch_gru_per_joint():
         expected, expected_last = ref(x[:, :, g], h0[:, g][None])
         assert torch.allclose(out[:, :, g], expected, atol=1e-6)
         assert torch.allclose(last[:, g], expected_last[0], atol=1e-6)
+        (expected.square().sum() + expected_last.sum()).backward()
+        assert torch.allclose(gru.weight_hh.grad[g], ref.weight_hh_l0.grad, atol=1e-5)
+        assert torch.allclose(gru.bias_ih.grad[g, 0], ref.bias_ih_l0.grad, atol=1e-5)
+    # forward: one frame frame by frame, several joint by joint
+    with torch.no_grad():
+        assert torch.equal(gru(x, h0)[0], gru.joint_by_joint(x, h0)[0])
+        assert torch.equal(gru(x[:, :1], h0)[0], gru.all_joints_per_frame(x[:, :1], h0)[0])
 
 
 def test_joint_selection_and_skeleton_neighbours(body):
