@@ -34,7 +34,7 @@ _OBJECT_STORE_BYTES = 300 * 1024**2
 
 
 @functools.lru_cache(maxsize=8)
-def _body(shape_values: tuple[float, ...]):
+def plan_body(shape_values: tuple[float, ...]):
     """The full-resolution Anny body of a shape, built once per process."""
     from loosefit.body import AnnyBody, AnnyShape
 
@@ -65,7 +65,7 @@ def simulate_file(
     from loosefit.garment import Garment, import_garment
     from loosefit.motion.io import load_motion
 
-    body = _body(tuple(AnnyShape.parse(shape).to_array().tolist()))
+    body = plan_body(tuple(AnnyShape.parse(shape).to_array().tolist()))
     garment_path = Path(garment_path)
     if Garment.sidecar_path(garment_path).is_file():
         garment = Garment.load(garment_path)
@@ -77,11 +77,12 @@ def simulate_file(
     return result
 
 
-def _load_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
+def load_plan_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
+    """Garment ``name`` of ``plan`` (a template made, or a file loaded) on the body of ``shape_values``."""
     from loosefit.garment import Garment, import_garment, make_garment
 
     spec = plan.garments[name]
-    body = _body(shape_values)
+    body = plan_body(shape_values)
     if "template" in spec:
         return make_garment(
             spec["template"],
@@ -94,11 +95,12 @@ def _load_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
     return Garment.load(path) if Garment.sidecar_path(path).is_file() else import_garment(path, body)
 
 
-def _load_motion(plan: Plan, name: str):
+def load_plan_motion(plan: Plan, name: str):
+    """Motion ``name`` of ``plan`` (procedural, or a file with its start and frame count) on the average body."""
     from loosefit.body import AnnyShape
 
     spec = plan.motions[name]
-    body = _body(tuple(AnnyShape().to_array().tolist()))  # motions are made on the average body
+    body = plan_body(tuple(AnnyShape().to_array().tolist()))  # motions are made on the average body
     if "procedural" in spec:
         from loosefit.motion.procedural import generate
 
@@ -121,7 +123,7 @@ def simulate_job(payload: dict[str, Any]) -> dict[str, Any]:
     try:
         result = simulate_sequence(
             payload["garment"],
-            _body(payload["shape"]),
+            plan_body(payload["shape"]),
             payload["motion"],
             SimParams.from_dict(payload["params"]),
             gate=QualityGate.from_dict(payload["gate"]),
@@ -218,10 +220,10 @@ def _inputs(plan: Plan, store, jobs: list[SequenceJob]) -> list[dict[str, Any]]:
         shape = shapes[job.shape]
         if job.garment_entry not in garments:
             store.add_body(job.shape, np.asarray(shape, np.float32))
-            garments[job.garment_entry] = _load_garment(plan, job.garment, shape)
+            garments[job.garment_entry] = load_plan_garment(plan, job.garment, shape)
             store.add_garment(job.garment_entry, garments[job.garment_entry])
         if job.motion not in motions:
-            motions[job.motion] = _load_motion(plan, job.motion)
+            motions[job.motion] = load_plan_motion(plan, job.motion)
             store.add_motion(job.motion, motions[job.motion])
         payloads.append({
             "garment": garments[job.garment_entry],
