@@ -90,13 +90,12 @@ def main() -> None:
                "against_as_is": {k: difference(v, base, below, motion.fps) for k, v in runs.items() if k != "as is"}}
     if args.data is not None:
         store = DatasetStore.open(args.data)
-        name = next((n for n in store.sequence_names()
-                     if store.sequence(n).garment.split("+")[0] == args.garment
-                     and store.sequence(n).motion == args.motion), None)
-        if name is None:
+        stored = next((q for q in map(store.sequence, store.sequence_names())
+                       if q.garment.split("+")[0] == args.garment and q.motion == args.motion), None)
+        if stored is None:
             raise InputError(f"no sequence of {args.garment} on {args.motion} in the store", args.data)
-        results["stored_sequence"] = name
-        results["stored_against_as_is"] = difference(np.asarray(store.sequence(name).verts[:]), base, below, motion.fps)
+        results["stored_sequence"] = stored.name
+        results["stored_against_as_is"] = difference(np.asarray(stored.verts[:]), base, below, motion.fps)
     for k, v in {**results["against_as_is"], "stored": results.get("stored_against_as_is")}.items():
         if v is not None:
             print(f"{k:>22}: RMSE {v['rmse_mm']:6.1f} mm, below the knees {v['mean_below_knees_mm']:6.1f} mm, "

@@ -321,7 +321,8 @@ class VirtualBones(GarmentModel):
             offsets, _ = self.high_frequency(raw, lf, frames=frames)
             verts = lf + offsets
             mask = mask[:, frames]
-            batch = {k: batch[k][:, frames] for k in ("verts", "lf", "body", "body_normals", "body_nearest") if k in batch}
+            keys = ("verts", "body", "body_normals", "body_nearest") + (("lf",) if c.hf_target == "residual" else ())
+            batch = {k: batch[k][:, frames] for k in keys if k in batch}
             if c.hf_target == "residual":
                 vertex = vertex_distance(offsets, batch["verts"] - batch["lf"], mask)
             else:
