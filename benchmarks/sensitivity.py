@@ -13,7 +13,8 @@ hem by centimetres, no model can follow both simulations, and held-out RMSE stay
 however much it trains.
 
 Run: .venv/bin/python benchmarks/sensitivity.py --plan configs/datasets/bench.yaml --garment skirt
-         --motion walk-1 [--joint LeftArm] [--degrees 0.1,0.5,2] [--data DATA.zarr] [--name sensitivity-skirt]
+         --motion walk-1 [--joint LeftArm] [--degrees 0.1,0.5,2] [--data DATA.zarr] [--sim-params NAME]
+         [--set air_drag=0.5 ...] [--seconds 4] [--name sensitivity-skirt]
 (writes benchmarks/results/<name>.json)
 """
 
@@ -57,6 +58,10 @@ def main() -> None:
     parser.add_argument("--joint", default="LeftArm", help="the joint turned")
     parser.add_argument("--degrees", default="0.1,0.5,2", help="comma-separated constant angles, degrees")
     parser.add_argument("--data", default=None, help="a store simulated from the plan, to compare with")
+    parser.add_argument("--sim-params", default=None, help="a simulation-parameter set of the plan (default: its first)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override one simulation parameter (repeatable), e.g. --set air_drag=0.5")
+    parser.add_argument("--seconds", type=float, default=None, help="simulate only the motion's first seconds")
     parser.add_argument("--name", default=None, help="results name (default sensitivity-<garment>-<motion>)")
     args = parser.parse_args()
     plan = load_plan(args.plan)
@@ -70,12 +75,19 @@ def main() -> None:
         raise InputError(f"--joint {args.joint!r} is not a joint of the body rig ({body.joint_names})")
     garment = load_plan_garment(plan, args.garment, shape)
     motion = load_plan_motion(plan, args.motion)
+    if args.seconds is not None:
+        motion = motion.slice(0, max(2, int(round(args.seconds * motion.fps))))
+    params_name = args.sim_params or next(iter(plan.sim_params))
+    if params_name not in plan.sim_params:
+        raise InputError(f"simulation-parameter set {params_name!r} is not in the plan "
+                         f"(it has {sorted(plan.sim_params)})", args.plan)
+    params = plan.sim_params[params_name].with_overrides(args.set)
     knee = float(np.mean([body.rest_joints()[body.joint_names.index(k)][2] for k in KNEES]))
     below = garment.verts[:, 2] < knee
 
     def simulate(m) -> np.ndarray:
         start = time.perf_counter()
-        result = simulate_sequence(garment, body, m)
+        result = simulate_sequence(garment, body, m, params)
         print(f"{m.name}: {result.status}, {time.perf_counter() - start:.0f} s", flush=True)
         return result.verts
 
@@ -85,7 +97,7 @@ def main() -> None:
         runs[f"{args.joint} {d:g} deg"] = simulate(nudged)
     base = runs["as is"]
     results = {"plan": args.plan, "garment": args.garment, "motion": args.motion, "frames": motion.num_frames,
-               "vertices": len(garment.verts), "vertices_below_knees": int(below.sum()), "joint": args.joint,
+               "vertices": len(garment.verts), "vertices_below_knees": int(below.sum()), "joint": args.joint, "sim_params": params.to_dict(),
                "load_average_at_start": os.getloadavg(),
                "against_as_is": {k: difference(v, base, below, motion.fps) for k, v in runs.items() if k != "as is"}}
     if args.data is not None:
@@ -95,7 +107,8 @@ def main() -> None:
         if stored is None:
             raise InputError(f"no sequence of {args.garment} on {args.motion} in the store", args.data)
         results["stored_sequence"] = stored.name
-        results["stored_against_as_is"] = difference(np.asarray(stored.verts[:]), base, below, motion.fps)
+        verts = np.asarray(stored.verts[:motion.num_frames])
+        results["stored_against_as_is"] = difference(verts, base, below, motion.fps)
     for k, v in {**results["against_as_is"], "stored": results.get("stored_against_as_is")}.items():
         if v is not None:
             print(f"{k:>22}: RMSE {v['rmse_mm']:6.1f} mm, below the knees {v['mean_below_knees_mm']:6.1f} mm, "

@@ -1,8 +1,10 @@
 """Heading-frame canonicalisation and motion features."""
 
 import numpy as np
+import pytest
 import torch
 
+from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix
 from loosefit.models.motion_features import (
     FeatureStream,
@@ -78,3 +80,5 @@ def test_stream_equals_batch():
         assert np.abs(root - batch["root"][t]).max() < 1e-5
         assert np.abs(joints - batch["joints"][t]).max() < 1e-5
         assert np.abs(r - rot[t]).max() < 1e-9 and np.abs(o - origin[t]).max() < 1e-9
+    with pytest.raises(InputError, match="NaN"):
+        stream.step(np.full_like(m.rotations[0], np.nan), m.translation[0])

@@ -16,6 +16,7 @@ from loosefit.rig.virtual_bones import (
     skin_bones,
     solve_bone_transforms,
     solve_frames,
+    sparse_weights,
 )
 from tests.rig.conftest import tube
 
@@ -95,6 +96,20 @@ def test_skinning_matches_a_per_vertex_sum():
     dense = torch.tensor(rig.dense_weights(), dtype=torch.float64)
     direct = skin_bones(torch.tensor(rest), dense, torch.tensor(R), torch.tensor(T)).numpy()
     np.testing.assert_allclose(direct, expected, atol=1e-6)
+    # the sparse table: its own bones and weights back, and the same vertices for one frame or two
+    # (<= SPARSE_FRAMES) or a per-frame rest mesh, as in JointNet's pose-space deformation
+    indices, values = sparse_weights(dense)
+    assert indices.shape == (V, K)
+    np.testing.assert_array_equal(np.sort(indices.numpy(), 1), np.sort(idx, 1))
+    np.testing.assert_allclose(values.sum(1).numpy(), 1.0, atol=1e-12)
+    per_frame_rest = torch.tensor(rest) + torch.tensor(rng.normal(scale=0.01, size=(2, V, 3)))
+    for r in (torch.tensor(rest), per_frame_rest):
+        for frames in (slice(0, 1), slice(0, 2)):
+            args = (r if r.ndim == 2 else r[frames], dense, torch.tensor(R[frames]), torch.tensor(T[frames]))
+            np.testing.assert_allclose(skin_bones(*args, sparse=(indices, values)).numpy(),
+                                       skin_bones(*args).numpy(), atol=1e-12)
+    np.testing.assert_allclose(skin_bones(torch.tensor(rest), dense, torch.tensor(R), torch.tensor(T),
+                                          sparse=(indices, values)).numpy(), expected, atol=1e-6)
 
 
 def test_error_falls_as_bones_increase_on_a_simulated_skirt(simulated_skirt):

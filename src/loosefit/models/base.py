@@ -21,6 +21,7 @@ import torch
 from torch import nn
 
 from loosefit.models.dataset import GarmentSequences
+from loosefit.rig.virtual_bones import skin_bones, sparse_weights
 from loosefit.train.losses import frame_mask
 
 
@@ -131,6 +132,16 @@ class GarmentModel(nn.Module):
             n = mask.sum().clamp_min(1)
             return {"rmse_mm": float(((sq * mask).sum() / n).sqrt() * 1e3),
                     "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3)}
+
+    def skin(self, rest: torch.Tensor, rotations: torch.Tensor, translations: torch.Tensor) -> torch.Tensor:
+        """:func:`loosefit.rig.skin_bones` with the model's ``skin_weights (V, B)`` buffer (methods driven
+        by virtual bones have one). The sparse table that speeds up streaming is rebuilt whenever the
+        buffer changes (a loaded checkpoint, another device)."""
+        weights = self.skin_weights
+        key = (weights.data_ptr(), weights._version, weights.device)
+        if getattr(self, "_sparse_key", None) != key:
+            self._sparse_skin, self._sparse_key = sparse_weights(weights), key
+        return skin_bones(rest, weights, rotations, translations, self._sparse_skin)
 
     def batch_size(self, batch: dict) -> int:
         return int(batch["root"].shape[0])

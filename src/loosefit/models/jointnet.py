@@ -46,7 +46,6 @@ from loosefit.models.config import WindowConfig
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.layers.mlp import mlp
 from loosefit.rig.prepare import load_rig
-from loosefit.rig.virtual_bones import skin_bones
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import normal_loss, vertex_l1
 
@@ -351,7 +350,7 @@ class JointNet(GarmentModel):
             weights = self.psd_mlp(psi)  # (B, T, J_s, |X|)
             displacement = (weights.flatten(-2) @ self.psd_basis.flatten(0, 1).flatten(-2)).unflatten(-1, (-1, 3))
             rest = rest + displacement
-        verts = skin_bones(rest, self.skin_weights, R, T)
+        verts = self.skin(rest, R, T)
         return {"verts": verts, "bones": (R, T), "association": association, "displacement": displacement, "state": state}
 
     # ------------------------------------------------------------------ trainer protocol

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_sixd
 from loosefit.motion.motion import Motion
 
@@ -55,7 +56,7 @@ def heading_frames(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
 
 def to_canonical(points: np.ndarray, rot: np.ndarray, origin: np.ndarray) -> np.ndarray:
     """World points ``(T, N, 3)`` -> canonical ``(T, N, 3)`` float32 with frames ``rot (T,3,3)``, ``origin (T,3)``."""
-    return np.einsum("tji,tnj->tni", rot, points - origin[:, None]).astype(np.float32)
+    return ((points - origin[:, None]) @ rot).astype(np.float32)  # p R == (R^T p^T)^T
 
 
 def to_world(points, rot, origin):
@@ -63,8 +64,8 @@ def to_world(points, rot, origin):
     if isinstance(points, torch.Tensor):
         rot = torch.as_tensor(rot, dtype=points.dtype, device=points.device)
         origin = torch.as_tensor(origin, dtype=points.dtype, device=points.device)
-        return torch.einsum("tij,tnj->tni", rot, points) + origin[:, None]
-    return (np.einsum("tij,tnj->tni", rot, points) + origin[:, None]).astype(np.float32)
+        return points @ rot.transpose(-1, -2) + origin[:, None]
+    return (points @ rot.transpose(0, 2, 1) + origin[:, None]).astype(np.float32)
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
@@ -74,20 +75,26 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 def motion_features(motion: Motion) -> dict[str, np.ndarray]:
     """Features of a whole motion: ``root (T, 11)`` and ``joints (T, J-1, 6)`` float32 (see module doc)."""
     R = axis_angle_to_matrix(torch.from_numpy(motion.rotations).double())  # (T, J, 3, 3)
+    return _features(R, motion.translation.astype(np.float64))[0]
+
+
+def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, float] | None = None):
+    """Features of frames with joint rotations ``R (T, J, 3, 3)`` (float64) and root positions ``trans
+    (T, 3)``; ``before`` is the root position and heading of the frame before the first (``None``: the
+    first frame is the motion's first, with no displacement). Also returns the frames' heading
+    rotations ``(T, 3, 3)`` and headings ``(T,)``."""
     root_rot = R[:, 0].numpy()
     psi = heading_angles(root_rot)
     Rh = rot_z(psi)
-    trans = motion.translation.astype(np.float64)
-    disp = np.zeros_like(trans)
-    disp[1:] = trans[1:] - trans[:-1]
-    dpsi = np.zeros_like(psi)
-    dpsi[1:] = _wrap(psi[1:] - psi[:-1])
-    tilt = np.einsum("tji,tjk->tik", Rh, root_rot)  # heading removed: Rz(psi)^T R_root
+    prev_trans, prev_psi = (trans[:1], psi[:1]) if before is None else (before[0][None], np.array([before[1]]))
+    disp = trans - np.concatenate([prev_trans, trans[:-1]])
+    dpsi = _wrap(psi - np.concatenate([prev_psi, psi[:-1]]))
+    tilt = Rh.transpose(0, 2, 1) @ root_rot  # heading removed: Rz(psi)^T R_root
     root = np.concatenate(
-        [trans[:, 2:3], np.einsum("tji,tj->ti", Rh, disp), dpsi[:, None], matrix_to_sixd(torch.from_numpy(tilt)).numpy()], 1
+        [trans[:, 2:3], (disp[:, None] @ Rh)[:, 0], dpsi[:, None], matrix_to_sixd(torch.from_numpy(tilt)).numpy()], 1
     )
     joints = matrix_to_sixd(R[:, 1:]).numpy()
-    return {"root": root.astype(np.float32), "joints": joints.astype(np.float32)}
+    return {"root": root.astype(np.float32), "joints": joints.astype(np.float32)}, Rh, psi
 
 
 class FeatureStream:
@@ -98,14 +105,16 @@ class FeatureStream:
     """
 
     def __init__(self):
-        self._prev: Motion | None = None  # the previous frame: differences need it
+        self._before: tuple[np.ndarray, float] | None = None  # the previous frame's root position and heading
 
     def step(self, rotations: np.ndarray, translation: np.ndarray):
-        frame = Motion(np.asarray(rotations)[None], np.asarray(translation)[None], rig="stream")
-        pair = frame if self._prev is None else Motion(
-            np.concatenate([self._prev.rotations, frame.rotations]),
-            np.concatenate([self._prev.translation, frame.translation]), rig="stream")
-        feats = motion_features(pair)
-        rot, origin = heading_frames(frame)
-        self._prev = frame
-        return feats["root"][-1], feats["joints"][-1], (rot[0], origin[0])
+        rotations = np.asarray(rotations, np.float32)
+        trans = np.asarray(translation, np.float32).astype(np.float64).reshape(1, 3)
+        if not (np.isfinite(rotations).all() and np.isfinite(trans).all()):
+            raise InputError("motion frame contains NaN or infinite values")
+        R = axis_angle_to_matrix(torch.from_numpy(rotations[None]).double())
+        feats, Rh, psi = _features(R, trans, self._before)
+        self._before = (trans[0], float(psi[0]))
+        origin = trans[0].copy()
+        origin[2] = 0.0
+        return feats["root"][0], feats["joints"][0], (Rh[0], origin)

@@ -49,7 +49,6 @@ from loosefit.models.layers.gru import GRUHead
 from loosefit.models.layers.mlp import NEGATIVE_SLOPE, mlp
 from loosefit.rig.normalization import RunningStats
 from loosefit.rig.prepare import load_rig
-from loosefit.rig.virtual_bones import skin_bones
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import collision_loss, laplacian_difference, laplacian_operator, vertex_distance
 
@@ -243,7 +242,7 @@ class VirtualBones(GarmentModel):
         out, h = self.low(x, h)
         raw = out.unflatten(-1, (-1, BONE_OUTPUTS))
         rot, trans = self.decode_bones(raw if frames is None else raw[:, frames])
-        return raw, rot, trans, skin_bones(self.rest_verts, self.skin_weights, rot, trans), h
+        return raw, rot, trans, self.skin(self.rest_verts, rot, trans), h
 
     def decode_bones(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised outputs ``(..., B, 9)`` -> bone rotations ``(..., B, 3, 3)`` and translations ``(..., B, 3)``."""

@@ -13,7 +13,7 @@ from loosefit.rig.prepare import (
     read_stats,
 )
 from loosefit.rig.spectral import spectral_decomposition, spectral_descriptor
-from loosefit.rig.virtual_bones import VirtualBoneRig, fit_virtual_bones, skin_bones, solve_bone_transforms
+from loosefit.rig.virtual_bones import VirtualBoneRig, fit_virtual_bones, skin_bones, solve_bone_transforms, sparse_weights
 
 __all__ = [
     "FitAttributeModel",
@@ -29,6 +29,7 @@ __all__ = [
     "load_rig",
     "read_stats",
     "skin_bones",
+    "sparse_weights",
     "solve_bone_transforms",
     "spectral_decomposition",
     "spectral_descriptor",

@@ -173,20 +173,46 @@ class VirtualBoneRig:
         )
 
 
+#: At most this many frames are skinned through the sparse weight table (:func:`sparse_weights`);
+#: more go through one dense product, which is faster in bulk (bench dress, 80 bones, 8 influences,
+#: one thread: one frame 0.55 ms sparse vs 1.03 ms dense; 600 frames 1.5 s sparse vs 0.31 s dense).
+SPARSE_FRAMES = 4
+
+
+def sparse_weights(weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The non-zero part of dense skinning weights ``(V, B)``: bone indices ``(V, K)`` int64 and weights
+    ``(V, K)``, ``K`` the most non-zero weights of any vertex (padding entries have weight 0)."""
+    K = max(int((weights != 0).sum(-1).max()), 1)
+    values, indices = weights.topk(K, -1)
+    return indices, values
+
+
 def skin_bones(
-    rest_verts: torch.Tensor, weights: torch.Tensor, rotations: torch.Tensor, translations: torch.Tensor
+    rest_verts: torch.Tensor,
+    weights: torch.Tensor,
+    rotations: torch.Tensor,
+    translations: torch.Tensor,
+    sparse: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> torch.Tensor:
     """Linear blend skinning by free bones (Eq. 1), any leading batch dimensions.
 
     Args:
-        rest_verts: ``(V, 3)`` rest mesh, metres.
+        rest_verts: ``(V, 3)`` or ``(..., V, 3)`` rest mesh, metres.
         weights: ``(V, B)`` dense skinning weights.
         rotations: ``(..., B, 3, 3)`` bone rotations (rest to frame).
         translations: ``(..., B, 3)`` bone translations, metres.
+        sparse: ``weights`` as :func:`sparse_weights` gives them; used (same result) when at most
+            :data:`SPARSE_FRAMES` frames are skinned, the streaming case.
 
     Returns:
         ``(..., V, 3)`` skinned vertices.
     """
+    if sparse is not None and rotations.shape[:-3].numel() <= SPARSE_FRAMES:
+        indices, values = sparse
+        transforms = torch.cat([rotations, translations[..., None]], -1).flatten(-2)  # (..., B, 12)
+        picked = transforms.index_select(-2, indices.reshape(-1)).unflatten(-2, indices.shape)  # (..., V, K, 12)
+        blend = (values[..., None] * picked).sum(-2).unflatten(-1, (3, 4))
+        return (blend[..., :3] @ rest_verts[..., None])[..., 0] + blend[..., 3]
     blend_R = torch.einsum("vb,...bij->...vij", weights, rotations)
     blend_T = torch.einsum("vb,...bi->...vi", weights, translations)
     return (blend_R @ rest_verts[..., None])[..., 0] + blend_T
