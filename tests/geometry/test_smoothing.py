@@ -27,6 +27,17 @@ def test_one_step_on_a_fan_matches_hand_computation():
     free = diffusion_smooth(verts, faces, lam, 1, boundary="free")
     assert np.allclose(free[1:], (1 - lam) * ring + lam * (prev + nxt + verts[0]) / 3, atol=1e-6)
 
+    # fixed vertices (a pinned waist): the centre and one ring vertex stay; the ring's neighbours of the
+    # fixed one still average with it
+    pinned = np.zeros(len(verts), bool)
+    pinned[[0, 1]] = True
+    kept = diffusion_smooth(verts, faces, lam, 1, boundary="along", fixed=pinned)
+    assert np.allclose(kept[pinned], verts[pinned], atol=1e-6) and np.allclose(kept[2:], along[2:], atol=1e-6)
+    low, high = frequency_split(verts, faces, "virtualbones", fixed=pinned)
+    assert np.abs(high[pinned]).max() < 1e-6 and np.abs(high[~pinned]).max() > 1e-3
+    with pytest.raises(InputError, match="mask"):
+        diffusion_smooth(verts, faces, lam, 1, fixed=pinned[:-1])
+
     twice = diffusion_smooth(diffusion_smooth(verts, faces, lam, 1), faces, lam, 1)
     assert np.allclose(diffusion_smooth(verts, faces, lam, 2), twice, atol=1e-6)
     assert np.array_equal(diffusion_smooth(verts, faces, lam, 0), verts.astype(np.float32))

@@ -28,6 +28,9 @@ def test_canonical_bones_skin_the_low_frequency_mesh(tiny_store, tiny_train):
         rmse = np.sqrt(((skinned.numpy() - s.lf) ** 2).sum(-1).mean())
         # The canonical transforms reproduce the canonical low-frequency mesh to the SSDR error (8 bones, coarse).
         assert rmse < 3 * rig.rmse + 2e-3, (rmse, rig.rmse)
+        # the split keeps the pinned waist where the simulation put it
+        pinned = tiny_train.garment.pinned
+        assert pinned.any() and np.abs(s.lf[:, pinned] - s.verts[:, pinned]).max() < 1e-6
 
 
 def test_windows_cover_each_sequence_with_burn_in(tiny_train):

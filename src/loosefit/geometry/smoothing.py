@@ -57,12 +57,16 @@ def get_preset(preset: str | SmoothingPreset) -> SmoothingPreset:
     return PRESETS[preset]
 
 
-def smoothing_operator(faces: np.ndarray, num_verts: int, coefficient: float, boundary: str = "along") -> sp.csr_matrix:
+def smoothing_operator(
+    faces: np.ndarray, num_verts: int, coefficient: float, boundary: str = "along", fixed: np.ndarray | None = None
+) -> sp.csr_matrix:
     """The one-iteration matrix ``S = I + lambda * L_n`` ``(V, V)`` float64 with rows of ``L_n`` summing to zero.
 
     ``L_n`` row ``i`` is ``mean_{j in N(i)} (x_j - x_i)`` over the mesh neighbours. ``boundary`` chooses
     the neighbours of border vertices: ``"along"`` (border neighbours only), ``"free"`` (all
-    neighbours, plain uniform smoothing) or ``"fixed"`` (border vertices do not move).
+    neighbours, plain uniform smoothing) or ``"fixed"`` (border vertices do not move). Vertices
+    where ``fixed (V,)`` bool is true do not move either (a garment's pinned waist band: smoothing
+    along the waist ring would shrink it into the body).
     """
     if not 0.0 < coefficient <= 1.0:
         raise InputError(f"smoothing coefficient must be in (0, 1] for stable diffusion, got {coefficient}")
@@ -79,6 +83,12 @@ def smoothing_operator(faces: np.ndarray, num_verts: int, coefficient: float, bo
             border = sp.coo_matrix((np.ones(2 * len(b)), (np.r_[b[:, 0], b[:, 1]], np.r_[b[:, 1], b[:, 0]])), shape=A.shape).tolil()
             for i in on_border:
                 A.rows[i], A.data[i] = border.rows[i], border.data[i]
+    if fixed is not None:
+        fixed = np.asarray(fixed, bool)
+        if fixed.shape != (num_verts,):
+            raise InputError(f"fixed vertices must be a ({num_verts},) mask, got shape {fixed.shape}")
+        for i in np.flatnonzero(fixed):
+            A.rows[i], A.data[i] = [], []
     A = A.tocsr()
     degree = np.asarray(A.sum(1)).ravel()
     inv = np.divide(1.0, degree, out=np.zeros_like(degree), where=degree > 0)
@@ -87,13 +97,15 @@ def smoothing_operator(faces: np.ndarray, num_verts: int, coefficient: float, bo
     return (sp.identity(num_verts, format="csr") + coefficient * L).tocsr()
 
 
-def diffusion_smooth(verts: np.ndarray, faces: np.ndarray, coefficient: float, iterations: int, boundary: str = "along") -> np.ndarray:
-    """Apply ``iterations`` explicit diffusion steps to ``verts (V, 3)`` or ``(T, V, 3)``; returns float32, same shape."""
+def diffusion_smooth(verts: np.ndarray, faces: np.ndarray, coefficient: float, iterations: int, boundary: str = "along",
+                     fixed: np.ndarray | None = None) -> np.ndarray:
+    """Apply ``iterations`` explicit diffusion steps to ``verts (V, 3)`` or ``(T, V, 3)``; returns float32, same
+    shape. ``fixed (V,)`` bool: vertices that keep their positions."""
     verts, faces = check_mesh(verts, faces)
     if int(iterations) != iterations or iterations < 0:
         raise InputError(f"smoothing iterations must be a non-negative integer, got {iterations}")
     V = verts.shape[-2]
-    S = smoothing_operator(faces, V, coefficient, boundary)
+    S = smoothing_operator(faces, V, coefficient, boundary, fixed)
     # Vertices first so that all frames and coordinates are columns of one sparse product.
     x = np.moveaxis(np.asarray(verts, np.float64).reshape((-1, V, 3)), 1, 0).reshape(V, -1)
     for _ in range(int(iterations)):
@@ -102,13 +114,15 @@ def diffusion_smooth(verts: np.ndarray, faces: np.ndarray, coefficient: float, i
 
 
 def frequency_split(
-    verts: np.ndarray, faces: np.ndarray, preset: str | SmoothingPreset = "virtualbones", boundary: str = "along"
+    verts: np.ndarray, faces: np.ndarray, preset: str | SmoothingPreset = "virtualbones", boundary: str = "along",
+    fixed: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Split ``verts (V, 3)`` or ``(T, V, 3)`` into ``(low, high)`` float32 with ``low + high = verts``.
 
-    ``low`` is ``verts`` smoothed with the preset's coefficient and iterations, ``high`` the residual.
+    ``low`` is ``verts`` smoothed with the preset's coefficient and iterations (``fixed (V,)`` bool
+    vertices unmoved, so ``high`` is zero there), ``high`` the residual.
     """
     p = get_preset(preset)
-    low = diffusion_smooth(verts, faces, p.coefficient, p.iterations, boundary)
+    low = diffusion_smooth(verts, faces, p.coefficient, p.iterations, boundary, fixed)
     high = (np.asarray(verts, np.float64) - low).astype(np.float32)
     return low, high

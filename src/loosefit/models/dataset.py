@@ -100,7 +100,10 @@ class GarmentSequences:
         self.garment = self.store.garment(garment)
         self.faces = self.garment.faces
         rig_attrs = self.store.read_attrs(f"garments/{garment}/rig") if bones else {}
-        self.smoothing = smoothing or rig_attrs.get("settings", {}).get("smoothing", "virtualbones")
+        settings = rig_attrs.get("settings", {})
+        self.smoothing = smoothing or settings.get("smoothing", "virtualbones")
+        # as the rig was prepared (stores prepared before the setting existed smoothed pinned vertices too)
+        self.fixed = self.garment.pinned if settings.get("keep_pinned", False) else None
         selected = [
             n for n in self.store.sequence_names(split=split)
             if self.store.sequence(n).garment == garment
@@ -117,7 +120,7 @@ class GarmentSequences:
         rot, origin = heading_frames(motion)
         world = np.asarray(seq.verts[:], np.float32)
         verts = to_canonical(world, rot, origin)
-        lf = frequency_split(verts, self.faces, self.smoothing)[0].astype(np.float32)
+        lf = frequency_split(verts, self.faces, self.smoothing, fixed=self.fixed)[0].astype(np.float32)
         feats = motion_features(motion)
         bone_rot = bone_trans = None
         if bones:

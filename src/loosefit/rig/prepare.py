@@ -79,6 +79,9 @@ class PrepareSettings:
         max_solve_frames: frames (from all training sequences together) the weight solve sees.
         trans_affine: Dem Bones' translation-affinity weight.
         smoothing: smoothing preset of the low/high-frequency split.
+        keep_pinned: the split leaves the garment's pinned vertices where they are (its high
+            frequency is zero there): smoothing along the pinned waist ring would shrink it into the
+            body, and the low-frequency module would learn a waist inside the body.
         descriptor_samples: ``z`` of the spectral descriptor.
         descriptor_sigma: its affinity kernel width, metres.
         fit_factors: factors of the fit attribute.
@@ -93,6 +96,7 @@ class PrepareSettings:
     max_solve_frames: int = DEFAULT_MAX_SOLVE_FRAMES
     trans_affine: float = DEFAULT_TRANS_AFFINE
     smoothing: str = "virtualbones"
+    keep_pinned: bool = True
     descriptor_samples: int = DEFAULT_SAMPLES
     descriptor_sigma: float = DEFAULT_SIGMA
     fit_factors: int = DEFAULT_FACTORS
@@ -102,7 +106,7 @@ class PrepareSettings:
     def rig(self) -> dict:
         """The settings a rig depends on."""
         keys = ("bones", "influences", "iterations", "transform_iterations", "max_solve_frames", "trans_affine")
-        return {k: getattr(self, k) for k in (*keys, "smoothing")}
+        return {k: getattr(self, k) for k in (*keys, "smoothing", "keep_pinned")}
 
     def descriptor(self) -> dict:
         """The settings a spectral descriptor depends on."""
@@ -202,11 +206,12 @@ def _prepare_rig(
     started = time.perf_counter()
     store.write_attrs(group, {"status": "writing"})
     faces = garment.faces
-    rest_lf = frequency_split(garment.verts, faces, s.smoothing)[0]
+    fixed = garment.pinned if s.keep_pinned else None
+    rest_lf = frequency_split(garment.verts, faces, s.smoothing, fixed=fixed)[0]
     seqs = [store.sequence(n) for n in names]
     lengths = [q.num_frames for q in seqs]
     picks = [solve_frames(n, k) for n, k in zip(lengths, _solve_counts(lengths, s.max_solve_frames))]
-    sample = np.concatenate([frequency_split(q.verts.oindex[p], faces, s.smoothing)[0] for q, p in zip(seqs, picks)])
+    sample = np.concatenate([frequency_split(q.verts.oindex[p], faces, s.smoothing, fixed=fixed)[0] for q, p in zip(seqs, picks)])
     if progress:
         tqdm.write(f"{g}: SSDR weights of {s.bones} bones on {len(sample)} of {sum(lengths)} training frames")
     fit_started = time.perf_counter()
@@ -228,7 +233,7 @@ def _prepare_rig(
         for a in range(0, q.num_frames, TRANSFORM_CHUNK):
             b = min(a + TRANSFORM_CHUNK, q.num_frames)
             full = np.asarray(q.verts[a:b], np.float32)
-            lf, hf = frequency_split(full, faces, s.smoothing)
+            lf, hf = frequency_split(full, faces, s.smoothing, fixed=fixed)
             R, T = solve_bone_transforms(rig, lf, R0[nearest[a:b]], T0[nearest[a:b]], iterations=s.transform_iterations,
                                          threads=s.threads)
             rotations[a:b], translations[a:b] = R, T
