@@ -9,6 +9,7 @@ coloured by error), a PNG of one frame, the metrics as CSV / JSON, and the Joint
 
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 
@@ -42,7 +43,7 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     from loosefit.metrics.report import SequencePair, evaluate
     from loosefit.rig.prepare import prepare
     from loosefit.sim import run_plan
-    from loosefit.train.pipeline import train_model
+    from loosefit.train.pipeline import StaleRunError, train_model
     from loosefit.viz.render import render_video, save_png, render_frames
     from loosefit.viz.scene import BODY_COLOR, MeshTrack
 
@@ -75,8 +76,14 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     for method, overrides in DEMO_TRAINING.items():
         t = _step(f"train {method}")
         run = out / "runs" / method
-        train_model(method, data, seq.garment, run, config=CONFIGS / "models" / f"{method}.yaml",
-                    overrides=overrides, resume=True)
+        try:
+            train_model(method, data, seq.garment, run, config=CONFIGS / "models" / f"{method}.yaml",
+                        overrides=overrides, resume=True)
+        except StaleRunError as e:  # the demo's data changed since (prepared again): its old run is out of date
+            print(f"   {e}: training again")
+            shutil.rmtree(run)
+            train_model(method, data, seq.garment, run, config=CONFIGS / "models" / f"{method}.yaml",
+                        overrides=overrides)
         predictions[method] = Animator(run).animate(motion)
         print(f"   trained and animated in {time.perf_counter() - t:.0f} s")
 

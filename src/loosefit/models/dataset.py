@@ -101,6 +101,7 @@ class GarmentSequences:
         self.faces = self.garment.faces
         rig_attrs = self.store.read_attrs(f"garments/{garment}/rig") if bones else {}
         settings = rig_attrs.get("settings", {})
+        self.rig_settings = dict(settings)  # how the store was prepared ({} without a rig)
         self.smoothing = smoothing or settings.get("smoothing", "virtualbones")
         # as the rig was prepared (stores prepared before the setting existed smoothed pinned vertices too)
         self.fixed = self.garment.pinned if settings.get("keep_pinned", False) else None

@@ -65,7 +65,10 @@ def train_model(
     model = cls.from_data(train_data, cfg.model)
     meta = {"method": method, "garment": garment, "data": str(Path(data).resolve()), "sizes": model.sizes(),
             "sim_params": sim_params, "train_sequences": [s.name for s in train_data.sequences],
-            "val_sequences": [s.name for s in val_data.sequences] if val_data else []}
+            "val_sequences": [s.name for s in val_data.sequences] if val_data else [],
+            "rig": train_data.rig_settings}
+    if resume and run.has_checkpoint() and (run.path / MODEL_META).exists():
+        _check_same_data(run.path / MODEL_META, meta)
     run.path.mkdir(parents=True, exist_ok=True)
     with atomic_path(run.path / MODEL_META) as tmp:
         tmp.write_text(json.dumps(meta, indent=2))
@@ -75,6 +78,27 @@ def train_model(
         return None
     return train(model, cfg.data.dataset(train_data), cfg.data.dataset(val_data) if val_data else None,
                  cfg.train, run.path, resume=resume)
+
+
+class StaleRunError(InputError):
+    """A run cannot be resumed: it was trained on other data."""
+
+
+#: What a run's training data is: resuming on data that differs in any of these would silently mix two datasets.
+SAME_DATA_KEYS = ("garment", "sim_params", "train_sequences", "sizes", "rig")
+
+
+def _check_same_data(path: Path, meta: dict) -> None:
+    """Refuse to resume the run whose ``model.json`` is ``path`` on training data other than ``meta``'s
+    (another garment or sequences, or a store prepared again with other rig settings)."""
+    try:
+        before = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise InputError(f"cannot read the run's data record: {e}", path) from None
+    changed = [k for k in SAME_DATA_KEYS if k in before and before[k] != meta[k]]
+    if changed:
+        raise StaleRunError(f"the run was trained on other data ({', '.join(changed)} differ: the store was "
+                         "simulated or prepared again); train into a new folder or delete this run", path.parent)
 
 
 def _save_fixed(model, run: RunDir) -> None:
