@@ -97,7 +97,8 @@ def main() -> None:
         runs[f"{args.joint} {d:g} deg"] = simulate(nudged)
     base = runs["as is"]
     results = {"plan": args.plan, "garment": args.garment, "motion": args.motion, "frames": motion.num_frames,
-               "vertices": len(garment.verts), "vertices_below_knees": int(below.sum()), "joint": args.joint, "sim_params": params.to_dict(),
+               "vertices": len(garment.verts), "vertices_below_knees": int(below.sum()), "joint": args.joint,
+               "sim_params": params.to_dict(),
                "load_average_at_start": os.getloadavg(),
                "against_as_is": {k: difference(v, base, below, motion.fps) for k, v in runs.items() if k != "as is"}}
     if args.data is not None:

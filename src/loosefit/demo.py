@@ -76,14 +76,13 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     for method, overrides in DEMO_TRAINING.items():
         t = _step(f"train {method}")
         run = out / "runs" / method
+        settings = {"config": CONFIGS / "models" / f"{method}.yaml", "overrides": overrides}
         try:
-            train_model(method, data, seq.garment, run, config=CONFIGS / "models" / f"{method}.yaml",
-                        overrides=overrides, resume=True)
+            train_model(method, data, seq.garment, run, resume=True, **settings)
         except StaleRunError as e:  # the demo's data changed since (prepared again): its old run is out of date
             print(f"   {e}: training again")
             shutil.rmtree(run)
-            train_model(method, data, seq.garment, run, config=CONFIGS / "models" / f"{method}.yaml",
-                        overrides=overrides)
+            train_model(method, data, seq.garment, run, **settings)
         predictions[method] = Animator(run).animate(motion)
         print(f"   trained and animated in {time.perf_counter() - t:.0f} s")
 
