@@ -211,7 +211,8 @@ def _prepare_rig(
     seqs = [store.sequence(n) for n in names]
     lengths = [q.num_frames for q in seqs]
     picks = [solve_frames(n, k) for n, k in zip(lengths, _solve_counts(lengths, s.max_solve_frames))]
-    sample = np.concatenate([frequency_split(q.verts.oindex[p], faces, s.smoothing, fixed=fixed)[0] for q, p in zip(seqs, picks)])
+    sample = np.concatenate([frequency_split(q.verts.oindex[p], faces, s.smoothing, fixed=fixed)[0]
+                             for q, p in zip(seqs, picks)])
     if progress:
         tqdm.write(f"{g}: SSDR weights of {s.bones} bones on {len(sample)} of {sum(lengths)} training frames")
     fit_started = time.perf_counter()
