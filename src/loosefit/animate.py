@@ -23,6 +23,9 @@ from loosefit.motion.motion import Motion
 from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
 
+#: Frames per forward pass of :meth:`Animator.animate_batch` (the default of ``Animator.chunk_frames``).
+CHUNK_FRAMES = 32
+
 
 class Animator:
     """A trained garment model ready to animate.
@@ -59,6 +62,9 @@ class Animator:
         animator._use(model, threads)
         return animator
 
+    #: Frames per forward pass in :meth:`animate_batch`.
+    chunk_frames: int = CHUNK_FRAMES
+
     def _use(self, model, threads: int | None) -> None:
         model.eval()
         self.model = model
@@ -82,7 +88,9 @@ class Animator:
         return self.animate_batch([motion], output)[0]
 
     def animate_batch(self, motions: list[Motion], output: str = "verts") -> list[np.ndarray]:
-        """World vertices ``(T_i, V, 3)`` for several motions, run as one batch.
+        """World vertices ``(T_i, V, 3)`` for several motions, run as one batch, :attr:`chunk_frames` frames
+        at a time with the recurrent state carried over (the same vertices as one pass over all frames;
+        memory grows with the chunk, not with the motions' length).
 
         ``output`` names the model output returned: ``"verts"`` (the garment), or another canonical
         ``(B, T, V, 3)`` vertex output of the model, such as VirtualBones' low-frequency mesh ``"lf"``.
@@ -95,13 +103,21 @@ class Animator:
         def padded(key):
             return torch.from_numpy(np.stack([np.concatenate([f[key], np.repeat(f[key][-1:], T - len(f[key]), 0)]) for f in feats]))
 
+        root, joints = padded("root"), padded("joints")
+        chunks, state = [], None
         with _threads(self.threads), torch.no_grad():
-            outputs = self.model(padded("root"), padded("joints"))
-        shape = outputs["verts"].shape
-        vertex_outputs = sorted(k for k, v in outputs.items() if isinstance(v, torch.Tensor) and v.shape == shape)
-        if output not in vertex_outputs:
-            raise InputError(f"{self.method} has no vertex output {output!r} (it has {vertex_outputs})")
-        canonical = outputs[output].numpy()
+            for start in range(0, T, self.chunk_frames):
+                outputs = self.model(root[:, start:start + self.chunk_frames], joints[:, start:start + self.chunk_frames],
+                                     state)
+                if start == 0:
+                    shape = outputs["verts"].shape
+                    vertex_outputs = sorted(k for k, v in outputs.items()
+                                            if isinstance(v, torch.Tensor) and v.shape == shape)
+                    if output not in vertex_outputs:
+                        raise InputError(f"{self.method} has no vertex output {output!r} (it has {vertex_outputs})")
+                chunks.append(outputs[output])
+                state = outputs["state"]
+        canonical = torch.cat(chunks, 1).numpy()
         out = []
         for m, c in zip(motions, canonical):
             rot, origin = heading_frames(m)

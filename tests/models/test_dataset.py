@@ -33,6 +33,15 @@ def test_canonical_bones_skin_the_low_frequency_mesh(tiny_store, tiny_train):
         assert pinned.any() and np.abs(s.lf[:, pinned] - s.verts[:, pinned]).max() < 1e-6
 
 
+def test_held_out_split_follows_the_rig_settings(tiny_test, tiny_train):
+    # loaded without bone transforms, the test sequences are still split as the rig was prepared
+    assert tiny_test.rig_settings == tiny_train.rig_settings and tiny_test.rig_settings["keep_pinned"]
+    pinned = tiny_test.garment.pinned
+    for s in tiny_test.sequences:
+        assert np.abs(s.lf[:, pinned] - s.verts[:, pinned]).max() < 1e-6
+        assert np.abs(s.lf[:, ~pinned] - s.verts[:, ~pinned]).max() > 1e-4  # and the rest is smoothed
+
+
 def test_windows_cover_each_sequence_with_burn_in(tiny_train):
     ds = WindowDataset(tiny_train, window=24, stride=12, burn_in=6)
     starts = {}

@@ -99,8 +99,10 @@ class GarmentSequences:
         self.garment_name = garment
         self.garment = self.store.garment(garment)
         self.faces = self.garment.faces
-        rig_attrs = self.store.read_attrs(f"garments/{garment}/rig") if bones else {}
-        settings = rig_attrs.get("settings", {})
+        try:  # the split follows the rig's settings in every split, with or without bone transforms
+            settings = self.store.read_attrs(f"garments/{garment}/rig").get("settings", {})
+        except InputError:
+            settings = {}  # not prepared (yet): the default split
         self.rig_settings = dict(settings)  # how the store was prepared ({} without a rig)
         self.smoothing = smoothing or settings.get("smoothing", "virtualbones")
         # as the rig was prepared (stores prepared before the setting existed smoothed pinned vertices too)

@@ -210,9 +210,10 @@ def weighted_rmse(gram: np.ndarray, count: int, weights: np.ndarray) -> float:
 
 
 @torch.no_grad()
-def predict_sequence(model: nn.Module, seq: SequenceData, chunk: int = 64) -> np.ndarray:
+def predict_sequence(model: nn.Module, seq: SequenceData, chunk: int = 64, output: str = "verts") -> np.ndarray:
     """Canonical vertices ``(T, V, 3)`` float32 a model predicts for a whole sequence from frame 0,
-    ``chunk`` frames at a time with its recurrent state carried over (equal to one pass)."""
+    ``chunk`` frames at a time with its recurrent state carried over (equal to one pass); ``output``
+    names the model's output (``"lf"``: VirtualBones' low-frequency mesh)."""
     model.eval()
     device = next(model.buffers()).device
     root = torch.from_numpy(seq.root).to(device)[None]
@@ -221,7 +222,7 @@ def predict_sequence(model: nn.Module, seq: SequenceData, chunk: int = 64) -> np
     for a in range(0, seq.num_frames, chunk):
         step = model(root[:, a:a + chunk], joints[:, a:a + chunk], state)
         state = step["state"]
-        out.append(step["verts"][0].cpu().numpy())
+        out.append(step[output][0].cpu().numpy())
     return np.concatenate(out).astype(np.float32)
 
 
