@@ -33,7 +33,7 @@ from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.errors import InputError  # noqa: E402
 from loosefit.metrics.correction import CorrectionStats  # noqa: E402
 from loosefit.models.dataset import GarmentSequences  # noqa: E402
-from loosefit.models.ensemble import predict_sequence  # noqa: E402
+from loosefit.models.ensemble import predict_outputs  # noqa: E402
 
 
 def garment_analysis(store: DatasetStore, garment: str, run: Path, split: str, limit: int) -> dict:
@@ -44,8 +44,8 @@ def garment_analysis(store: DatasetStore, garment: str, run: Path, split: str, l
     pooled, rows = CorrectionStats(), {}
     with torch.no_grad():
         for seq in sequences:
-            lf = predict_sequence(model, seq, output="lf")
-            offsets = predict_sequence(model, seq) - lf
+            out = predict_outputs(model, seq, ("verts", "lf"))
+            lf, offsets = out["lf"], out["verts"] - out["lf"]
             one = CorrectionStats()
             for stats in (one, pooled):
                 stats.add(seq.verts, lf, offsets, seq.verts - seq.lf)

@@ -23,9 +23,6 @@ from loosefit.motion.motion import Motion
 from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
 
-#: Frames per forward pass of :meth:`Animator.animate_batch` (the default of ``Animator.chunk_frames``).
-CHUNK_FRAMES = 32
-
 
 class Animator:
     """A trained garment model ready to animate.
@@ -62,8 +59,8 @@ class Animator:
         animator._use(model, threads)
         return animator
 
-    #: Frames per forward pass in :meth:`animate_batch`.
-    chunk_frames: int = CHUNK_FRAMES
+    #: Frames per forward pass in :meth:`animate_batch` (32 measured fastest of 16-600 at 12k vertices).
+    chunk_frames: int = 32
 
     def _use(self, model, threads: int | None) -> None:
         model.eval()

@@ -210,20 +210,26 @@ def weighted_rmse(gram: np.ndarray, count: int, weights: np.ndarray) -> float:
 
 
 @torch.no_grad()
-def predict_sequence(model: nn.Module, seq: SequenceData, chunk: int = 64, output: str = "verts") -> np.ndarray:
-    """Canonical vertices ``(T, V, 3)`` float32 a model predicts for a whole sequence from frame 0,
-    ``chunk`` frames at a time with its recurrent state carried over (equal to one pass); ``output``
-    names the model's output (``"lf"``: VirtualBones' low-frequency mesh)."""
+def predict_outputs(model: nn.Module, seq: SequenceData, names: Sequence[str] = ("verts",), chunk: int = 64) -> dict[str, np.ndarray]:
+    """Canonical vertex outputs ``{name: (T, V, 3) float32}`` a model predicts for a whole sequence from
+    frame 0, ``chunk`` frames at a time with its recurrent state carried over (equal to one pass);
+    ``names`` are the model's outputs (``"verts"``; ``"lf"``: VirtualBones' low-frequency mesh)."""
     model.eval()
     device = next(model.buffers()).device
     root = torch.from_numpy(seq.root).to(device)[None]
     joints = torch.from_numpy(seq.joints).to(device)[None]
-    state, out = None, []
+    state, out = None, {name: [] for name in names}
     for a in range(0, seq.num_frames, chunk):
         step = model(root[:, a:a + chunk], joints[:, a:a + chunk], state)
         state = step["state"]
-        out.append(step[output][0].cpu().numpy())
-    return np.concatenate(out).astype(np.float32)
+        for name in names:
+            out[name].append(step[name][0].cpu().numpy())
+    return {name: np.concatenate(parts).astype(np.float32) for name, parts in out.items()}
+
+
+def predict_sequence(model: nn.Module, seq: SequenceData, chunk: int = 64) -> np.ndarray:
+    """The garment vertices ``(T, V, 3)`` of :func:`predict_outputs`."""
+    return predict_outputs(model, seq, ("verts",), chunk)["verts"]
 
 
 def error_grams(models: Sequence[nn.Module], data: Sequence[GarmentSequences]) -> tuple[np.ndarray, np.ndarray]:
