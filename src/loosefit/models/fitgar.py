@@ -118,10 +118,9 @@ class FitGarConfig:
 
 @dataclass(frozen=True)
 class FramesConfig:
-    """Which frames train FitGar: every ``frame_stride``-th frame of each sequence; validation on ``val_split``."""
+    """Which frames train FitGar: every ``frame_stride``-th frame of each sequence."""
 
     frame_stride: int = 1
-    val_split: str = "test"
 
     def __post_init__(self):
         if self.frame_stride < 1:
