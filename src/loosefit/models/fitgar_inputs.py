@@ -8,7 +8,7 @@ inputs of every frame, all in the heading frame of that frame (:mod:`loosefit.mo
 the body faces -Y, its root above the origin), ``T`` frames, ``V`` garment vertices, ``J`` joints:
 
 - ``anchor (T, V, 3)``: ``I M_b``, the posed body vertex under each garment vertex (FitGar Eq. 5), metres;
-- ``body_normal (T, V, 3)``: the normal there (the rest normal turned by the blended joint rotations);
+- ``body_normal (T, V, 3)``: the posed body's area-weighted vertex normal there;
 - ``body_rel (T, V, 3)``: the relative skinning feature of that body vertex (FitGar Sec. 4.3): its
   skinned position without the root's translation, metres;
 - ``garment_rel (T, V, 3)``: the same for the garment's rest vertices, skinned with the weights of their
@@ -18,7 +18,8 @@ the body faces -Y, its root above the origin), ``T`` frames, ``V`` garment verti
   joint's local rotation, each as 6D (first two matrix columns);
 - ``rot (T, 3, 3)``, ``origin (T, 3)``: the heading frames, to put predictions back in the world.
 
-Only the ``V`` indicated body vertices are skinned, not the whole body: the cost follows the garment.
+Only the indicated body vertices and their one-ring (for the normals) are skinned, not the whole body:
+the cost follows the garment.
 """
 
 from __future__ import annotations
@@ -61,8 +62,11 @@ class GarmentBodyPair:
     Attributes:
         garment_verts: ``(V, 3)`` float32 rest garment, metres. faces: ``(F, 3)`` int64. edges: ``(2, E)`` int64.
         nearest: ``(V,)`` int64 indicator: the closest rest body vertex of each garment vertex.
-        body_rest: ``(V, 3)`` float32 those body vertices at rest. body_rest_normal: ``(V, 3)`` their rest normals.
-        weights: ``(V, J)`` float32 their skinning weights. rest_joints: ``(J, 3)`` float32. parents: ``(J,)`` int64.
+        ring_rest: ``(U, 3)`` float32 rest positions of the body vertices in the faces around the indicated
+            ones; ring_weights: ``(U, J)`` float32 their skinning weights; ring_faces: ``(K, 3)`` int64 those
+            faces in that numbering; ring_index: ``(V,)`` int64 where each garment vertex's body vertex is.
+        weights: ``(V, J)`` float32 skinning weights of the indicated body vertices (borrowed by the garment).
+        rest_joints: ``(J, 3)`` float32. parents: ``(J,)`` int64.
         shape: ``(S,)`` float32 body shape ``beta``. alpha: ``(F,)`` float32 fit attribute.
     """
 
@@ -70,8 +74,10 @@ class GarmentBodyPair:
     faces: np.ndarray
     edges: np.ndarray
     nearest: np.ndarray
-    body_rest: np.ndarray
-    body_rest_normal: np.ndarray
+    ring_rest: np.ndarray
+    ring_weights: np.ndarray
+    ring_faces: np.ndarray
+    ring_index: np.ndarray
     weights: np.ndarray
     rest_joints: np.ndarray
     parents: np.ndarray
@@ -90,9 +96,13 @@ class GarmentBodyPair:
             raise InputError("the fit attribute and the body shape must be finite")
         rest = body.rest_verts(shape)
         nearest = nearest_body_vertex(garment_verts, rest)
-        normals = vertex_normals(rest, body.faces).astype(np.float32)
-        return cls(garment_verts, faces, graph_edges(faces), nearest, rest[nearest].astype(np.float32),
-                   normals[nearest], body.skinning_weights()[nearest].astype(np.float32),
+        body_faces = np.asarray(body.faces, np.int64)
+        around = body_faces[np.isin(body_faces, nearest).any(1)]
+        ring, local = np.unique(around, return_inverse=True)
+        weights = body.skinning_weights()
+        return cls(garment_verts, faces, graph_edges(faces), nearest, rest[ring].astype(np.float32),
+                   weights[ring].astype(np.float32), local.reshape(-1, 3).astype(np.int64),
+                   np.searchsorted(ring, nearest).astype(np.int64), weights[nearest].astype(np.float32),
                    body.rest_joints(shape).astype(np.float32), np.asarray(body.parents, np.int64), shape, alpha)
 
     @property
@@ -108,13 +118,12 @@ class GarmentBodyPair:
         if posed.transforms.shape[1] != len(self.rest_joints):
             raise InputError(f"the pose has {posed.transforms.shape[1]} joints, the body has {len(self.rest_joints)}")
         A = torch.from_numpy(posed.transforms)
-        weights = torch.from_numpy(self.weights).double()
-        body = linear_blend_skinning(torch.from_numpy(self.body_rest).double(), weights, A).numpy()
-        garment = linear_blend_skinning(torch.from_numpy(self.garment_verts).double(), weights, A).numpy()
-        turn = A.clone()
-        turn[..., :3, 3] = 0.0  # normals turn with the blended rotation only
-        normal = linear_blend_skinning(torch.from_numpy(self.body_rest_normal).double(), weights, turn).numpy()
-        normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
+        ring = linear_blend_skinning(torch.from_numpy(self.ring_rest).double(),
+                                     torch.from_numpy(self.ring_weights).double(), A).numpy()
+        body = ring[:, self.ring_index]
+        normal = vertex_normals(ring, self.ring_faces)[:, self.ring_index].astype(np.float64)
+        garment = linear_blend_skinning(torch.from_numpy(self.garment_verts).double(),
+                                        torch.from_numpy(self.weights).double(), A).numpy()
         rot, origin = posed.rot, posed.origin
         # Relative skinning features: the root's translation removed. Skinning is affine in it, so that is
         # the posed point minus the root's displacement; in the heading frame only its height remains.
