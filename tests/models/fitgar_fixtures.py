@@ -3,6 +3,8 @@ poses of a procedural walk, and a synthetic target (skinned garment plus a pose-
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import torch
 
@@ -13,10 +15,8 @@ from loosefit.models.fitgar_inputs import GarmentBodyPair
 #: A FitGar small enough for tests (the paper's structure, every width cut down).
 TINY = FitGarConfig(heads=2, coarse_first=8, coarse_blocks=(16, 8), coarse_dense=(8,), parser=(16, 16),
                     detail_first=16, detail_blocks=(8, 8, 8, 8), detail_dense=(8,))
-#: The same as ``loosefit train --set`` overrides.
-TINY_OVERRIDES = ["model.heads=2", "model.coarse_first=8", "model.coarse_blocks=[16, 8]", "model.coarse_dense=[8]",
-                  "model.parser=[16, 16]", "model.detail_first=16", "model.detail_blocks=[8, 8, 8, 8]",
-                  "model.detail_dense=[8]"]
+#: The same in a config file, with a short training (``loosefit train --config``).
+TINY_CONFIG = Path(__file__).parents[2] / "configs" / "models" / "fitgar-tiny.yaml"
 
 
 def synthetic_target(items: list[dict], smoother: Smoother) -> list[dict]:
@@ -46,10 +46,55 @@ def set_stats(model, items: list[dict]) -> None:
     rel = np.concatenate([np.concatenate([it["body_rel"], it["garment_rel"]]) for it in items])
     dist = np.concatenate([np.linalg.norm(it["smooth"][:, None] - it["joints"][None], axis=-1).ravel() for it in items])
     model.rel_mean.copy_(torch.from_numpy(rel.mean(0)))
-    model.rel_std.fill_(float(rel.std()))
+    model.rel_std.copy_(torch.from_numpy(rel.std(0)))
     model.dist_mean.fill_(float(dist.mean()))
     model.dist_std.fill_(float(dist.std()))
     coarse = np.concatenate([np.sum((it["smooth"] - it["anchor"]) ** 2, -1) for it in items])
     detail = np.concatenate([np.sum((it["verts"] - it["smooth"]) ** 2, -1) for it in items])
     model.coarse.output.scale.fill_(float(np.sqrt(coarse.mean())))
     model.detail.output.scale.fill_(float(np.sqrt(detail.mean())))
+
+
+def synthetic_store(path, body, seconds: float = 0.5):
+    """A prepared multi-garment store laid out as ``configs/datasets/garments.yaml`` makes them, with the
+    synthetic target instead of a simulation (no Blender): garment entries ``skirt+average``,
+    ``skirt+heavy``, ``dress+average`` on two body shapes, motions ``walk`` and ``sway``; the dress
+    sways in the test split, everything else trains."""
+    import torch as _torch
+
+    from loosefit.body import AnnyBody, AnnyShape
+    from loosefit.data.store import DatasetStore
+    from loosefit.garment import make_garment
+    from loosefit.geometry.lbs import linear_blend_skinning
+    from loosefit.motion.procedural import generate
+    from loosefit.models.fitgar_inputs import pose_motion
+    from loosefit.rig.prepare import prepare
+
+    store = DatasetStore.create(path)
+    shapes = {"average": AnnyShape(), "heavy": AnnyShape(weight=0.85, height=0.3)}
+    motions = {"walk": generate("walk", seconds, 0, body), "sway": generate("sway", seconds, 1, body)}
+    for name, motion in motions.items():
+        store.add_motion(name, motion)
+    plan = [("skirt", "average", ["walk", "sway"]), ("skirt", "heavy", ["walk"]), ("dress", "average", ["walk", "sway"])]
+    for kind, shape_name, motion_names in plan:
+        shape = shapes[shape_name]
+        fitted = body if shape == body.shape else AnnyBody(shape)
+        store.add_body(shape_name, shape.to_array())
+        garment = make_garment(kind, fitted, seed=0, edge_length=0.06)
+        entry = f"{kind}+{shape_name}"
+        store.add_garment(entry, garment)
+        rest = fitted.rest_verts()
+        nearest = np.linalg.norm(garment.verts[:, None] - rest[None], axis=-1).argmin(1)
+        weights = _torch.from_numpy(fitted.skinning_weights()[nearest]).double()
+        for m in motion_names:
+            posed = pose_motion(fitted.rest_joints(), fitted.parents, motions[m])
+            skinned = linear_blend_skinning(_torch.from_numpy(garment.verts).double(), weights,
+                                            _torch.from_numpy(posed.transforms)).numpy()
+            ripple = 0.01 * np.sin(25.0 * skinned[..., 2] + 3.0 * posed.pose[:, 6:].mean(1)[:, None])
+            verts = skinned + np.stack([ripple, 0.5 * ripple, 0 * ripple], -1)
+            split = "test" if (kind, m) == ("dress", "sway") else "train"
+            store.write_sequence(f"{entry}+{m}+default", verts.astype(np.float32), garment=entry, body=shape_name,
+                                 motion=m, sim_params={}, stats={}, split=split)
+    prepare(path, bones=2, body=body, progress=False, iterations=2, transform_iterations=2, max_solve_frames=8,
+            descriptor_samples=16)
+    return path

@@ -36,8 +36,7 @@ Choices the paper leaves open, made here: the split of every GAT block into half
 attention heads; the place of the pooling (after the first of the four detail blocks, unpooling before
 the last); Tanh after the detail generator's first block; the direction branch's "normalisation" as
 scaling the direction to unit length, so that the magnitude branch gives the displacement's length;
-the magnitude in units of the training displacements' root mean square length; normals of the posed
-body turned by the skinning rotations rather than recomputed on the whole body; everything in the
+the magnitude in units of the training displacements' root mean square length; everything in the
 heading frame of each frame (as every loosefit method), so the pose ``theta`` holds the root's tilt
 but not its heading.
 """
@@ -213,7 +212,7 @@ class FitGar(nn.Module):
         n = int(sizes["fit_length"])
         for name, shape in [("rel_mean", (3,)), ("shape_mean", (S,)), ("alpha_mean", (F,)), ("dist_mean", ())]:
             self.register_buffer(name, torch.zeros(shape))
-        for name, shape in [("rel_std", ()), ("shape_std", (S,)), ("alpha_std", (F,)), ("dist_std", ())]:
+        for name, shape in [("rel_std", (3,)), ("shape_std", (S,)), ("alpha_std", (F,)), ("dist_std", ())]:
             self.register_buffer(name, torch.ones(shape))
         self.register_buffer("fit_mean", torch.zeros(n, dtype=torch.float64))
         self.register_buffer("fit_components", torch.zeros(F, n, dtype=torch.float64))

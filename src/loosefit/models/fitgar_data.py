@@ -130,7 +130,7 @@ class GarmentFrames(Dataset):
 
     def feature_stats(self, samples: int = 256) -> dict[str, np.ndarray]:
         """Statistics the model normalises with, from up to ``samples`` frames spread over the set:
-        ``rel_mean (3,)``, ``rel_std ()`` (relative skinning features, metres), ``dist_mean ()``,
+        ``rel_mean (3,)``, ``rel_std (3,)`` (relative skinning features per axis, metres), ``dist_mean ()``,
         ``dist_std ()`` (distances from the coarse target's vertices to the joints), ``shape_mean/std (S,)``, ``alpha_mean/std (F,)`` (over
         the pairs), ``coarse_scale ()`` (root mean square length of the coarse displacement ``smooth -
         anchor``) and ``detail_scale ()`` (of ``verts - smooth``), metres."""
@@ -145,7 +145,7 @@ class GarmentFrames(Dataset):
         alphas = np.stack([p.alpha for p in self.pairs.values()]).astype(np.float64)
         f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
         return {
-            "rel_mean": f32(rel.mean(0)), "rel_std": f32(max(rel.std(), STD_FLOOR)),
+            "rel_mean": f32(rel.mean(0)), "rel_std": f32(np.maximum(rel.std(0), STD_FLOOR)),
             "dist_mean": f32(dist.mean()), "dist_std": f32(max(dist.std(), STD_FLOOR)),
             "shape_mean": f32(shapes.mean(0)), "shape_std": f32(np.maximum(shapes.std(0), STD_FLOOR)),
             "alpha_mean": f32(alphas.mean(0)), "alpha_std": f32(np.maximum(alphas.std(0), STD_FLOOR)),
