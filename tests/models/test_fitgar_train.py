@@ -60,17 +60,24 @@ def test_unprepared_or_empty(store, body, tmp_path):
         GarmentFrames(tmp_path / "empty.zarr", "train", body=body)
 
 
-def test_loosefit_train_fitgar(store, tmp_path, body):
+@pytest.fixture(scope="module")
+def run(store, tmp_path_factory):
+    """``loosefit train --method fitgar`` on the store with the tiny config."""
+    from loosefit.cli import main
+
+    out = tmp_path_factory.mktemp("fitgar-run") / "run"
+    assert main(["train", "--method", "fitgar", "--data", str(store), "--out", str(out), "--config", str(TINY_CONFIG)]) == 0
+    return out
+
+
+def test_loosefit_train_fitgar(store, run, body):
     """The CLI trains both stages on the store, validates on the held-out dress, writes a run folder that
     rebuilds the model; the coarse loss falls over the epochs."""
-    from loosefit.cli import main
     from loosefit.models.fitgar import FitGar
     from loosefit.rig.prepare import load_fit_attribute
     from loosefit.train.run import load_weights
 
-    out = tmp_path / "run"
-    args = ["train", "--method", "fitgar", "--data", str(store), "--out", str(out), "--config", str(TINY_CONFIG)]
-    assert main(args) == 0
+    out = run
     rows = list(csv.DictReader((out / "metrics.csv").open()))
     assert [r["stage"] for r in rows] == ["coarse"] * 20 + ["detail"] * 4
     coarse = [float(r["train_coarse"]) for r in rows[:20]]
@@ -107,3 +114,54 @@ def test_train_fitgar_refuses_a_garment(store, tmp_path):
 
     with pytest.raises(InputError, match="every garment"):
         train_model("fitgar", store, "skirt+average", tmp_path / "run")
+
+
+@pytest.fixture(scope="module")
+def heavy_case(body):
+    """A garment the model never saw (a long shirt) on a body shape it never saw, and a short motion."""
+    from loosefit.body import AnnyBody, AnnyShape
+    from loosefit.garment import make_garment
+    from loosefit.motion.procedural import generate
+
+    shape = "weight=0.7,height=0.6"
+    heavy = AnnyBody(AnnyShape.parse(shape))
+    return shape, heavy, make_garment("long_shirt", heavy, seed=0, edge_length=0.06), generate("turn", 0.4, 0, body)
+
+
+def test_animate_any_garment_frame_by_frame(run, heavy_case):
+    from loosefit.animate_any import AnyGarmentAnimator, is_multi_garment_run
+
+    shape, heavy, garment, motion = heavy_case
+    assert is_multi_garment_run(run) and not is_multi_garment_run(run.parent)
+    animator = AnyGarmentAnimator(run)
+    pair = animator.pair(garment.verts, garment.faces, heavy)
+    verts = animator.animate(pair, motion)
+    assert verts.shape == (motion.num_frames, len(garment.verts), 3) and np.isfinite(verts).all()
+    # a static method: frames alone, in other batches, or a slice of the motion give the same vertices
+    one = AnyGarmentAnimator(run, frames_per_pass=1).animate(pair, motion)
+    np.testing.assert_allclose(one, verts, atol=1e-5)
+    part = animator.animate(pair, motion.slice(5, 9))
+    np.testing.assert_allclose(part, verts[5:9], atol=1e-5)
+    coarse = animator.animate(pair, motion, output="coarse")
+    assert 0 < np.abs(coarse - verts).max() < 0.5
+    # the garment follows the body: mean distance to the posed body vertices under it is a few cm, not metres
+    posed = heavy.pose(motion).verts[:, pair.nearest]
+    assert np.linalg.norm(verts - posed, axis=-1).mean() < 0.3
+    with pytest.raises(InputError, match="output"):
+        animator.animate(pair, motion, output="lf")
+
+
+def test_loosefit_animate_cli(run, heavy_case, tmp_path):
+    from loosefit.cli import main
+    from loosefit.io.mesh_sequence import MeshSequence
+
+    shape, heavy, garment, motion = heavy_case
+    garment.save(tmp_path / "shirt.obj")
+    motion.save(tmp_path / "turn.npz")
+    out = tmp_path / "anim.npz"
+    args = ["animate", str(run), "--motion", str(tmp_path / "turn.npz"), "--shape", shape, "--out", str(out)]
+    assert main(args) == 2  # no --garment
+    assert main(args + ["--garment", str(tmp_path / "shirt.obj")]) == 0
+    seq = MeshSequence.load(out)
+    assert seq.verts.shape == (motion.num_frames, len(garment.verts), 3)
+    assert np.array_equal(seq.faces, garment.faces)
