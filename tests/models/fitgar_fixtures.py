@@ -51,6 +51,10 @@ def set_stats(model, items: list[dict]) -> None:
     model.dist_std.fill_(float(dist.std()))
     coarse = np.concatenate([np.sum((it["smooth"] - it["anchor"]) ** 2, -1) for it in items])
     detail = np.concatenate([np.sum((it["verts"] - it["smooth"]) ** 2, -1) for it in items])
+    if model.coarse is None:  # one step: the detail generator predicts the whole displacement
+        full = np.concatenate([np.sum((it["verts"] - it["anchor"]) ** 2, -1) for it in items])
+        model.detail.output.scale.fill_(float(np.sqrt(full.mean())))
+        return
     model.coarse.output.scale.fill_(float(np.sqrt(coarse.mean())))
     model.detail.output.scale.fill_(float(np.sqrt(detail.mean())))
 

@@ -185,17 +185,18 @@ def test_training_overfits_a_two_garment_batch(scene):
     and the coarse and detail errors (mm) fall with them."""
     items = scene["skirt"][:2] + scene["dress"][:2]
     batch = collate_frames(items)
-    model = tiny_model(items, seed=1)
+    model = tiny_model(items, seed=0)
     start = {s: model.training_loss(batch, s)[1][s] for s in model.stages()}
     metrics0 = model.validation_metrics(batch, "detail")
     coarse = _train(model, batch, "coarse", 60, 1e-2)
     detail_start = model.training_loss(batch, "detail")[1]["detail"]
     detail = _train(model, batch, "detail", 60, 1e-2)
     metrics = model.validation_metrics(batch, "detail")
-    # measured: coarse 0.41 -> 0.036, detail 0.66 -> 0.36; coarse error 155 -> 39 mm, detail 34 mm
-    assert coarse < 0.15 * start["coarse"], (start, coarse)
+    # measured (seed 0): coarse 0.414 -> 0.032, detail 0.546 -> 0.296; coarse error 151 -> 38 mm, detail
+    # 30 mm against the coarse mesh's 38 mm. The bounds hold for seeds 0-3 (worst: 0.15, 0.56, 0.36, 0.78).
+    assert coarse < 0.2 * start["coarse"], (start, coarse)
     assert detail < 0.7 * detail_start, (detail_start, detail)
-    assert metrics["coarse_error_mm"] < 0.35 * metrics0["coarse_error_mm"], (metrics0, metrics)
+    assert metrics["coarse_error_mm"] < 0.4 * metrics0["coarse_error_mm"], (metrics0, metrics)
     assert metrics["detail_error_mm"] < 0.9 * metrics["coarse_sim_error_mm"], metrics
 
 
@@ -232,3 +233,37 @@ def test_bad_config():
         FitGarConfig(parser=(16, 32), detail_first=16)
     with pytest.raises(InputError, match="pooling"):
         FitGarConfig(pool_before=2, unpool_before=1)
+
+
+@pytest.mark.parametrize("change", [{"output": "plain"}, {"output": "limited"}, {"parser_mode": "concat"},
+                                    {"parser_mode": "nodes"}, {"two_step": False}])
+def test_ablations_of_section_5_3_run_and_learn(scene, change):
+    """Each ablation variant builds, runs on two garments and lowers its last stage's loss."""
+    items = scene["skirt"][:1] + scene["dress"][:1]
+    batch = collate_frames(items)
+    model = tiny_model(items, seed=4, config=FitGarConfig(**{**TINY.__dict__, **change}))
+    out = model(batch)
+    assert out["verts"].shape == batch["verts"].shape
+    stage = model.stages()[-1]
+    if change.get("two_step") is False:
+        assert model.stages() == ["detail"] and model.coarse is None
+        assert torch.equal(out["coarse"], batch["anchor"])
+    if change.get("output") == "limited":
+        bound = model.config.limit_factor * model.detail.output.scale
+        assert out["detail_displacement"].abs().max() <= bound
+    if change.get("parser_mode") == "nodes":
+        assert model.parser is None
+    before = model.training_loss(batch, stage)[1][stage]
+    after = _train(model, batch, stage, 15, 1e-2)
+    assert after < 0.9 * before, (before, after)
+
+
+def test_limited_output_is_bounded():
+    from loosefit.models.layers.decomposed_output import DirectOutput
+
+    head = DirectOutput(4, (8,), "limited", scale=0.02, limit=5.0)
+    out = head(torch.randn(100, 4) * 100)["displacement"]
+    assert out.abs().max() <= 0.1 + 1e-7 and out.abs().max() > 0.05
+    plain = DirectOutput(4, (), "plain", scale=2.0)
+    x = torch.randn(5, 4)
+    torch.testing.assert_close(plain(x)["displacement"], 2.0 * (x @ plain.out.weight.T + plain.out.bias))

@@ -32,6 +32,10 @@ loss is then near 1 for a zero prediction whatever the units). Trainer stages ``
 the coarse generator first, then the parser and the detail generator together with the coarse
 generator frozen (FitGar Sec. 4.4).
 
+The ablations of FitGar Sec. 5.3 are config switches (:class:`FitGarConfig`): ``output`` (a plain or a
+limited 3-vector instead of Eq. 4), ``parser_mode`` (concatenation instead of Eq. 7's product, or the
+attributes on every node without a parser), ``two_step`` (no coarse generator) and ``pooling``.
+
 Choices the paper leaves open, made here: the split of every GAT block into half self stream, half
 attention heads; the place of the pooling (after the first of the four detail blocks, unpooling before
 the last); Tanh after the detail generator's first block; the direction branch's "normalisation" as
@@ -51,7 +55,7 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import GarmentFrames, collate_frames
-from loosefit.models.layers.decomposed_output import DecomposedOutput, dense_stack
+from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput, dense_stack
 from loosefit.models.layers.edge_pool import EdgeContractionPooling
 from loosefit.models.layers.gat_block import GATBlock
 from loosefit.rig.fit_attribute import FitAttributeModel
@@ -59,6 +63,10 @@ from loosefit.train import StageConfig, TrainConfig
 
 #: Coarse node features: body normal (3), relative skinning feature (3), first fit factor (1).
 COARSE_FEATURES = 7
+#: Output reconstructions: FitGar Eq. 4, and the two direct outputs of its ablation.
+OUTPUT_MODES = ("decomposed", *DIRECT_MODES)
+#: How the attributes reach the detail generator: FitGar Eq. 7, and the two ablations.
+PARSER_MODES = ("multiply", "concat", "nodes")
 
 
 @dataclass(frozen=True)
@@ -80,6 +88,15 @@ class FitGarConfig:
         detail_dense: hidden sizes of each detail branch's fully connected layers.
         magnitude_bias: initial bias of the magnitude branches' last layer (their ReLU starts open).
         coarse_weight, detail_weight: weights of the two loss terms.
+        output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no Eq. 4):
+            ``"plain"`` (a 3-vector, unbounded) and ``"limited"`` (within plus or minus ``limit_factor``
+            times the output scale).
+        limit_factor: the ``"limited"`` output's bound in output scales (the paper divides by 5).
+        parser_mode: ``"multiply"`` (FitGar Eq. 7); ablations: ``"concat"`` (encodings concatenated to
+            the first block's features) and ``"nodes"`` (no parser: the attributes appended to every
+            detail node's features).
+        two_step: False is the "w/o two steps" ablation: no coarse generator, the detail generator runs on
+            the body graph's anchors ``I M_b`` and predicts the whole displacement (one stage, ``detail``).
     """
 
     heads: int = 4
@@ -97,13 +114,22 @@ class FitGarConfig:
     magnitude_bias: float = 0.5
     coarse_weight: float = 1.0
     detail_weight: float = 1.0
+    output: str = "decomposed"
+    limit_factor: float = 5.0
+    parser_mode: str = "multiply"
+    two_step: bool = True
 
     def __post_init__(self):
+        if self.output not in OUTPUT_MODES or self.parser_mode not in PARSER_MODES:
+            raise InputError(f"output must be one of {OUTPUT_MODES} and parser_mode one of {PARSER_MODES}, "
+                             f"got {self.output!r}, {self.parser_mode!r}")
+        if not self.limit_factor > 0:
+            raise InputError(f"limit_factor must be > 0, got {self.limit_factor}")
         sizes = (self.heads, self.coarse_first, self.detail_first, *self.coarse_blocks, *self.detail_blocks,
                  *self.parser, *self.coarse_dense, *self.detail_dense)
         if min(sizes) < 1 or not self.coarse_blocks or not self.detail_blocks or not self.parser:
             raise InputError(f"FitGar sizes must be >= 1 and the block lists non-empty, got {self}")
-        if self.parser[-1] != self.detail_first:
+        if self.parser_mode == "multiply" and self.parser[-1] != self.detail_first:
             raise InputError(f"the parser's last size ({self.parser[-1]}) must equal detail_first "
                              f"({self.detail_first}): FitGar Eq. 7 multiplies them feature by feature")
         if self.pooling and not 0 < self.pool_before < self.unpool_before <= len(self.detail_blocks) - 1:
@@ -165,17 +191,25 @@ class Branch(nn.Module):
 
 
 class Generator(nn.Module):
-    """A FitGar generator after its first block: two branches and the output reconstruction (FitGar Eq. 4)."""
+    """A FitGar generator after its first block: two branches and the output reconstruction (FitGar Eq. 4),
+    or, for the ablations' direct outputs, one branch (Tanh) and :class:`DirectOutput`."""
 
     def __init__(self, in_channels: int, widths, dense, c: FitGarConfig, pool: bool):
         super().__init__()
         where = dict(pool_before=c.pool_before, unpool_before=c.unpool_before) if pool else {}
-        self.magnitude = Branch(in_channels, widths, nn.ReLU, c.heads, c.self_fraction, **where)
+        self.magnitude = None
+        if c.output == "decomposed":
+            self.magnitude = Branch(in_channels, widths, nn.ReLU, c.heads, c.self_fraction, **where)
         self.direction = Branch(in_channels, widths, nn.Tanh, c.heads, c.self_fraction, **where)
-        self.output = DecomposedOutput(widths[-1], widths[-1], dense, magnitude_bias=c.magnitude_bias)
+        if c.output == "decomposed":
+            self.output = DecomposedOutput(widths[-1], widths[-1], dense, magnitude_bias=c.magnitude_bias)
+        else:
+            self.output = DirectOutput(widths[-1], dense, c.output, limit=c.limit_factor)
 
     def forward(self, x, edge_index, batch) -> torch.Tensor:
         """``(N, 3)`` displacement, metres."""
+        if self.magnitude is None:
+            return self.output(self.direction(x, edge_index, batch))["displacement"]
         return self.output(self.magnitude(x, edge_index, batch), self.direction(x, edge_index, batch))["displacement"]
 
 
@@ -217,11 +251,16 @@ class FitGar(nn.Module):
         self.register_buffer("fit_mean", torch.zeros(n, dtype=torch.float64))
         self.register_buffer("fit_components", torch.zeros(F, n, dtype=torch.float64))
         self.register_buffer("fit_noise", torch.ones(n, dtype=torch.float64))
-        self.coarse_first = GATBlock.of_width(COARSE_FEATURES, c.coarse_first, c.heads, c.self_fraction)
-        self.coarse = Generator(c.coarse_first, c.coarse_blocks, c.coarse_dense, c, pool=False)
-        self.parser = dense_stack((F + S + P, *c.parser), nn.ReLU)
-        self.detail_first = GATBlock.of_width(6 + J, c.detail_first, c.heads, c.self_fraction)
-        self.detail = Generator(c.detail_first, c.detail_blocks, c.detail_dense, c, pool=c.pooling)
+        self.coarse_first = self.coarse = None
+        if c.two_step:
+            self.coarse_first = GATBlock.of_width(COARSE_FEATURES, c.coarse_first, c.heads, c.self_fraction)
+            self.coarse = Generator(c.coarse_first, c.coarse_blocks, c.coarse_dense, c, pool=False)
+        attributes = F + S + P
+        self.parser = dense_stack((attributes, *c.parser), nn.ReLU) if c.parser_mode != "nodes" else None
+        node_features = 6 + J + (attributes if c.parser_mode == "nodes" else 0)
+        self.detail_first = GATBlock.of_width(node_features, c.detail_first, c.heads, c.self_fraction)
+        branch_in = c.detail_first + (c.parser[-1] if c.parser_mode == "concat" else 0)
+        self.detail = Generator(branch_in, c.detail_blocks, c.detail_dense, c, pool=c.pooling)
 
     # ------------------------------------------------------------------ construction
 
@@ -242,8 +281,9 @@ class FitGar(nn.Module):
             for key in ("rel_mean", "rel_std", "dist_mean", "dist_std", "shape_mean", "shape_std", "alpha_mean",
                         "alpha_std"):
                 getattr(self, key).copy_(torch.from_numpy(np.asarray(stats[key])))
-            self.coarse.output.scale.fill_(float(stats["coarse_scale"]))
-            self.detail.output.scale.fill_(float(stats["detail_scale"]))
+            if self.coarse is not None:
+                self.coarse.output.scale.fill_(float(stats["coarse_scale"]))
+            self.detail.output.scale.fill_(float(stats["detail_scale" if self.coarse is not None else "full_scale"]))
             fa = data.fit_model
             self.fit_mean.copy_(torch.from_numpy(fa.mean))
             self.fit_components.copy_(torch.from_numpy(fa.components))
@@ -260,25 +300,37 @@ class FitGar(nn.Module):
     # ------------------------------------------------------------------ prediction
 
     def coarse_displacement(self, batch: dict) -> torch.Tensor:
-        """FitGar Eq. 6: ``Delta_coarse (N, 3)`` metres from the body graph."""
+        """FitGar Eq. 6: ``Delta_coarse (N, 3)`` metres from the body graph (zeros without a coarse generator)."""
+        if self.coarse is None:
+            return torch.zeros_like(batch["anchor"])
         a1 = ((batch["alpha"][:, :1] - self.alpha_mean[:1]) / self.alpha_std[:1])[batch["batch"]]
         x = torch.cat([batch["body_normal"], (batch["body_rel"] - self.rel_mean) / self.rel_std, a1], -1)
         h = torch.tanh(self.coarse_first(x, batch["edge_index"]))
         return self.coarse(h, batch["edge_index"], batch["batch"])
 
+    def attributes(self, batch: dict) -> torch.Tensor:
+        """The normalised multi-source attributes ``(G, F + S + P)``: ``alpha``, ``beta``, ``theta``."""
+        return torch.cat([(batch["alpha"] - self.alpha_mean) / self.alpha_std,
+                          (batch["shape"] - self.shape_mean) / self.shape_std, batch["pose"]], -1)
+
     def encoding(self, batch: dict) -> torch.Tensor:
-        """The attribute parser: detail-aware encodings ``(G, detail_first)`` of ``(alpha, beta, theta)``."""
-        attributes = torch.cat([(batch["alpha"] - self.alpha_mean) / self.alpha_std,
-                                (batch["shape"] - self.shape_mean) / self.shape_std, batch["pose"]], -1)
-        return self.parser(attributes)
+        """The attribute parser: detail-aware encodings ``(G, parser[-1])`` of ``(alpha, beta, theta)``."""
+        return self.parser(self.attributes(batch))
 
     def detail_displacement(self, batch: dict, coarse: torch.Tensor) -> torch.Tensor:
         """FitGar Eqs. 7-8: ``Delta_detail (N, 3)`` metres from the coarse garment ``coarse (N, 3)``."""
         idx = batch["batch"]
         dist = (coarse[:, None] - batch["joints"][idx]).norm(dim=-1)
-        x = torch.cat([vertex_normals_torch(coarse, batch["faces"]), (batch["garment_rel"] - self.rel_mean) / self.rel_std,
-                       (dist - self.dist_mean) / self.dist_std], -1)
-        h = torch.tanh(self.detail_first(x, batch["edge_index"])) * self.encoding(batch)[idx]  # FitGar Eq. 7
+        parts = [vertex_normals_torch(coarse, batch["faces"]), (batch["garment_rel"] - self.rel_mean) / self.rel_std,
+                 (dist - self.dist_mean) / self.dist_std]
+        mode = self.config.parser_mode
+        if mode == "nodes":
+            parts.append(self.attributes(batch)[idx])
+        h = torch.tanh(self.detail_first(torch.cat(parts, -1), batch["edge_index"]))
+        if mode == "multiply":
+            h = h * self.encoding(batch)[idx]  # FitGar Eq. 7
+        elif mode == "concat":
+            h = torch.cat([h, self.encoding(batch)[idx]], -1)
         return self.detail(h, batch["edge_index"], idx)
 
     def forward(self, batch: dict) -> dict[str, torch.Tensor]:
@@ -291,13 +343,14 @@ class FitGar(nn.Module):
     # ------------------------------------------------------------------ trainer protocol
 
     def stages(self) -> list[str]:
-        return ["coarse", "detail"]
+        return ["coarse", "detail"] if self.coarse is not None else ["detail"]
 
     def stage_parameters(self, stage: str):
-        if stage == "coarse":
+        if stage == "coarse" and self.coarse is not None:
             return [*self.coarse_first.parameters(), *self.coarse.parameters()]
         if stage == "detail":
-            return [*self.parser.parameters(), *self.detail_first.parameters(), *self.detail.parameters()]
+            parser = [] if self.parser is None else list(self.parser.parameters())
+            return [*parser, *self.detail_first.parameters(), *self.detail.parameters()]
         raise ValueError(f"unknown stage {stage!r}")
 
     @staticmethod

@@ -130,10 +130,11 @@ class GarmentFrames(Dataset):
 
     def feature_stats(self, samples: int = 256) -> dict[str, np.ndarray]:
         """Statistics the model normalises with, from up to ``samples`` frames spread over the set:
-        ``rel_mean (3,)``, ``rel_std (3,)`` (relative skinning features per axis, metres), ``dist_mean ()``,
-        ``dist_std ()`` (distances from the coarse target's vertices to the joints), ``shape_mean/std (S,)``, ``alpha_mean/std (F,)`` (over
-        the pairs), ``coarse_scale ()`` (root mean square length of the coarse displacement ``smooth -
-        anchor``) and ``detail_scale ()`` (of ``verts - smooth``), metres."""
+        ``rel_mean (3,)``, ``rel_std (3,)`` (relative skinning features per axis, metres); ``dist_mean ()``,
+        ``dist_std ()`` (distances from the coarse target's vertices to the joints); ``shape_mean/std (S,)``,
+        ``alpha_mean/std (F,)`` (over the pairs); root mean square lengths, metres, of the coarse
+        displacement ``smooth - anchor`` (``coarse_scale ()``), of ``verts - smooth`` (``detail_scale ()``)
+        and of ``verts - anchor`` (``full_scale ()``)."""
         picks = np.unique(np.linspace(0, len(self) - 1, min(samples, len(self))).round().astype(int))
         items = [self[int(k)] for k in picks]
         rel = np.concatenate([np.concatenate([it["body_rel"], it["garment_rel"]]) for it in items]).astype(np.float64)
@@ -141,6 +142,7 @@ class GarmentFrames(Dataset):
                                for it in items])
         coarse = np.concatenate([np.sum((it["smooth"] - it["anchor"]) ** 2, -1) for it in items])
         detail = np.concatenate([np.sum((it["verts"] - it["smooth"]) ** 2, -1) for it in items])
+        full = np.concatenate([np.sum((it["verts"] - it["anchor"]) ** 2, -1) for it in items])
         shapes = np.stack([p.shape for p in self.pairs.values()]).astype(np.float64)
         alphas = np.stack([p.alpha for p in self.pairs.values()]).astype(np.float64)
         f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
@@ -151,6 +153,7 @@ class GarmentFrames(Dataset):
             "alpha_mean": f32(alphas.mean(0)), "alpha_std": f32(np.maximum(alphas.std(0), STD_FLOOR)),
             "coarse_scale": f32(max(np.sqrt(coarse.mean()), 1e-4)),
             "detail_scale": f32(max(np.sqrt(detail.mean()), 1e-4)),
+            "full_scale": f32(max(np.sqrt(full.mean()), 1e-4)),
         }
 
     @property

@@ -69,3 +69,33 @@ class DecomposedOutput(nn.Module):
         direction = unit_direction(self.direction(direction_features))
         return {"displacement": compose_displacement(magnitude, direction), "magnitude": magnitude,
                 "direction": direction}
+
+
+#: Direct outputs of the paper's ablation (FitGar Sec. 5.3): ``"plain"`` (w/o decomposition, unbounded) and
+#: ``"limited"`` (w/ output limit: within plus or minus a fixed limit).
+DIRECT_MODES = ("plain", "limited")
+
+
+class DirectOutput(nn.Module):
+    """The ablations' output without Eq. 4: one branch's features ``(N, C)`` -> a displacement ``(N, 3)``.
+
+    Fully connected layers ``(C, *hidden)`` with Tanh after each, then a linear layer to 3 values ``z``:
+    ``"plain"`` gives ``scale * z``; ``"limited"`` gives ``limit * scale * tanh(z)``, every coordinate
+    within plus or minus ``limit * scale`` (the paper limits to ``(-1, 1)`` after dividing by a factor of 5).
+    Returns ``{"displacement": (N, 3)}`` metres.
+    """
+
+    def __init__(self, in_channels: int, hidden: Sequence[int], mode: str, scale: float = 1.0, limit: float = 5.0):
+        super().__init__()
+        if mode not in DIRECT_MODES:
+            raise InputError(f"direct output mode must be one of {DIRECT_MODES}, got {mode!r}")
+        self.mode, self.limit = mode, float(limit)
+        self.hidden = dense_stack((in_channels, *hidden), nn.Tanh) if hidden else nn.Identity()
+        self.out = nn.Linear(hidden[-1] if hidden else in_channels, 3)
+        self.register_buffer("scale", torch.tensor(float(scale)))
+
+    def forward(self, features: torch.Tensor) -> dict[str, torch.Tensor]:
+        z = self.out(self.hidden(features))
+        if self.mode == "limited":
+            return {"displacement": self.limit * self.scale * torch.tanh(z)}
+        return {"displacement": self.scale * z}
