@@ -99,24 +99,28 @@ class AnyGarmentAnimator:
     def animate(self, pair: GarmentBodyPair, motion: Motion, output: str = "verts") -> np.ndarray:
         """World vertices ``(T, V, 3)`` float32 of ``pair`` along ``motion``: ``output`` ``"verts"`` (the
         detail mesh) or ``"coarse"``."""
-        if output not in OUTPUTS:
-            raise InputError(f"{self.method} has no vertex output {output!r} (it has {list(OUTPUTS)})")
+        return self.animate_outputs(pair, motion, (output,))[output]
+
+    def animate_outputs(self, pair: GarmentBodyPair, motion: Motion, outputs=OUTPUTS) -> dict[str, np.ndarray]:
+        """Several vertex outputs of one pass: ``{name: (T, V, 3) world float32}`` for names in ``outputs``."""
+        unknown = sorted(set(outputs) - set(OUTPUTS))
+        if unknown:
+            raise InputError(f"{self.method} has no vertex output {unknown} (it has {list(OUTPUTS)})")
         inputs = pair.frames(motion)
         items = frame_items(pair, inputs)
-        chunks = []
+        chunks: dict[str, list[torch.Tensor]] = {name: [] for name in outputs}
         saved = torch.get_num_threads()
         try:
             if self.threads:
                 torch.set_num_threads(self.threads)
             with torch.no_grad():
                 for start in range(0, len(items), self.frames_per_pass):
-                    out = self.model(collate_frames(items[start:start + self.frames_per_pass]))[output]
-                    chunks.append(out.reshape(-1, pair.num_verts, 3))
+                    out = self.model(collate_frames(items[start:start + self.frames_per_pass]))
+                    for name in outputs:
+                        chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
         finally:
             torch.set_num_threads(saved)
-        canonical = torch.cat(chunks).numpy()
-        return to_world(canonical, inputs["rot"], inputs["origin"])
-
+        return {name: to_world(torch.cat(c).numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
 def is_multi_garment_run(run_dir: str | Path) -> bool:
     """Whether the run folder holds a multi-garment method (False when it is no run folder)."""
