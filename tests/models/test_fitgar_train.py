@@ -165,3 +165,12 @@ def test_loosefit_animate_cli(run, heavy_case, tmp_path):
     seq = MeshSequence.load(out)
     assert seq.verts.shape == (motion.num_frames, len(garment.verts), 3)
     assert np.array_equal(seq.faces, garment.faces)
+
+
+def test_resume_of_a_finished_run_trains_no_further(store, run):
+    from loosefit.train.pipeline import train_model
+
+    before = (run / "checkpoints" / "last.pt").read_bytes()
+    result = train_model("fitgar", store, None, run, config=TINY_CONFIG, resume=True)
+    assert result.global_step == json.loads((run / "run.json").read_text())["global_step"]
+    assert (run / "checkpoints" / "last.pt").read_bytes() == before
