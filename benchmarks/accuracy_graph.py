@@ -28,6 +28,7 @@ Run: .venv/bin/python benchmarks/accuracy_graph.py --data DATA.zarr --runs RUNS 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections import defaultdict
@@ -98,7 +99,9 @@ def table(rows: list[dict], key: str) -> dict:
 
 
 def speed(vertices: list[int], threads: list[int], config: Path, frames: int = 20) -> list[dict]:
-    """Frames per second of the untrained paper-size model on dresses of about ``vertices`` vertices."""
+    """Frames per second of the untrained model of ``config`` on dresses of about ``vertices`` vertices: the
+    network alone (inputs made beforehand), one frame per pass, the 1-minute load average beside (the
+    machine may be shared)."""
     from loosefit.config import load_config
     from loosefit.garment import make_garment
     from loosefit.models.fitgar import Config, FitGar
@@ -131,7 +134,8 @@ def speed(vertices: list[int], threads: list[int], config: Path, frames: int = 2
             finally:
                 torch.set_num_threads(saved)
             rows.append({"vertices": len(garment.verts), "threads": t, "ms_per_frame": per_frame * 1e3,
-                         "fps": 1.0 / per_frame, "device": "cpu", "paper_ms_per_frame": 21.0})
+                         "fps": 1.0 / per_frame, "device": "cpu", "load_average": os.getloadavg()[0],
+                         "paper_ms_per_frame": 21.0})
             print(rows[-1], flush=True)
     return rows
 
