@@ -3,7 +3,6 @@ body shapes, a few poses, synthetic targets."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 import torch
 
@@ -53,7 +52,7 @@ def test_registered_with_its_config():
     assert list(FitGar(SIZES, TINY).stages()) == ["coarse", "detail"]
 
 
-def test_yaml_config_is_the_default(tmp_path):
+def test_yaml_config_is_the_default():
     from pathlib import Path
 
     from loosefit.config import load_config

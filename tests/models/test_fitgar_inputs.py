@@ -64,7 +64,7 @@ def test_pose_and_edges(case):
     assert sorted(map(tuple, e.T.tolist())) == [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]
 
 
-def test_bad_input(case, body):
+def test_bad_input(case):
     body, garment, motion, pair, inputs, posed = case
     with pytest.raises(InputError):
         GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [np.nan])

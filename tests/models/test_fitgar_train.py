@@ -8,7 +8,6 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import GarmentFrames, Smoother
