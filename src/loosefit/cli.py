@@ -185,6 +185,8 @@ def cmd_animate(args):
         pair = animator.pair(garment.verts, garment.faces, body)
         results, faces = [animator.animate(pair, m) for m in motions], garment.faces
     else:
+        if args.garment:
+            raise InputError("--garment is for runs that animate any garment (fitgar); this run has its own", args.run)
         animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads)
         results, faces = animator.animate_batch(motions), animator.faces
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
