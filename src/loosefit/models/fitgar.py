@@ -33,7 +33,7 @@ the coarse generator first, then the parser and the detail generator together wi
 generator frozen (FitGar Sec. 4.4).
 
 The ablations of FitGar Sec. 5.3 are config switches (:class:`FitGarConfig`): ``output`` (a plain or a
-limited 3-vector instead of Eq. 4), ``parser_mode`` (concatenation instead of Eq. 7's product, or the
+limited 3-vector instead of FitGar Eq. 4), ``parser_mode`` (concatenation instead of FitGar Eq. 7's product, or the
 attributes on every node without a parser), ``two_step`` (no coarse generator) and ``pooling``.
 
 Choices the paper leaves open, made here: the split of every GAT block into half self stream, half

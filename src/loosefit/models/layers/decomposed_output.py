@@ -77,7 +77,7 @@ DIRECT_MODES = ("plain", "limited")
 
 
 class DirectOutput(nn.Module):
-    """The ablations' output without Eq. 4: one branch's features ``(N, C)`` -> a displacement ``(N, 3)``.
+    """The ablations' output without FitGar Eq. 4: one branch's features ``(N, C)`` -> a displacement ``(N, 3)``.
 
     Fully connected layers ``(C, *hidden)`` with Tanh after each, then a linear layer to 3 values ``z``:
     ``"plain"`` gives ``scale * z``; ``"limited"`` gives ``limit * scale * tanh(z)``, every coordinate
