@@ -8,7 +8,7 @@ import logging
 import sys
 from pathlib import Path
 
-from loosefit.errors import LoosefitError
+from loosefit.errors import InputError, LoosefitError
 
 
 def _body(args):
@@ -169,17 +169,30 @@ def cmd_train(args):
 
 def cmd_animate(args):
     from loosefit.animate import Animator
+    from loosefit.animate_any import AnyGarmentAnimator, is_multi_garment_run
     from loosefit.io.export import export_animation
     from loosefit.motion.io import load_motion
 
     body = _body(args)
-    animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads)
     motions = [load_motion(path, body) for path in args.motion]
-    results = animator.animate_batch(motions)
+    if is_multi_garment_run(args.run):
+        from loosefit.garment import Garment
+
+        if not args.garment:
+            raise InputError("this run animates any garment: give --garment (in the rest pose of --shape)", args.run)
+        animator = AnyGarmentAnimator(args.run, checkpoint=args.checkpoint, threads=args.threads)
+        garment = Garment.load(args.garment)
+        pair = animator.pair(garment.verts, garment.faces, body)
+        results, faces = [animator.animate(pair, m) for m in motions], garment.faces
+    else:
+        if args.garment:
+            raise InputError("--garment is for runs that animate any garment (fitgar); this run has its own", args.run)
+        animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads)
+        results, faces = animator.animate_batch(motions), animator.faces
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
     for motion, verts, out in zip(motions, results, outs):
         posed = body.pose(motion) if args.with_body else None
-        export_animation(out, verts, animator.faces, fps=motion.fps,
+        export_animation(out, verts, faces, fps=motion.fps,
                          body_verts=None if posed is None else posed.verts, body_faces=None if posed is None else body.faces)
         print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method})")
 
@@ -280,9 +293,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_prepare)
 
     sp = sub.add_parser("train", help="train a garment model")
-    sp.add_argument("--method", required=True, help="virtualbones, jointnet or body-lbs")
+    sp.add_argument("--method", required=True, help="virtualbones, jointnet, body-lbs or fitgar")
     sp.add_argument("--data", required=True, help="a prepared DATA.zarr")
-    sp.add_argument("--garment", required=True, help="garment name in the dataset (see loosefit info)")
+    sp.add_argument("--garment", default=None,
+                    help="garment name in the dataset (see loosefit info); none for fitgar, which trains on all")
     sp.add_argument("--out", required=True, help="run folder")
     sp.add_argument("--config", default=None, help="method config YAML (configs/models/<method>.yaml)")
     sp.add_argument("--set", action="append", help="config override, e.g. train.epochs=5 (repeatable)")
@@ -292,6 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("animate", help="animate a trained garment on new motions")
     sp.add_argument("run", help="run folder written by loosefit train")
     sp.add_argument("--motion", required=True, action="append", help="motion .npz / .bvh / AMASS .npz (repeatable)")
+    sp.add_argument("--garment", default=None, help="fitgar runs: the garment .obj, in the rest pose of --shape")
     body_options(sp)
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")

@@ -10,11 +10,13 @@ METHODS = {
     "virtualbones": "loosefit.models.virtualbones:VirtualBones",
     "jointnet": "loosefit.models.jointnet:JointNet",
     "body-lbs": "loosefit.models.body_lbs:BodyLBS",
+    "fitgar": "loosefit.models.fitgar:FitGar",
 }
 
 
 def model_class(method: str):
-    """The :class:`~loosefit.models.base.GarmentModel` subclass of ``method``."""
+    """The model class of ``method``: a :class:`~loosefit.models.base.GarmentModel` subclass, or a
+    multi-garment model (class attribute ``multi_garment``, e.g. FitGar)."""
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; available: {sorted(METHODS)}")
     module, name = METHODS[method].split(":")

@@ -1,4 +1,8 @@
-"""``loosefit train``: data -> model -> trained run folder, for any per-garment method.
+"""``loosefit train``: data -> model -> trained run folder, for any method.
+
+A per-garment method trains on the sequences of one garment; a multi-garment method (its class has
+``multi_garment = True``: FitGar) trains on the frames of every garment, body shape and motion of the
+store (:class:`loosefit.models.fitgar_data.GarmentFrames`) and takes no garment.
 
 The run folder holds, besides the trainer's files (:mod:`loosefit.train.run`), ``model.json`` (method,
 garment, sizes, dataset) and ``method.yaml`` (the method's full config: model, train and data sections),
@@ -26,7 +30,7 @@ METHOD_CONFIG = "method.yaml"
 def train_model(
     method: str,
     data: str | Path,
-    garment: str,
+    garment: str | None,
     out: str | Path,
     config: str | Path | None = None,
     overrides: tuple[str, ...] | list[str] = (),
@@ -34,7 +38,8 @@ def train_model(
     val_split: str | None = "test",
     sim_params: dict | None = None,
 ) -> TrainResult | None:
-    """Train ``method`` on the training sequences of ``garment`` in dataset ``data``; validate on ``val_split``.
+    """Train ``method`` on the training sequences of ``garment`` in dataset ``data`` (every garment for a
+    multi-garment method, which takes ``garment=None``); validate on ``val_split``.
 
     Args:
         config: the method's YAML config (``configs/models/<method>.yaml``); None: the built-in defaults
@@ -52,6 +57,12 @@ def train_model(
     if config is None and resume and saved.exists():
         config = saved
     cfg = load_config(run_config_class(method), config, overrides)
+    if getattr(cls, "multi_garment", False):
+        if garment is not None:
+            raise InputError(f"{method} trains on every garment of the store: give no garment (got {garment!r})")
+        return _train_multi_garment(method, cls, cfg, data, run, resume, val_split, sim_params)
+    if garment is None:
+        raise InputError(f"{method} is trained per garment: name one (loosefit info lists them)", Path(data))
     trained = hasattr(cfg, "train")
     if trained:
         seed_everything(cfg.train.seed)
@@ -78,6 +89,32 @@ def train_model(
         return None
     return train(model, cfg.data.dataset(train_data), cfg.data.dataset(val_data) if val_data else None,
                  cfg.train, run.path, resume=resume)
+
+
+def _train_multi_garment(method, cls, cfg, data, run: RunDir, resume: bool, val_split, sim_params) -> TrainResult:
+    """:func:`train_model` for a method trained on every garment of the store at once."""
+    from loosefit.models.fitgar_data import GarmentFrames
+
+    seed_everything(cfg.train.seed)
+    stride = cfg.data.frame_stride
+    train_data = GarmentFrames(data, "train", sim_params=sim_params, frame_stride=stride)
+    val_data = None
+    if val_split is not None:
+        try:
+            val_data = GarmentFrames(data, val_split, sim_params=sim_params, frame_stride=stride)
+        except InputError:
+            val_data = None  # no held-out sequences: train without validation
+    model = cls.from_data(train_data, cfg.model)
+    meta = {"method": method, "garment": None, "data": str(Path(data).resolve()), "sizes": model.sizes(),
+            "sim_params": sim_params, "train_sequences": train_data.sequence_names,
+            "val_sequences": val_data.sequence_names if val_data else [], "rig": {}}
+    if resume and run.has_checkpoint() and (run.path / MODEL_META).exists():
+        _check_same_data(run.path / MODEL_META, meta)
+    run.path.mkdir(parents=True, exist_ok=True)
+    with atomic_path(run.path / MODEL_META) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2))
+    save_config(run.path / METHOD_CONFIG, cfg)
+    return train(model, train_data, val_data, cfg.train, run.path, resume=resume)
 
 
 class StaleRunError(InputError):

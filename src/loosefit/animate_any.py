@@ -1,0 +1,134 @@
+"""``loosefit animate`` for a multi-garment static method (FitGar): a trained run folder + any garment
++ any body shape + motions -> garment mesh sequences, each frame predicted on its own.
+
+The garment must be in the rest pose of the body shape it is animated on (``loosefit garment make``
+with that ``--shape``, or an imported garment aligned to it). Its fit attribute comes from the factor
+analysis kept in the checkpoint (FitGar Sec. 4.1), computed once per garment-body pair.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from loosefit.config import load_config
+from loosefit.errors import InputError
+from loosefit.models.fitgar_data import collate_frames, frame_items
+from loosefit.models.fitgar_inputs import GarmentBodyPair
+from loosefit.models.motion_features import to_world
+from loosefit.models.registry import model_class, run_config_class
+from loosefit.motion.motion import Motion
+from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
+from loosefit.train.run import RunDir, load_weights
+
+#: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (Eq. 5).
+OUTPUTS = ("verts", "coarse")
+
+
+def body_shape_values(body) -> np.ndarray:
+    """The shape values ``(S,)`` float32 a body was built with (Anny: its six phenotype values)."""
+    shape = getattr(body, "shape", None)
+    if shape is not None and hasattr(shape, "to_array"):
+        return shape.to_array()
+    betas = getattr(body, "betas", None)
+    if betas is not None:
+        return np.asarray(betas, np.float32).reshape(-1)
+    raise InputError(f"cannot tell the shape values of body {getattr(body, 'name', body)!r}")
+
+
+class AnyGarmentAnimator:
+    """A trained multi-garment model ready to animate any garment on any body shape.
+
+    Args:
+        run_dir: a folder written by ``loosefit train --method fitgar``.
+        checkpoint: ``"last"``, ``"best"`` (falls back to ``"last"``) or a checkpoint path.
+        threads: torch CPU threads while animating.
+        frames_per_pass: frames batched into one forward pass (frames never interact).
+    """
+
+    def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1,
+                 frames_per_pass: int = 16):
+        run = RunDir(run_dir)
+        meta_path = run.path / MODEL_META
+        if not meta_path.is_file():
+            raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
+        self.meta = json.loads(meta_path.read_text())
+        cls = model_class(self.meta["method"])
+        if not getattr(cls, "multi_garment", False):
+            raise InputError(f"{self.meta['method']} is a per-garment method: use loosefit.animate.Animator", run.path)
+        cfg = load_config(run_config_class(self.meta["method"]), run.path / METHOD_CONFIG)
+        model = cls(self.meta["sizes"], cfg.model)
+        path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
+        if checkpoint == "best" and not path.is_file():
+            path = run.last_checkpoint
+        load_weights(model, path)
+        self._use(model, threads, frames_per_pass)
+
+    @classmethod
+    def from_model(cls, model, threads: int | None = 1, frames_per_pass: int = 16) -> "AnyGarmentAnimator":
+        """An animator around an in-memory model, without a run folder."""
+        animator = cls.__new__(cls)
+        animator.meta = {"method": model.method, "sizes": model.sizes()}
+        animator._use(model, threads, frames_per_pass)
+        return animator
+
+    def _use(self, model, threads, frames_per_pass: int) -> None:
+        if frames_per_pass < 1:
+            raise InputError(f"frames_per_pass must be >= 1, got {frames_per_pass}")
+        model.eval()
+        self.model, self.threads, self.frames_per_pass = model, threads, frames_per_pass
+        self.fit_model = model.fit_attribute_model()
+
+    @property
+    def method(self) -> str:
+        return self.meta["method"]
+
+    def pair(self, garment_verts: np.ndarray, faces: np.ndarray, body) -> GarmentBodyPair:
+        """The garment ``(V, 3)`` / ``(F, 3)`` in the rest pose of ``body`` (its own shape), with its fit attribute."""
+        shape = body_shape_values(body)
+        sizes = self.meta["sizes"]
+        if len(shape) != sizes["num_shape"] or body.num_joints != sizes["num_joints"]:
+            raise InputError(f"the model was trained on bodies of {sizes['num_shape']} shape values and "
+                             f"{sizes['num_joints']} joints; this body has {len(shape)} and {body.num_joints}")
+        alpha = self.fit_model.attribute(garment_verts, faces, body.rest_verts())
+        return GarmentBodyPair.build(garment_verts, faces, body, shape, alpha)
+
+    def animate(self, pair: GarmentBodyPair, motion: Motion, output: str = "verts") -> np.ndarray:
+        """World vertices ``(T, V, 3)`` float32 of ``pair`` along ``motion``: ``output`` ``"verts"`` (the
+        detail mesh) or ``"coarse"``."""
+        return self.animate_outputs(pair, motion, (output,))[output]
+
+    def animate_outputs(self, pair: GarmentBodyPair, motion: Motion, outputs=OUTPUTS) -> dict[str, np.ndarray]:
+        """Several vertex outputs of one pass: ``{name: (T, V, 3) world float32}`` for names in ``outputs``."""
+        unknown = sorted(set(outputs) - set(OUTPUTS))
+        if unknown:
+            raise InputError(f"{self.method} has no vertex output {unknown} (it has {list(OUTPUTS)})")
+        inputs = pair.frames(motion)
+        items = frame_items(pair, inputs)
+        chunks: dict[str, list[torch.Tensor]] = {name: [] for name in outputs}
+        saved = torch.get_num_threads()
+        try:
+            if self.threads:
+                torch.set_num_threads(self.threads)
+            with torch.no_grad():
+                for start in range(0, len(items), self.frames_per_pass):
+                    out = self.model(collate_frames(items[start:start + self.frames_per_pass]))
+                    for name in outputs:
+                        chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
+        finally:
+            torch.set_num_threads(saved)
+        return {name: to_world(torch.cat(c).numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
+
+def is_multi_garment_run(run_dir: str | Path) -> bool:
+    """Whether the run folder holds a multi-garment method (False when it is no run folder)."""
+    path = Path(run_dir) / MODEL_META
+    if not path.is_file():
+        return False
+    try:
+        method = json.loads(path.read_text())["method"]
+        return bool(getattr(model_class(method), "multi_garment", False))
+    except (ValueError, KeyError, InputError):
+        return False

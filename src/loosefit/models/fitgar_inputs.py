@@ -1,0 +1,175 @@
+"""FitGar's per-frame inputs for one garment-body pair (Li et al. 2023, Sec. 4.1-4.4).
+
+A :class:`GarmentBodyPair` holds what does not change with the pose: the garment's rest mesh and
+graph, the indicator (each garment vertex's closest body vertex in the rest pose, FitGar Eq. 5's
+``I``), the body's skinning weights, rest positions and rest normals at those vertices, the body
+shape ``beta`` and the fit attribute ``alpha``. :meth:`GarmentBodyPair.frames` turns a motion into the
+inputs of every frame, all in the heading frame of that frame (:mod:`loosefit.models.motion_features`:
+the body faces -Y, its root above the origin), ``T`` frames, ``V`` garment vertices, ``J`` joints:
+
+- ``anchor (T, V, 3)``: ``I M_b``, the posed body vertex under each garment vertex (FitGar Eq. 5), metres;
+- ``body_normal (T, V, 3)``: the posed body's area-weighted vertex normal there;
+- ``body_rel (T, V, 3)``: the relative skinning feature of that body vertex (FitGar Sec. 4.3): its
+  skinned position without the root's translation, metres;
+- ``garment_rel (T, V, 3)``: the same for the garment's rest vertices, skinned with the weights of their
+  body vertex (FitGar Sec. 4.4's ``p_i``);
+- ``joints (T, J, 3)``: posed joint positions (for FitGar Sec. 4.4's vertex-to-joint distances ``x_i``);
+- ``pose (T, 6 J)``: FitGar's ``theta``: the root's rotation without its heading, then every other
+  joint's local rotation, each as 6D (first two matrix columns);
+- ``rot (T, 3, 3)``, ``origin (T, 3)``: the heading frames, to put predictions back in the world.
+
+Only the indicated body vertices and their one-ring (for the normals) are skinned, not the whole body:
+the cost follows the garment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from loosefit.errors import InputError
+from loosefit.geometry.features import nearest_body_vertex
+from loosefit.geometry.laplacian import edges as mesh_edges
+from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
+from loosefit.geometry.normals import vertex_normals
+from loosefit.geometry.rotations import axis_angle_to_matrix
+from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+from loosefit.motion.motion import Motion
+
+#: Columns of :func:`motion_features`' ``root`` block holding the root rotation without its heading (6D).
+ROOT_TILT = slice(5, 11)
+
+
+def graph_edges(faces: np.ndarray) -> np.ndarray:
+    """``(2, E)`` int64 directed mesh edges, both directions of every undirected edge."""
+    e = mesh_edges(np.asarray(faces, np.int64))
+    return np.ascontiguousarray(np.concatenate([e, e[:, ::-1]]).T)
+
+
+def pose_vector(motion: Motion) -> np.ndarray:
+    """FitGar's pose attribute ``theta (T, 6 J)`` float32 (see the module docstring)."""
+    feats = motion_features(motion)
+    T = motion.num_frames
+    return np.concatenate([feats["root"][:, ROOT_TILT], feats["joints"].reshape(T, -1)], 1).astype(np.float32)
+
+
+@dataclass
+class GarmentBodyPair:
+    """A garment in the rest pose of a body shape (see the module docstring).
+
+    Attributes:
+        garment_verts: ``(V, 3)`` float32 rest garment, metres. faces: ``(F, 3)`` int64. edges: ``(2, E)`` int64.
+        nearest: ``(V,)`` int64 indicator: the closest rest body vertex of each garment vertex.
+        ring_rest: ``(U, 3)`` float32 rest positions of the body vertices in the faces around the indicated
+            ones; ring_weights: ``(U, J)`` float32 their skinning weights; ring_faces: ``(K, 3)`` int64 those
+            faces in that numbering; ring_index: ``(V,)`` int64 where each garment vertex's body vertex is.
+        weights: ``(V, J)`` float32 skinning weights of the indicated body vertices (borrowed by the garment).
+        rest_joints: ``(J, 3)`` float32. parents: ``(J,)`` int64.
+        shape: ``(S,)`` float32 body shape ``beta``. alpha: ``(F,)`` float32 fit attribute.
+    """
+
+    garment_verts: np.ndarray
+    faces: np.ndarray
+    edges: np.ndarray
+    nearest: np.ndarray
+    ring_rest: np.ndarray
+    ring_weights: np.ndarray
+    ring_faces: np.ndarray
+    ring_index: np.ndarray
+    weights: np.ndarray
+    rest_joints: np.ndarray
+    parents: np.ndarray
+    shape: np.ndarray
+    alpha: np.ndarray
+
+    @classmethod
+    def build(cls, garment_verts: np.ndarray, faces: np.ndarray, body, shape, alpha: np.ndarray) -> "GarmentBodyPair":
+        """The pair of a garment ``(V, 3)`` fitted to ``body`` (a :class:`~loosefit.body.base.BodyModel`) of
+        ``shape`` (the body's shape values, e.g. Anny's six), with fit attribute ``alpha (F,)``."""
+        garment_verts = np.asarray(garment_verts, np.float32)
+        faces = np.asarray(faces, np.int64)
+        shape = np.asarray(shape, np.float32).reshape(-1)
+        alpha = np.asarray(alpha, np.float32).reshape(-1)
+        if not (np.isfinite(alpha).all() and np.isfinite(shape).all()):
+            raise InputError("the fit attribute and the body shape must be finite")
+        rest = body.rest_verts(shape)
+        nearest = nearest_body_vertex(garment_verts, rest)
+        body_faces = np.asarray(body.faces, np.int64)
+        around = body_faces[np.isin(body_faces, nearest).any(1)]
+        ring, local = np.unique(around, return_inverse=True)
+        weights = body.skinning_weights()
+        return cls(garment_verts, faces, graph_edges(faces), nearest, rest[ring].astype(np.float32),
+                   weights[ring].astype(np.float32), local.reshape(-1, 3).astype(np.int64),
+                   np.searchsorted(ring, nearest).astype(np.int64), weights[nearest].astype(np.float32),
+                   body.rest_joints(shape).astype(np.float32), np.asarray(body.parents, np.int64), shape, alpha)
+
+    @property
+    def num_verts(self) -> int:
+        return len(self.garment_verts)
+
+    def frames(self, motion: Motion) -> dict[str, np.ndarray]:
+        """The per-frame inputs of ``motion`` (keys and shapes in the module docstring), float32."""
+        return self.inputs(pose_motion(self.rest_joints, self.parents, motion))
+
+    def inputs(self, posed: "PosedSkeleton") -> dict[str, np.ndarray]:
+        """The per-frame inputs of a posed skeleton of this body shape (:func:`pose_motion`)."""
+        if posed.transforms.shape[1] != len(self.rest_joints):
+            raise InputError(f"the pose has {posed.transforms.shape[1]} joints, the body has {len(self.rest_joints)}")
+        A = torch.from_numpy(posed.transforms)
+        ring = linear_blend_skinning(torch.from_numpy(self.ring_rest).double(),
+                                     torch.from_numpy(self.ring_weights).double(), A).numpy()
+        body = ring[:, self.ring_index]
+        normal = vertex_normals(ring, self.ring_faces)[:, self.ring_index].astype(np.float64)
+        garment = linear_blend_skinning(torch.from_numpy(self.garment_verts).double(),
+                                        torch.from_numpy(self.weights).double(), A).numpy()
+        rot, origin = posed.rot, posed.origin
+        # Relative skinning features: the root's translation removed. Skinning is affine in it, so that is
+        # the posed point minus the root's displacement; in the heading frame only its height remains.
+        lift = np.zeros((len(rot), 1, 3))
+        lift[:, 0, 2] = posed.root_height - float(self.rest_joints[0, 2])
+        anchor = to_canonical(body, rot, origin)
+        return {
+            "anchor": anchor,
+            "body_normal": (normal @ rot).astype(np.float32),
+            "body_rel": (anchor - lift).astype(np.float32),
+            "garment_rel": (to_canonical(garment, rot, origin) - lift).astype(np.float32),
+            "joints": posed.joints,
+            "pose": posed.pose,
+            "rot": rot,
+            "origin": origin,
+        }
+
+
+@dataclass
+class PosedSkeleton:
+    """A motion on a body shape's skeleton, ``T`` frames: skinning ``transforms (T, J, 4, 4)`` float64
+    (:func:`~loosefit.geometry.lbs.skinning_transforms`), canonical ``joints (T, J, 3)`` float32,
+    ``pose (T, 6 J)`` float32 (FitGar's ``theta``), heading frames ``rot (T, 3, 3)``, ``origin (T, 3)``
+    float64 and the root's ``root_height (T,)`` float64, metres."""
+
+    transforms: np.ndarray
+    joints: np.ndarray
+    pose: np.ndarray
+    rot: np.ndarray
+    origin: np.ndarray
+    root_height: np.ndarray
+
+    def __getitem__(self, frames) -> "PosedSkeleton":
+        """The frames ``frames`` (an index array or a slice), as a posed skeleton."""
+        return PosedSkeleton(self.transforms[frames], self.joints[frames], self.pose[frames], self.rot[frames],
+                             self.origin[frames], self.root_height[frames])
+
+
+def pose_motion(rest_joints: np.ndarray, parents: np.ndarray, motion: Motion) -> PosedSkeleton:
+    """The skeleton of rest joints ``(J, 3)`` (one body shape) along ``motion``."""
+    J = len(rest_joints)
+    if motion.num_joints != J:
+        raise InputError(f"motion {motion.name!r} has {motion.num_joints} joints, the body has {J}")
+    rest = torch.from_numpy(np.asarray(rest_joints)).double()
+    world = forward_kinematics(axis_angle_to_matrix(torch.from_numpy(motion.rotations).double()),
+                               torch.from_numpy(motion.translation).double(), rest, parents)
+    rot, origin = heading_frames(motion)
+    return PosedSkeleton(skinning_transforms(world, rest).numpy(), to_canonical(world[..., :3, 3].numpy(), rot, origin),
+                         pose_vector(motion), rot, origin, motion.translation[:, 2].astype(np.float64))
