@@ -280,9 +280,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_prepare)
 
     sp = sub.add_parser("train", help="train a garment model")
-    sp.add_argument("--method", required=True, help="virtualbones, jointnet or body-lbs")
+    sp.add_argument("--method", required=True, help="virtualbones, jointnet, body-lbs or swingar")
     sp.add_argument("--data", required=True, help="a prepared DATA.zarr")
-    sp.add_argument("--garment", required=True, help="garment name in the dataset (see loosefit info)")
+    sp.add_argument("--garment", default=None, help="garment name in the dataset (see loosefit info); for swingar "
+                    "a comma-separated list, or none for every training garment")
     sp.add_argument("--out", required=True, help="run folder")
     sp.add_argument("--config", default=None, help="method config YAML (configs/models/<method>.yaml)")
     sp.add_argument("--set", action="append", help="config override, e.g. train.epochs=5 (repeatable)")

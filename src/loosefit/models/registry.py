@@ -10,6 +10,7 @@ METHODS = {
     "virtualbones": "loosefit.models.virtualbones:VirtualBones",
     "jointnet": "loosefit.models.jointnet:JointNet",
     "body-lbs": "loosefit.models.body_lbs:BodyLBS",
+    "swingar": "loosefit.models.swingar:SwinGar",
 }
 
 

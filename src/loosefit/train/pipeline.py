@@ -26,7 +26,7 @@ METHOD_CONFIG = "method.yaml"
 def train_model(
     method: str,
     data: str | Path,
-    garment: str,
+    garment: str | None,
     out: str | Path,
     config: str | Path | None = None,
     overrides: tuple[str, ...] | list[str] = (),
@@ -37,6 +37,8 @@ def train_model(
     """Train ``method`` on the training sequences of ``garment`` in dataset ``data``; validate on ``val_split``.
 
     Args:
+        garment: the store garment of a per-garment method; for a multi-garment method (SwinGar) a
+            comma-separated list of store garments, or None for every garment with training sequences.
         config: the method's YAML config (``configs/models/<method>.yaml``); None: the built-in defaults
             (on ``resume``: the run folder's own ``method.yaml``).
         overrides: ``"section.key=value"`` strings, e.g. ``"train.epochs=5"``, ``"model.hidden=64"``.
@@ -55,6 +57,10 @@ def train_model(
     trained = hasattr(cfg, "train")
     if trained:
         seed_everything(cfg.train.seed)
+    if getattr(cls, "multi_garment", False):
+        return _train_multi_garment(cls, method, data, garment, run, cfg, resume, val_split)
+    if garment is None:
+        raise InputError(f"{method} is trained per garment: name the garment (--garment)")
     train_data = GarmentSequences(data, garment, "train", sim_params=sim_params, bones=cls.needs_rig)
     val_data = None
     if val_split is not None:
@@ -80,12 +86,44 @@ def train_model(
                  cfg.train, run.path, resume=resume)
 
 
+def _train_multi_garment(cls, method: str, data, garment: str | None, run: RunDir, cfg, resume: bool,
+                         val_split: str | None) -> TrainResult:
+    """:func:`train_model` for a multi-garment method: every (or each named) garment of the training split;
+    validation on every garment of ``val_split`` (held-out garments, shapes and motions)."""
+    from loosefit.models.multi_garment import MultiGarmentData, MultiWindowDataset
+
+    names = None if garment is None else [g.strip() for g in garment.split(",") if g.strip()]
+    settings = {"descriptor_samples": cfg.model.descriptor_samples, "density": cfg.model.density}
+    train_data = MultiGarmentData(data, "train", names, **settings)
+    val_data = None
+    if val_split is not None:
+        try:
+            val_data = MultiGarmentData(data, val_split, None, body=False, **settings)
+        except InputError:
+            val_data = None  # no held-out sequences: train without validation
+    model = cls.from_data(train_data, cfg.model)
+    meta = {"method": method, "garments": [g.name for g in train_data.graphs], "data": str(Path(data).resolve()),
+            "sizes": model.sizes(),
+            "train_sequences": [s.name for d in train_data.sequences for s in d.sequences],
+            "val_sequences": [s.name for d in val_data.sequences for s in d.sequences] if val_data else []}
+    if resume and run.has_checkpoint() and (run.path / MODEL_META).exists():
+        _check_same_data(run.path / MODEL_META, meta)
+    run.path.mkdir(parents=True, exist_ok=True)
+    with atomic_path(run.path / MODEL_META) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2))
+    save_config(run.path / METHOD_CONFIG, cfg)
+    history = cfg.model.motion_frames - 1 + cfg.model.corrective_frames - 1
+    windows = [None if d is None else MultiWindowDataset(d, cfg.data.window, cfg.data.stride, history)
+               for d in (train_data, val_data)]
+    return train(model, windows[0], windows[1], cfg.train, run.path, resume=resume)
+
+
 class StaleRunError(InputError):
     """A run cannot be resumed: it was trained on other data."""
 
 
 #: What a run's training data is: resuming on data that differs in any of these would silently mix two datasets.
-SAME_DATA_KEYS = ("garment", "sim_params", "train_sequences", "sizes", "rig")
+SAME_DATA_KEYS = ("garment", "garments", "sim_params", "train_sequences", "sizes", "rig")
 
 
 def _check_same_data(path: Path, meta: dict) -> None:
@@ -95,7 +133,7 @@ def _check_same_data(path: Path, meta: dict) -> None:
         before = json.loads(path.read_text())
     except (OSError, ValueError) as e:
         raise InputError(f"cannot read the run's data record: {e}", path) from None
-    changed = [k for k in SAME_DATA_KEYS if k in before and before[k] != meta[k]]
+    changed = [k for k in SAME_DATA_KEYS if k in before and before[k] != meta.get(k)]
     if changed:
         raise StaleRunError(f"the run was trained on other data ({', '.join(changed)} differ: the store was "
                             "simulated or prepared again); train into a new folder or delete this run", path.parent)
