@@ -432,7 +432,7 @@ class SwinGar(nn.Module):
             used = ("vert",) if stage == "supervised" else tuple(terms)
             total = total + share * sum(weights[k] * terms[k] for k in used)
             for k, v in terms.items():
-                logged[k] = logged.get(k, 0.0) + share * float(v)
+                logged[k] = logged.get(k, 0.0) + share * float(v.detach())
         return total, logged
 
     def validation_metrics(self, batch: list[dict], stage: str) -> dict[str, float]:

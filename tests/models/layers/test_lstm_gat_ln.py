@@ -66,3 +66,15 @@ def test_graph_couples_nodes_and_steps_equal_sequence():
     assert (out2[0, neighbour] - out[0, neighbour]).abs().max() > 1e-4
     with pytest.raises(InputError):
         cell(x[0, 0], table, valid)
+
+
+def test_gradients_are_finite_from_a_zero_state():
+    """The first step's state-to-state map sees zeros: its norms must not give NaN gradients."""
+    verts, faces = tube(5, 8)
+    table, valid = map(torch.from_numpy, attention_table(faces, len(verts)))
+    torch.manual_seed(2)
+    cell = LSTMGATLN(IN, HID, heads=2)
+    out, _ = cell(torch.randn(3, len(verts), IN), table, valid)
+    out.sum().backward()
+    for name, p in cell.named_parameters():
+        assert torch.isfinite(p.grad).all() and p.grad.abs().sum() > 0, name

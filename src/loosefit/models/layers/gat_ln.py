@@ -132,10 +132,12 @@ class GATLN(nn.Module):
         mask = valid[None, :, :, None]
         if self.alpha is not None:
             s = s * mask
-            row = s.square().sum(2).sqrt().amax(1)  # (B, H): (2, inf)-norm of the score matrix
-            lip = torch.sqrt(c_dst.square().sum(-1) + c_src.square().sum(-1))  # (H,)
-            feat = x.norm(dim=-1).amax(1, keepdim=True)  # (B, 1): (inf, 2)-norm of the features
-            s = self.alpha * s / torch.maximum(row, feat * lip).clamp_min(NORM_EPS)[:, None, None]
+            # square roots clamped away from 0: their gradient there is infinite (a zero recurrent state)
+            tiny = NORM_EPS * NORM_EPS
+            row = s.square().sum(2).clamp_min(tiny).sqrt().amax(1)  # (B, H): (2, inf)-norm of the score matrix
+            lip = (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(tiny).sqrt()  # (H,)
+            feat = x.square().sum(-1).clamp_min(tiny).sqrt().amax(1, keepdim=True)  # (B, 1): (inf, 2)-norm of the features
+            s = self.alpha * s / torch.maximum(row, feat * lip)[:, None, None]
         s = nn.functional.leaky_relu(s, SCORE_SLOPE).masked_fill(~mask, float("-inf"))
         return torch.softmax(s, 2)
 
