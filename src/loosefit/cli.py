@@ -173,7 +173,8 @@ def cmd_animate(args):
     from loosefit.motion.io import load_motion
 
     body = _body(args)
-    animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads)
+    animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads, garment=args.garment,
+                        body=body if args.garment else None)
     motions = [load_motion(path, body) for path in args.motion]
     results = animator.animate_batch(motions)
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
@@ -299,6 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--with-body", action="store_true", help="export the posed body too")
     sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
     sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    sp.add_argument("--garment", default=None, help="for swingar: the garment to animate (.obj, any vertex count)")
     sp.set_defaults(func=cmd_animate)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")

@@ -445,3 +445,32 @@ class SwinGar(nn.Module):
                 dist += float(err.norm(dim=-1).mean(-1).sum())
                 frames += err.shape[0] * err.shape[1]
         return {"rmse_mm": (sq / frames) ** 0.5 * 1e3, "mean_vertex_error_mm": dist / frames * 1e3}
+
+
+class BoundSwinGar(nn.Module):
+    """A trained :class:`SwinGar` bound to one garment on one body: the per-garment interface of
+    :class:`~loosefit.models.base.GarmentModel` (``forward(root, joints, state) -> {"verts", "state", ...}``,
+    ``faces``), so that :class:`loosefit.animate.Animator` animates it in batches or frame by frame.
+    The garment's graph and shape features are computed once here.
+
+    Args:
+        model: a (trained) SwinGar.
+        graph: the garment on its body, :class:`~loosefit.models.multi_garment.GarmentGraph`; any vertex count.
+    """
+
+    method: ClassVar[str] = "swingar"
+
+    def __init__(self, model: SwinGar, graph):
+        super().__init__()
+        self.model, self.graph_name = model, graph.name
+        self.g = graph.tensors()
+        self.register_buffer("faces", self.g["faces"].clone())
+        with torch.no_grad():
+            self.features = model.garment_features(self.g)
+
+    def sizes(self) -> dict:
+        return {**self.model.sizes(), "num_verts": len(self.g["rest"]), "num_faces": len(self.g["faces"])}
+
+    def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None) -> dict:
+        """Raw features ``root (B, T, 11)``, ``joints (B, T, J-1, 6)`` -> :meth:`SwinGar.forward`'s outputs."""
+        return self.model(self.g, root, joints, state=state, features=self.features)
