@@ -159,6 +159,14 @@ def cmd_prepare(args):
 def cmd_train(args):
     from loosefit.train.pipeline import train_model
 
+    if args.method == "collision":
+        from loosefit.config import load_config
+        from loosefit.models.collision import SDFRunConfig, train_sdf_run
+
+        summary = train_sdf_run(args.data, args.out, load_config(SDFRunConfig, args.config, args.set or ()))
+        print(json.dumps(summary, indent=2, default=str))
+        return
+
     result = train_model(args.method, args.data, args.garment, args.out, config=args.config,
                          overrides=args.set or (), resume=args.resume)
     if result is None:
@@ -177,6 +185,13 @@ def cmd_animate(args):
                         body=body if args.garment else None)
     motions = [load_motion(path, body) for path in args.motion]
     results = animator.animate_batch(motions)
+    if args.collision:
+        from loosefit.models.collision import SDF_FILE, handle_motion_collisions, load_body_sdf
+
+        mode, net = args.collision, None
+        if mode not in ("exact", "pushout"):
+            mode, net = "neural", load_body_sdf(Path(args.collision) / SDF_FILE)
+        results = [handle_motion_collisions(v, animator.faces, body, m, mode, net) for v, m in zip(results, motions)]
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
     for motion, verts, out in zip(motions, results, outs):
         posed = body.pose(motion) if args.with_body else None
@@ -281,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_prepare)
 
     sp = sub.add_parser("train", help="train a garment model")
-    sp.add_argument("--method", required=True, help="virtualbones, jointnet, body-lbs or swingar")
+    sp.add_argument("--method", required=True, help="virtualbones, jointnet, body-lbs, swingar or collision (the body SDF of SwinGar's collision handling)")
     sp.add_argument("--data", required=True, help="a prepared DATA.zarr")
     sp.add_argument("--garment", default=None, help="garment name in the dataset (see loosefit info); for swingar "
                     "a comma-separated list, or none for every training garment")
@@ -301,6 +316,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
     sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     sp.add_argument("--garment", default=None, help="for swingar: the garment to animate (.obj, any vertex count)")
+    sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
+                    "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
     sp.set_defaults(func=cmd_animate)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")

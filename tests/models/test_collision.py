@@ -67,7 +67,7 @@ def test_exact_sdf_and_push_out_on_a_mesh(cloth):
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=RADIUS)
     body = BodySDF(np.asarray(mesh.vertices) + CENTRE.numpy(), np.asarray(mesh.faces))
     verts, faces = cloth
-    exact = ExactSDF(body.verts, body.faces)
+    exact = ExactSDF(body)
     s, g = sdf_and_gradient(exact, verts)
     np.testing.assert_allclose(s.numpy(), body.query(verts.numpy()), atol=1e-6)
     assert torch.allclose(g.norm(dim=-1), torch.ones(len(verts), dtype=g.dtype))

@@ -140,10 +140,14 @@ def sdf_loss(net: BodySDFNet, points: torch.Tensor, target: torch.Tensor, normal
 class ExactSDF:
     """The body's exact signed distance (libigl, :class:`BodySDF`) as an :data:`SDFFunction`: values from the
     mesh, gradients the unit direction from the closest surface point (outwards), so that
-    :func:`resolve_collisions` can use it as the reference for the network."""
+    :func:`resolve_collisions` can use it as the reference for the network.
 
-    def __init__(self, verts: np.ndarray, faces: np.ndarray):
-        self.mesh = BodySDF(verts, faces)
+    Args:
+        mesh: a :class:`BodySDF` (the posed body, its tree built once).
+    """
+
+    def __init__(self, mesh: BodySDF):
+        self.mesh = mesh
 
     def __call__(self, points: torch.Tensor) -> torch.Tensor:
         p = points.detach().cpu().double().numpy()
@@ -251,3 +255,190 @@ def sdf_samples(body: BodySDF, surface: int, near: int, inside: int, near_sigma:
     normals = np.where(norm > 1e-6, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None], body.face_normals[fid])
     normals[:surface] = body.face_normals[face[:surface]]
     return {"points": points.astype(np.float32), "sdf": dist.astype(np.float32), "normals": normals.astype(np.float32)}
+
+
+# ---------------------------------------------------------------------------------------------- on Anny bodies
+
+
+def body_code(shape_values: np.ndarray, root: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """The code the body SDF network is conditioned on, per frame: ``(T, S + 7 + 6 (J-1))`` float32 from the
+    body's shape values ``(S,)`` and the motion features ``root (T, 11)``, ``joints (T, J-1, 6)``
+    (:mod:`loosefit.models.motion_features`): shape, root height, root tilt and joint rotations, everything
+    that places the body in the canonical heading frame."""
+    T = len(root)
+    shape = np.broadcast_to(np.asarray(shape_values, np.float32), (T, len(shape_values)))
+    return np.concatenate([shape, root[:, :1], root[:, 5:11], joints.reshape(T, -1)], 1).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class SDFTrainConfig:
+    """How :func:`train_body_sdf` samples posed bodies and fits the network.
+
+    Attributes:
+        frames: posed frames drawn from each (shape, motion) pair.
+        surface, near, inside: sample points per posed frame (:func:`sdf_samples`).
+        near_sigma: metres. steps, lr, batch_frames: Adam steps, learning rate, frames per step. seed.
+    """
+
+    frames: int = 8
+    surface: int = 2048
+    near: int = 2048
+    inside: int = 512
+    near_sigma: float = 0.02
+    steps: int = 2000
+    lr: float = 5e-4
+    batch_frames: int = 4
+    seed: int = 0
+
+
+def body_sdf_samples(shapes, motions, config: SDFTrainConfig) -> dict[str, np.ndarray]:
+    """Samples of many posed Anny bodies (the collision proxy), canonical: ``points (P, N, 3)``, ``sdf (P, N)``,
+    ``normals (P, N, 3)`` and ``code (P, C)`` for ``P`` posed frames (``config.frames`` per shape and motion)."""
+    from loosefit.body import AnnyBody
+    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+
+    rng = np.random.default_rng(config.seed)
+    out: dict[str, list] = {"points": [], "sdf": [], "normals": [], "code": []}
+    for shape in shapes:
+        proxy = AnnyBody(shape, resolution="low")
+        for motion in motions:
+            feats = motion_features(motion)
+            rot, origin = heading_frames(motion)
+            frames = np.sort(rng.choice(motion.num_frames, min(config.frames, motion.num_frames), replace=False))
+            posed = to_canonical(proxy.pose(motion).verts[frames], rot[frames], origin[frames])
+            code = body_code(shape.to_array(), feats["root"][frames], feats["joints"][frames])
+            for k, verts in enumerate(posed):
+                s = sdf_samples(BodySDF(verts, proxy.faces), config.surface, config.near, config.inside,
+                                config.near_sigma, seed=int(rng.integers(2**31)))
+                for key in ("points", "sdf", "normals"):
+                    out[key].append(s[key])
+                out["code"].append(code[k])
+    return {k: np.stack(v) for k, v in out.items()}
+
+
+def train_body_sdf(samples: dict[str, np.ndarray], config: SDFTrainConfig = SDFTrainConfig(),
+                   net_config: BodySDFConfig = BodySDFConfig(), progress: bool = False) -> tuple[BodySDFNet, list]:
+    """Fit a :class:`BodySDFNet` to :func:`body_sdf_samples` with SwinGar Eqs. 8-9 (Adam). Returns the network
+    and the loss per step."""
+    torch.manual_seed(config.seed)
+    pts, sdf, nrm, code = (torch.from_numpy(samples[k]) for k in ("points", "sdf", "normals", "code"))
+    net = BodySDFNet(code.shape[1], net_config)
+    opt = torch.optim.Adam(net.parameters(), config.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
+    gen = torch.Generator().manual_seed(config.seed)
+    history = []
+    for step in range(config.steps):
+        pick = torch.randperm(len(pts), generator=gen)[:config.batch_frames]
+        loss, terms = sdf_loss(net, pts[pick], sdf[pick], nrm[pick], code[pick])
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        history.append(float(loss.detach()))
+        if progress and step % 100 == 0:
+            print(f"step {step}: loss {history[-1]:.4g} {terms}")
+    return net, history
+
+
+def save_body_sdf(path, net: BodySDFNet) -> None:
+    """Write the network and its sizes to one file (``torch.save`` of tensors and plain values)."""
+    from loosefit.paths import atomic_path
+
+    state = {"format": "loosefit-body-sdf", "code_size": net.code_size, "config": dict(vars(net.config)),
+             "model": net.state_dict()}
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
+
+
+def load_body_sdf(path) -> BodySDFNet:
+    """Read a network written by :func:`save_body_sdf`; a bad file is an :class:`InputError` naming it."""
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        if state.get("format") != "loosefit-body-sdf":
+            raise ValueError("not a loosefit body SDF")
+        net = BodySDFNet(int(state["code_size"]), BodySDFConfig(**state["config"]))
+        net.load_state_dict(state["model"])
+    except Exception as e:  # missing, truncated or foreign files
+        raise InputError(f"cannot read a body SDF network: {e}", path) from None
+    return net.eval()
+
+
+def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
+                             net: BodySDFNet | None = None, push_distance: float = 0.004) -> np.ndarray:
+    """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
+    Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
+
+    ``mode``: ``"neural"`` (SwinGar Eq. 10 with ``net``, in the canonical frame, the code from the motion),
+    ``"exact"`` (SwinGar Eq. 10 with libigl's distance to the posed collision proxy) or ``"pushout"`` (the
+    fixed-distance baseline).
+    """
+    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical, to_world
+
+    if mode not in ("neural", "exact", "pushout"):
+        raise InputError(f"collision mode must be 'neural', 'exact' or 'pushout', got {mode!r}")
+    if mode == "neural" and net is None:
+        raise InputError("neural collision handling needs a body SDF network")
+    proxy = body.collision_proxy()
+    out = np.array(verts, np.float32, copy=True)
+    if mode == "neural":
+        feats = motion_features(motion)
+        rot, origin = heading_frames(motion)
+        canonical = torch.from_numpy(to_canonical(out, rot, origin))
+        code = torch.from_numpy(body_code(body.shape.to_array(), feats["root"], feats["joints"]))
+        fixed = [resolve_collisions(canonical[t], faces, lambda p, c=code[t]: net(p[None], c[None])[0])[0]
+                 for t in range(len(out))]
+        return to_world(torch.stack(fixed).detach().numpy(), rot, origin)
+    posed = proxy.pose(motion).verts
+    for t in range(len(out)):
+        mesh = BodySDF(posed[t], proxy.faces)
+        if mode == "pushout":
+            out[t] = push_out(out[t], mesh, push_distance)[0]
+        else:
+            out[t] = resolve_collisions(torch.from_numpy(out[t]).double(), faces, ExactSDF(mesh))[0].numpy()
+    return out
+
+
+#: The files of a body SDF run folder (``loosefit train --method collision``).
+SDF_FILE, SDF_META = "body_sdf.pt", "model.json"
+
+
+@dataclass(frozen=True)
+class SDFRunConfig:
+    """What ``loosefit train --method collision`` reads: ``train`` (:class:`SDFTrainConfig`) and ``net``
+    (:class:`BodySDFConfig`), e.g. ``--set train.steps=500 --set net.hidden=256``."""
+
+    train: SDFTrainConfig = SDFTrainConfig()
+    net: BodySDFConfig = BodySDFConfig()
+
+
+def train_sdf_run(data, out, run_config: SDFRunConfig = SDFRunConfig(), progress: bool = True) -> dict:
+    """``loosefit train --method collision``: fit the body SDF network on every body shape and training motion
+    of a dataset store (the collision proxy of each, canonical); write ``out/body_sdf.pt`` and ``out/model.json``.
+    Returns the summary written to ``model.json``."""
+    import json
+    from pathlib import Path
+
+    from loosefit.body import AnnyShape
+    from loosefit.data.store import DatasetStore
+    from loosefit.paths import atomic_path
+
+    store = DatasetStore.open(data, mode="r")
+    train = store.sequence_names(split="train")
+    bodies = sorted({store.sequence(n).body for n in train})
+    motions = sorted({store.sequence(n).motion for n in train})
+    if not bodies or not motions:
+        raise InputError("no training sequences: the body SDF trains on their bodies and motions", store.path)
+    config, net_config = run_config.train, run_config.net
+    shapes = [AnnyShape.from_array(store.body(b)) for b in bodies]
+    samples = body_sdf_samples(shapes, [store.motion(m) for m in motions], config)
+    net, history = train_body_sdf(samples, config, net_config, progress)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_body_sdf(out / SDF_FILE, net)
+    summary = {"method": "collision", "data": str(Path(data).resolve()), "bodies": bodies, "motions": motions,
+               "frames": int(len(samples["code"])), "first_loss": history[0] if history else None,
+               "final_loss": history[-1] if history else None,
+               "config": dict(vars(config)), "net": dict(vars(net_config))}
+    with atomic_path(out / SDF_META) as tmp:
+        tmp.write_text(json.dumps(summary, indent=2))
+    return summary
