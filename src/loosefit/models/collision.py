@@ -2,7 +2,7 @@
 moves garment vertices out of the body (SwinGar Eq. 10), with the exact and push-out references.
 
 Sign convention: loosefit's (:mod:`loosefit.geometry.signed_distance`): negative inside the body, the
-gradient pointing outwards. SwinGar's Eq. 7 calls the inside positive, with which its Eq. 10 would
+gradient pointing outwards. SwinGar Eq. 7 calls the inside positive, with which SwinGar Eq. 10 would
 move a vertex further in; the displacement here is along the outward gradient, as intended there.
 
 - :class:`BodySDFNet` ``S(x | code)``: eight fully connected layers of 512 (three on the point, three on the

@@ -284,9 +284,9 @@ class SwinGar(nn.Module):
 
     def coarse(self, g: dict, G: torch.Tensor, shape: torch.Tensor, m: torch.Tensor, root: torch.Tensor,
                joints: torch.Tensor) -> dict:
-        """The first stage for frames with motion features ``m (B, T, motion_hidden)``: skinning weights
-        ``(B, T, V, J)``, blend shapes ``(B, T, V, 3)``, ``M_c (B, T, V, 3)`` and the corrective node features
-        ``(B, T, V, 3 + J)``."""
+        """The first stage for frames with motion features ``m (B, T, motion_hidden)``: ``weights`` (skinning,
+        ``(B, T, V, J)``), ``blend`` (``(B, T, V, 3)``), ``coarse`` (``M_c (B, T, V, 3)``) and ``nodes`` (the corrective
+        node features ``(B, T, V, 3 + J)``: position and distance to every joint)."""
         table, valid = _graph(g)
         S = self.state_encoder(G * m[:, :, None], table, valid)  # (B, T, V, state)
         weights = torch.softmax(self.weight_out(self.weight_state(S) * shape), -1)
@@ -301,17 +301,17 @@ class SwinGar(nn.Module):
         dist = (Mc[..., :, None, :] - joint_pos[..., None, :, :]).norm(dim=-1)  # (B, T, V, J)
         return {"weights": weights, "blend": blend, "coarse": Mc, "nodes": torch.cat([Mc, dist], -1)}
 
-    def corrective(self, g: dict, nodes: torch.Tensor, body: torch.Tensor) -> torch.Tensor:
-        """Corrections ``(B, T, V, 3)`` from node features ``(B, K - 1 + T, V, 3 + J)`` (``K =
-        corrective_frames``; each frame's ``K - 1`` predecessors first) and body features ``(B, T, body)``."""
+    def corrective(self, g: dict, gates: torch.Tensor, body: torch.Tensor) -> torch.Tensor:
+        """Corrections ``(B, T, V, 3)`` from the LSTM-GAT-LN's input-to-state maps of the corrective node features,
+        ``gates (B, K - 1 + T, V, 4 corrective_hidden)`` (``K = corrective_frames``; each frame's ``K - 1``
+        predecessors first), and body features ``(B, T, body)``: per frame the cell runs from a zero state over
+        its last ``K`` frames."""
         table, valid = _graph(g)
         K = self.config.corrective_frames
-        T = nodes.shape[1] - (K - 1)
-        gx = self.corrective_lstm.input_map(nodes, table, valid)  # every frame's input map once
+        T = gates.shape[1] - (K - 1)
         state = None
-        stacked = torch.stack([gx[:, k:k + T] for k in range(K)], 0)  # (K, B, T, V, 4 hidden)
         for k in range(K):
-            state = self.corrective_lstm.cell(None, table, valid, state, x_gates=stacked[k])
+            state = self.corrective_lstm.cell(None, table, valid, state, x_gates=gates[:, k:k + T])
         h = state[0] * body[:, :, None]
         for layer in self.corrective_layers:
             h = layer(h, table, valid)
@@ -327,8 +327,9 @@ class SwinGar(nn.Module):
             body_shape: ``(B, S)``; None: the garment's own body (``g["body_shape"]``).
             state: None at the start of a motion (the first frame's pose repeated before it), or the
                 ``"state"`` of the previous call: ``{"root": (B, m-1, 11), "joints": (B, m-1, J-1, 6)}``
-                (the poses before this call) and optionally ``"nodes": (B, K-1, V, 3+J)`` (the corrective
-                node features of the last ``K-1`` frames; without it they are computed from 2 more poses).
+                (the poses before this call) and optionally ``"gates": (B, K-1, V, 4 corrective_hidden)`` (the
+                LSTM-GAT-LN's input-to-state maps of the last ``K-1`` frames' corrective node features; without
+                it they are computed from ``K-1`` more poses of history).
             features: ``garment_features(g)`` when already computed (they do not change with the motion).
 
         Returns:
@@ -348,7 +349,7 @@ class SwinGar(nn.Module):
             hist_root, hist_joints = root[:, :1].expand(B, m - 1, -1), joints[:, :1].expand(B, m - 1, -1, -1)
         else:
             hist_root, hist_joints = state["root"], state["joints"]
-            extra = 0 if "nodes" in state else K - 1
+            extra = 0 if "gates" in state else K - 1
             if hist_root.shape[1] != m - 1 + extra:
                 raise InputError(f"SwinGar state holds {hist_root.shape[1]} poses, expected {m - 1 + extra}")
         all_root, all_joints = torch.cat([hist_root, root], 1), torch.cat([hist_joints, joints], 1)
@@ -356,19 +357,19 @@ class SwinGar(nn.Module):
         n = T + extra  # frames whose coarse mesh is computed
         mfeat = self.motion_features(poses, n)
         out = self.coarse(g, G, shape, mfeat, all_root[:, -n:], all_joints[:, -n:])
+        gates = self.corrective_lstm.input_map(out.pop("nodes"), *_graph(g))  # each frame's input map once
         if state is None:
-            prev = out["nodes"][:, :1].expand(-1, K - 1, -1, -1)
+            gates = torch.cat([gates[:, :1].expand(-1, K - 1, -1, -1), gates], 1)
         elif extra == 0:
-            prev = state["nodes"]
+            gates = torch.cat([state["gates"], gates], 1)
         else:
-            prev, out = out["nodes"][:, :extra], {k: v[:, extra:] for k, v in out.items()}
-        nodes = torch.cat([prev, out["nodes"]], 1)
+            out = {k: v[:, extra:] for k, v in out.items()}
         body = self.body_encoder(torch.cat([body_shape[:, None].expand(-1, T, -1), poses[:, -T:]], -1))
-        correction = self.corrective(g, nodes, body)
+        correction = self.corrective(g, gates, body)
         translation = torch.stack([-g["rest_joints"][0, 0].expand(B, T), -g["rest_joints"][0, 1].expand(B, T),
                                    root[..., 0] - g["rest_joints"][0, 2]], -1)  # canonical root minus rest root
         verts = out["coarse"] + correction + translation[:, :, None]
-        new_state = {"root": all_root[:, -(m - 1):], "joints": all_joints[:, -(m - 1):], "nodes": nodes[:, -(K - 1):]}
+        new_state = {"root": all_root[:, -(m - 1):], "joints": all_joints[:, -(m - 1):], "gates": gates[:, -(K - 1):]}
         return {"verts": verts, "coarse": out["coarse"], "weights": out["weights"], "blend": out["blend"],
                 "correction": correction, "state": new_state}
 
