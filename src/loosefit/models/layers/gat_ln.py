@@ -29,8 +29,11 @@ leaves it out, as the gate maps of :mod:`loosefit.models.layers.lstm_gat_ln` nee
 switches the normalisation off: the plain GAT layer of SwinGar's ablation (Fig. 8, 9).
 
 The graph is a padded neighbour table (:func:`attention_table`) rather than PyG's edge list: the
-forward pass then scatters nothing (the backward pass scatters one value per vertex, slot and channel),
-which matters on CPUs where torch's scatter is slow with several threads.
+forward pass then scatters nothing (the backward pass scatters one value per vertex, slot and input
+channel), which matters on CPUs where torch's scatter is slow with several threads. Since
+``sum_j P_ij W_h x_j = W_h sum_j P_ij x_j``, the inputs are aggregated per head first and projected once
+by all heads' stacked weights: the neighbour gather moves ``in`` channels instead of ``heads * out``
+(24 heads of 128 channels on a 2.8k-vertex dress: 2.7 s a frame the other way round, one CPU thread).
 """
 
 from __future__ import annotations
@@ -147,13 +150,13 @@ class GATLN(nn.Module):
             raise InputError(f"GAT-LN expects (..., {table.shape[0]}, {self.in_channels}) features, got {tuple(x.shape)}")
         lead = x.shape[:-2]
         x = x.reshape(-1, *x.shape[-2:])
-        P = self.attention(x, table, valid)
-        Wx = (x @ self.weight).unflatten(-1, (self.heads, self.out_channels))  # (B, V, H, C)
-        out = None
-        for d in range(table.shape[1]):
-            term = (P[:, :, d, :, None] * Wx.index_select(1, table[:, d])).sum(2)
-            out = term if out is None else out + term
-        out = out / self.heads + self.bias
+        P = self.attention(x, table, valid)  # (B, V, D, H)
+        # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j): aggregate the inputs per head, then one product with
+        # the heads' stacked projections (which also averages them)
+        gathered = x.index_select(1, table.reshape(-1)).unflatten(1, table.shape)  # (B, V, D, in)
+        z = torch.einsum("bvdh,bvdc->bvhc", P, gathered)  # (B, V, H, in)
+        W = self.weight.view(self.in_channels, self.heads, self.out_channels).transpose(0, 1)
+        out = z.flatten(-2) @ W.reshape(self.heads * self.in_channels, self.out_channels) / self.heads + self.bias
         if self.activation == "tanh":
             out = torch.tanh(out)
         return out.reshape(*lead, *out.shape[-2:])
