@@ -360,3 +360,22 @@ def test_cli_trains_on_a_multi_garment_store(trained_run):
     assert np.isfinite(summary["val_metrics"]["rmse_mm"])
     model = SwinGar(meta["sizes"], CONFIG)
     load_weights(model, run / "checkpoints" / "last.pt")
+
+
+def test_skeleton_follows_the_posed_body_in_the_canonical_frame(model, body):
+    """The model's forward kinematics from motion features, plus the root translation it adds last, put every
+    joint where the posed body has it in the canonical heading frame (a spin: the heading turns)."""
+    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+
+    proxy = body.collision_proxy()
+    motion = generate("spin", 1.0, 2, body)
+    feats = motion_features(motion)
+    rot, origin = heading_frames(motion)
+    expected = to_canonical(proxy.pose(motion).joints, rot, origin)
+    rest = torch.from_numpy(proxy.rest_joints())
+    root, joints = torch.from_numpy(feats["root"][None]), torch.from_numpy(feats["joints"][None])
+    _, positions = model.joint_transforms(root, joints, rest)
+    translation = torch.stack([-rest[0, 0].expand(1, 30), -rest[0, 1].expand(1, 30), root[..., 0] - rest[0, 2]], -1)
+    got = (positions + translation[:, :, None])[0].numpy()
+    assert np.abs(np.diff(rot[:, 0, 0])).max() > 0  # the heading does change
+    np.testing.assert_allclose(got, expected, atol=1e-4)
