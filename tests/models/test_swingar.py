@@ -379,3 +379,40 @@ def test_skeleton_follows_the_posed_body_in_the_canonical_frame(model, body):
     got = (positions + translation[:, :, None])[0].numpy()
     assert np.abs(np.diff(rot[:, 0, 0])).max() > 0  # the heading does change
     np.testing.assert_allclose(got, expected, atol=1e-4)
+
+
+class CrashingSwinGar(SwinGar):
+    """Raises KeyboardInterrupt (Ctrl-C) at a given training step."""
+
+    crash_at_call = None
+    calls = 0
+
+    def training_loss(self, batch, stage):
+        self.calls += 1
+        if self.calls == self.crash_at_call:
+            raise KeyboardInterrupt
+        return super().training_loss(batch, stage)
+
+
+def test_resume_gives_identical_weights(data, tmp_path):
+    from loosefit.train import StageConfig, TrainConfig, train
+
+    windows = MultiWindowDataset(data, window=8, stride=8, history=HISTORY)  # 12 windows: 3 steps an epoch
+    config = TrainConfig(batch_size=4, progress=False, tensorboard=False,
+                         stages={"supervised": StageConfig(epochs=1), "all": StageConfig(epochs=1)})
+
+    def build(seed):
+        torch.manual_seed(seed)
+        return CrashingSwinGar.from_data(data, CONFIG)
+
+    reference = build(0)
+    train(reference, windows, None, config, tmp_path / "ref")
+    crashed = build(0)
+    crashed.crash_at_call = 5  # inside stage "all"
+    with pytest.raises(KeyboardInterrupt):
+        train(crashed, windows, None, config, tmp_path / "run")
+    resumed = build(7)  # other initial weights: everything must come from the checkpoint
+    result = train(resumed, windows, None, config, tmp_path / "run", resume=True)
+    assert result.global_step == 6
+    for key, value in reference.state_dict().items():
+        assert torch.equal(value, resumed.state_dict()[key]), key
