@@ -41,7 +41,7 @@ quantity before its factor analysis, which describes a garment, not a vertex); h
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Optional
 
 import numpy as np
 import torch
@@ -79,7 +79,7 @@ class SwinGarConfig:
         corrective_hidden, corrective_heads: LSTM-GAT-LN (64, 8); ``corrective_hidden`` equals ``body_mlp[-1]``.
         corrective_layers: single-head GAT-LN sizes after it ([64, 3]; the last must be 3).
         corrective_frames: coarse meshes the LSTM-GAT-LN runs over (3).
-        alpha: GAT-LN score scale (2).
+        alpha: GAT-LN score scale (2); null: plain GAT layers (the ablation of SwinGar Fig. 8, 9).
         descriptor_samples: spectral descriptor length ``z`` (256).
         k_vert, k_edge, k_bend, k_gravity, k_collision: loss weights (50, 10, 3, 0.2, 1.5).
         collision_eps: ``epsilon`` of SwinGar Eq. 14, metres (the paper: "a small positive value"; ours 2 mm).
@@ -100,7 +100,7 @@ class SwinGarConfig:
     corrective_heads: int = 8
     corrective_layers: list[int] = field(default_factory=lambda: [64, 3])
     corrective_frames: int = 3
-    alpha: float = 2.0
+    alpha: Optional[float] = 2.0
     descriptor_samples: int = 256
     k_vert: float = 50.0
     k_edge: float = 10.0
@@ -127,7 +127,7 @@ class SwinGarConfig:
         if self.corrective_layers[-1] != 3:
             raise InputError(f"corrective_layers must end with 3 (a displacement), got {self.corrective_layers}")
         weights = (self.k_vert, self.k_edge, self.k_bend, self.k_gravity, self.k_collision, self.collision_eps)
-        if min(weights) < 0 or self.alpha < 0 or not self.density > 0:
+        if min(weights) < 0 or (self.alpha is not None and self.alpha < 0) or not self.density > 0:
             raise InputError("loss weights, collision_eps and alpha must be >= 0 and density > 0")
 
 
