@@ -22,7 +22,10 @@ Per frame ``t`` and garment (``V`` vertices, any count), in the canonical headin
 5. **Root translation last**: the root's canonical position minus its rest position.
 
 Every GAT-LN layer uses tanh and ``alpha = 2``; fully connected layers ReLU (SwinGar Sec. IV).
-GAT-LN weights are Glorot-initialised, LSTM and linear weights Kaiming's (uniform, torch's default).
+GAT-LN weights are Glorot-initialised, the motion LSTM's weights Kaiming-uniform with its default
+settings, linear layers torch's default (Kaiming-uniform with ``a = sqrt(5)``); the two layers whose
+outputs are displacements start scaled by :data:`OUTPUT_INIT` (ours: the garment starts near its skinned
+rest shape).
 
 Losses (SwinGar Eqs. 11-14), each averaged over frames: vertex ``k_v mean_i |X_i - X_i^GT|^2``; consistency
 ``k_e mean_e (|e| - |e^GT|)^2 + k_b mean_f |(L N)_f|^2`` (``L`` the uniform Laplacian of the face adjacency,
@@ -213,6 +216,9 @@ class SwinGar(nn.Module):
         chans = [c.corrective_hidden, *c.corrective_layers]
         self.corrective_layers = nn.ModuleList(GATLN(i, o, 1, a) for i, o in zip(chans[:-1], chans[1:]))
         with torch.no_grad():
+            for name, w in self.motion_encoder.named_parameters():
+                if name.startswith("weight"):
+                    nn.init.kaiming_uniform_(w)  # SwinGar Sec. IV: Kaiming for the LSTM, default settings
             self.blend_out.weight.mul_(OUTPUT_INIT)
             self.blend_out.bias.zero_()
             self.corrective_layers[-1].weight.mul_(OUTPUT_INIT)
