@@ -33,7 +33,8 @@ forward pass then scatters nothing (the backward pass scatters one value per ver
 channel), which matters on CPUs where torch's scatter is slow with several threads. Since
 ``sum_j P_ij W_h x_j = W_h sum_j P_ij x_j``, the inputs are aggregated per head first and projected once
 by all heads' stacked weights: the neighbour gather moves ``in`` channels instead of ``heads * out``
-(24 heads of 128 channels on a 2.8k-vertex dress: 2.7 s a frame the other way round, one CPU thread).
+(SwinGar at the paper's sizes on a 2.8k-vertex dress, one CPU thread: 2.7 s a frame the other way
+round, 0.2 s this way).
 """
 
 from __future__ import annotations
