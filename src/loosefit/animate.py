@@ -33,21 +33,33 @@ class Animator:
             ``"last"`` when absent) or a checkpoint path. ``"last"`` is the default because validation runs on
             the held-out motions: picking the epoch by them would flatter any accuracy measured on them.
         threads: torch CPU threads used while animating (1 is fastest for the graph layers here).
+        garment: for a multi-garment method (SwinGar): the garment to animate, a
+            :class:`~loosefit.garment.Garment`, a garment file (``.obj`` with its sidecar) or any ``.obj``
+            in the body's rest pose; any vertex count, never seen in training if need be.
+        body: the body the garment is worn on (its shape), for a multi-garment method; None: the average Anny body.
     """
 
-    def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1):
+    def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1, garment=None,
+                 body=None):
         run = RunDir(run_dir)
         meta_path = run.path / MODEL_META
         if not meta_path.is_file():
             raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
         self.meta = json.loads(meta_path.read_text())
         cls = model_class(self.meta["method"])
+        if getattr(cls, "static", False):
+            raise InputError(f"{self.meta['method']} animates frame by frame: use loosefit.animate_any.AnyGarmentAnimator",
+                             run.path)
         cfg = load_config(run_config_class(self.meta["method"]), run.path / METHOD_CONFIG)
         model = cls(self.meta["sizes"], cfg.model)
         path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
         if checkpoint == "best" and not path.is_file():
             path = run.last_checkpoint
         load_weights(model, path)
+        if getattr(cls, "multi_garment", False):
+            model = _bind_garment(model, cfg.model, garment, body)
+        elif garment is not None:
+            raise InputError(f"{self.meta['method']} is trained for one garment; it cannot animate another")
         self._use(model, threads)
 
     @classmethod
@@ -143,6 +155,31 @@ class AnimationStream:
             out = self.animator.model(torch.from_numpy(root)[None, None], torch.from_numpy(joints)[None, None], self.state)
         self.state = out["state"]
         return to_world(out["verts"][0].numpy(), rot[None], origin[None])[0]
+
+
+def _bind_garment(model, config, garment, body):
+    """A multi-garment model bound to ``garment`` worn on ``body`` (see :class:`Animator`)."""
+    from loosefit.body import AnnyBody
+    from loosefit.garment import Garment
+    from loosefit.garment.obj_io import read_obj
+    from loosefit.models.multi_garment import garment_graph
+    from loosefit.models.swingar import BoundSwinGar
+
+    if garment is None:
+        raise InputError("a multi-garment model animates the garment it is given: pass the garment (--garment)")
+    if not isinstance(garment, Garment):
+        path = Path(garment)
+        if Garment.sidecar_path(path).is_file():
+            garment = Garment.load(path)
+        else:
+            verts, faces = read_obj(path)
+            garment = Garment(verts, faces, np.zeros(len(verts), bool), "imported", name=path.stem)
+    body = AnnyBody() if body is None else body
+    if not hasattr(body, "shape") or not hasattr(body.shape, "to_array"):
+        raise InputError("a multi-garment model reads Anny bodies (their shape values)")
+    graph = garment_graph(garment.name or "garment", garment.verts, garment.faces, body.collision_proxy(),
+                          body.shape.to_array(), config.descriptor_samples, config.density)
+    return BoundSwinGar(model, graph)
 
 
 class _threads:

@@ -57,8 +57,8 @@ class AnyGarmentAnimator:
             raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
         self.meta = json.loads(meta_path.read_text())
         cls = model_class(self.meta["method"])
-        if not getattr(cls, "multi_garment", False):
-            raise InputError(f"{self.meta['method']} is a per-garment method: use loosefit.animate.Animator", run.path)
+        if not getattr(cls, "static", False):
+            raise InputError(f"{self.meta['method']} animates along a motion: use loosefit.animate.Animator", run.path)
         cfg = load_config(run_config_class(self.meta["method"]), run.path / METHOD_CONFIG)
         model = cls(self.meta["sizes"], cfg.model)
         path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
@@ -122,13 +122,13 @@ class AnyGarmentAnimator:
             torch.set_num_threads(saved)
         return {name: to_world(torch.cat(c).numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
-def is_multi_garment_run(run_dir: str | Path) -> bool:
-    """Whether the run folder holds a multi-garment method (False when it is no run folder)."""
+def is_static_run(run_dir: str | Path) -> bool:
+    """Whether the run folder holds a static any-garment method, FitGar (False when it is no run folder)."""
     path = Path(run_dir) / MODEL_META
     if not path.is_file():
         return False
     try:
         method = json.loads(path.read_text())["method"]
-        return bool(getattr(model_class(method), "multi_garment", False))
+        return bool(getattr(model_class(method), "static", False))
     except (ValueError, KeyError, InputError):
         return False

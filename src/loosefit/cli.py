@@ -159,6 +159,14 @@ def cmd_prepare(args):
 def cmd_train(args):
     from loosefit.train.pipeline import train_model
 
+    if args.method == "collision":
+        from loosefit.config import load_config
+        from loosefit.models.collision import SDFRunConfig, train_sdf_run
+
+        summary = train_sdf_run(args.data, args.out, load_config(SDFRunConfig, args.config, args.set or ()))
+        print(json.dumps(summary, indent=2, default=str))
+        return
+
     result = train_model(args.method, args.data, args.garment, args.out, config=args.config,
                          overrides=args.set or (), resume=args.resume)
     if result is None:
@@ -169,13 +177,13 @@ def cmd_train(args):
 
 def cmd_animate(args):
     from loosefit.animate import Animator
-    from loosefit.animate_any import AnyGarmentAnimator, is_multi_garment_run
+    from loosefit.animate_any import AnyGarmentAnimator, is_static_run
     from loosefit.io.export import export_animation
     from loosefit.motion.io import load_motion
 
     body = _body(args)
     motions = [load_motion(path, body) for path in args.motion]
-    if is_multi_garment_run(args.run):
+    if is_static_run(args.run):
         from loosefit.garment import Garment
 
         if not args.garment:
@@ -185,10 +193,16 @@ def cmd_animate(args):
         pair = animator.pair(garment.verts, garment.faces, body)
         results, faces = [animator.animate(pair, m) for m in motions], garment.faces
     else:
-        if args.garment:
-            raise InputError("--garment is for runs that animate any garment (fitgar); this run has its own", args.run)
-        animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads)
+        animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads, garment=args.garment,
+                            body=body if args.garment else None)
         results, faces = animator.animate_batch(motions), animator.faces
+    if args.collision:
+        from loosefit.models.collision import SDF_FILE, handle_motion_collisions, load_body_sdf
+
+        mode, net = args.collision, None
+        if mode not in ("exact", "pushout"):
+            mode, net = "neural", load_body_sdf(Path(args.collision) / SDF_FILE)
+        results = [handle_motion_collisions(v, faces, body, m, mode, net) for v, m in zip(results, motions)]
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
     for motion, verts, out in zip(motions, results, outs):
         posed = body.pose(motion) if args.with_body else None
@@ -293,10 +307,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_prepare)
 
     sp = sub.add_parser("train", help="train a garment model")
-    sp.add_argument("--method", required=True, help="virtualbones, jointnet, body-lbs or fitgar")
+    sp.add_argument("--method", required=True, help="virtualbones, jointnet, body-lbs, fitgar, swingar or collision "
+                    "(the body SDF of SwinGar's collision handling)")
     sp.add_argument("--data", required=True, help="a prepared DATA.zarr")
-    sp.add_argument("--garment", default=None,
-                    help="garment name in the dataset (see loosefit info); none for fitgar, which trains on all")
+    sp.add_argument("--garment", default=None, help="garment name in the dataset (see loosefit info); none for fitgar, "
+                    "which trains on all; for swingar a comma-separated list, or none for every training garment")
     sp.add_argument("--out", required=True, help="run folder")
     sp.add_argument("--config", default=None, help="method config YAML (configs/models/<method>.yaml)")
     sp.add_argument("--set", action="append", help="config override, e.g. train.epochs=5 (repeatable)")
@@ -306,13 +321,16 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("animate", help="animate a trained garment on new motions")
     sp.add_argument("run", help="run folder written by loosefit train")
     sp.add_argument("--motion", required=True, action="append", help="motion .npz / .bvh / AMASS .npz (repeatable)")
-    sp.add_argument("--garment", default=None, help="fitgar runs: the garment .obj, in the rest pose of --shape")
+    sp.add_argument("--garment", default=None, help="fitgar and swingar runs: the garment .obj to animate (any vertex "
+                    "count), in the rest pose of --shape")
     body_options(sp)
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
     sp.add_argument("--with-body", action="store_true", help="export the posed body too")
     sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
     sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
+                    "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
     sp.set_defaults(func=cmd_animate)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")

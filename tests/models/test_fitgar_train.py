@@ -128,10 +128,10 @@ def heavy_case(body):
 
 
 def test_animate_any_garment_frame_by_frame(run, heavy_case):
-    from loosefit.animate_any import AnyGarmentAnimator, is_multi_garment_run
+    from loosefit.animate_any import AnyGarmentAnimator, is_static_run
 
     shape, heavy, garment, motion = heavy_case
-    assert is_multi_garment_run(run) and not is_multi_garment_run(run.parent)
+    assert is_static_run(run) and not is_static_run(run.parent)
     animator = AnyGarmentAnimator(run)
     pair = animator.pair(garment.verts, garment.faces, heavy)
     verts = animator.animate(pair, motion)

@@ -242,6 +242,8 @@ class FitGar(nn.Module):
     Config = FitGarConfig
     #: Trained on many garments at once (a :class:`GarmentFrames` store), not one.
     multi_garment = True
+    #: Static: each frame on its own, from the pose alone (:mod:`loosefit.animate_any`), no recurrent state.
+    static = True
 
     def __init__(self, sizes: dict, config: FitGarConfig):
         super().__init__()

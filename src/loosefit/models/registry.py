@@ -11,6 +11,7 @@ METHODS = {
     "jointnet": "loosefit.models.jointnet:JointNet",
     "body-lbs": "loosefit.models.body_lbs:BodyLBS",
     "fitgar": "loosefit.models.fitgar:FitGar",
+    "swingar": "loosefit.models.swingar:SwinGar",
 }
 
 

@@ -1,0 +1,165 @@
+"""SwinGar end to end on a small simulated multi-garment store, on a CPU: simulate, train, animate, compare.
+
+1. Simulate (Blender) the plan below: three training garments (two skirts and a dress, 426-879 vertices)
+   and a held-out skirt (346 vertices) on the average Anny body, walk / spin / sway of 2 s; test split:
+   the held-out skirt on every motion, and every garment on the held-out sway.
+2. Train SwinGar with small CPU sizes (``SMALL`` below; 30 epochs vertex term only, then 15 with every
+   term) twice: GAT-LN with ``alpha = 2`` and plain GAT (``alpha = null``), the ablation of SwinGar Fig. 9a.
+3. Animate every sequence with each run from the garment's rest mesh (:class:`loosefit.animate.Animator`
+   with ``garment=``) and report the RMSE against the simulation, next to body-LBS (the garment skinned
+   with the skinning weights of its closest rest body vertex).
+4. Streaming and batch-16 time per frame of SwinGar at the paper's sizes (untrained weights: the time
+   does not depend on their values) on dresses of about 2.8k and 7.5k vertices, one torch thread.
+
+Each step is skipped when its output exists under ``--work`` (the store, a run's ``run.json``).
+
+Run: .venv/bin/python benchmarks/swingar_small.py [--work /tmp/swingar-small] [--skip-speed]
+(writes benchmarks/results/swingar-small.json)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import save_results  # noqa: E402
+
+PLAN = """
+name: swingar-e2e
+garments:
+  skirt-a: {template: skirt, seed: 0, edge_length: 0.05, params: {length: 0.45, flare: 25}}
+  skirt-b: {template: skirt, seed: 2, edge_length: 0.045, params: {length: 0.5}}
+  dress-a: {template: dress, seed: 1, edge_length: 0.06, params: {length: 0.5}}
+  skirt-c: {template: skirt, seed: 5, edge_length: 0.05, params: {length: 0.5}}
+motions:
+  walk: {procedural: walk, seconds: 2.0, seed: 0}
+  spin: {procedural: spin, seconds: 2.0, seed: 1}
+  sway: {procedural: sway, seconds: 2.0, seed: 2}
+sim_params:
+  default: {preroll: 0.5}
+split:
+  test: {garments: [skirt-c], motions: [sway]}
+"""
+
+SMALL = {
+    "model": {"graph_hidden": [16, 32], "graph_heads": [4, 4], "shape_mlp": [32, 16], "motion_hidden": 32,
+              "motion_frames": 16, "body_mlp": [32, 16], "state_hidden": 32, "state_heads": 4,
+              "blend_hidden": [32, 32], "blend_heads": 2, "corrective_hidden": 16, "corrective_heads": 2,
+              "corrective_layers": [16, 3], "descriptor_samples": 64},
+    "data": {"window": 15, "stride": 15},
+    "train": {"batch_size": 4, "lr": 1.0e-3, "progress": False, "tensorboard": False, "device": "cpu",
+              "stages": {"supervised": {"epochs": 30}, "all": {"epochs": 15}}},
+}
+VARIANTS = {"gat-ln-alpha-2": "2.0", "plain-gat": "null"}
+
+
+def rmse_mm(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(((a - b) ** 2).sum(-1).mean()) * 1e3)
+
+
+def body_lbs(garment, body, motion) -> np.ndarray:
+    from loosefit.geometry.features import nearest_body_vertex
+    from loosefit.geometry.lbs import linear_blend_skinning, skinning_transforms
+
+    posed = body.pose(motion)
+    weights = body.skinning_weights()[nearest_body_vertex(garment.verts, body.rest_verts())]
+    A = skinning_transforms(torch.from_numpy(posed.joint_transforms).double(), torch.from_numpy(body.rest_joints()).double())
+    return linear_blend_skinning(torch.from_numpy(garment.verts).double(), torch.from_numpy(weights).double(), A).numpy()
+
+
+def speed() -> dict:
+    from loosefit.body import AnnyBody
+    from loosefit.garment import make_garment
+    from loosefit.models.motion_features import motion_features
+    from loosefit.models.multi_garment import garment_graph
+    from loosefit.models.swingar import BoundSwinGar, SwinGar, SwinGarConfig
+    from loosefit.motion.procedural import generate
+
+    torch.set_num_threads(1)
+    body = AnnyBody()
+    feats = motion_features(generate("walk", 1.0, 0, body))
+    root, joints = torch.from_numpy(feats["root"])[None], torch.from_numpy(feats["joints"])[None]
+    torch.manual_seed(0)
+    model = SwinGar({"num_joints": body.num_joints, "parents": body.parents.tolist(), "shape_values": 6},
+                    SwinGarConfig()).eval()
+    out = {"parameters": int(sum(p.numel() for p in model.parameters()))}
+    for edge in (0.03, 0.018):
+        g = make_garment("dress", body, seed=1, edge_length=edge)
+        bound = BoundSwinGar(model, garment_graph("dress", g.verts, g.faces, body.collision_proxy(),
+                                                  body.shape.to_array(), 256))
+        with torch.no_grad():
+            state, times = None, []
+            for t in range(8):
+                start = time.perf_counter()
+                state = bound(root[:, t:t + 1], joints[:, t:t + 1], state)["state"]
+                times.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            bound(root[:, :16], joints[:, :16])
+            batch = (time.perf_counter() - start) / 16
+        out[f"dress-{g.num_verts}"] = {"stream_ms_per_frame": float(np.median(times[2:]) * 1e3),
+                                       "batch16_ms_per_frame": batch * 1e3}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", default="/tmp/swingar-small")
+    parser.add_argument("--skip-speed", action="store_true")
+    args = parser.parse_args()
+    from loosefit.animate import Animator
+    from loosefit.body import AnnyBody
+    from loosefit.cli import main as cli
+    from loosefit.data.store import DatasetStore
+    from loosefit.sim import run_plan
+
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    store_path = work / "data.zarr"
+    if not store_path.exists():
+        (work / "plan.yaml").write_text(PLAN)
+        run_plan(work / "plan.yaml", store_path, progress=False)
+    (work / "small.yaml").write_text(yaml.safe_dump(SMALL))
+    history = {}
+    for name, alpha in VARIANTS.items():
+        run = work / f"run-{name}"
+        if not (run / "run.json").exists():
+            cli(["train", "--method", "swingar", "--data", str(store_path), "--out", str(run),
+                 "--config", str(work / "small.yaml"), "--set", f"model.alpha={alpha}"])
+        import csv
+
+        with open(run / "metrics.csv", newline="") as f:
+            history[name] = [{"stage": r["stage"], "epoch": int(r["epoch"]), "val_rmse_mm": float(r["val_rmse_mm"])}
+                             for r in csv.DictReader(f)]
+    torch.set_num_threads(1)
+    store = DatasetStore.open(store_path)
+    body = AnnyBody()
+    animators: dict = {name: {} for name in VARIANTS}
+    rows = []
+    for seq_name in sorted(store.sequence_names()):
+        seq = store.sequence(seq_name)
+        garment, motion, truth = store.garment(seq.garment), store.motion(seq.motion), seq.verts[:]
+        row = {"sequence": seq_name, "split": seq.split, "garment_vertices": garment.num_verts,
+               "body-lbs": rmse_mm(body_lbs(garment, body, motion), truth)}
+        for name in VARIANTS:
+            if seq.garment not in animators[name]:
+                animators[name][seq.garment] = Animator(work / f"run-{name}", garment=garment, body=body)
+            row[name] = rmse_mm(animators[name][seq.garment].animate(motion), truth)
+        rows.append(row)
+    unseen = [r for r in rows if r["sequence"].startswith("skirt-c")]
+    summary = {k: float(np.mean([r[k] for r in unseen])) for k in ["body-lbs", *VARIANTS]}
+    results = {"plan": yaml.safe_load(PLAN), "config": SMALL, "rmse_mm": rows,
+               "unseen_garment_mean_rmse_mm": summary, "validation_history": history}
+    if not args.skip_speed:
+        results["speed_paper_sizes_1_thread"] = speed()
+    save_results("swingar-small", results)
+
+
+if __name__ == "__main__":
+    main()

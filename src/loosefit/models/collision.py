@@ -1,0 +1,444 @@
+"""Neural collision handling (SwinGar Sec. III-D): a learned body signed distance field and the step that
+moves garment vertices out of the body (SwinGar Eq. 10), with the exact and push-out references.
+
+Sign convention: loosefit's (:mod:`loosefit.geometry.signed_distance`): negative inside the body, the
+gradient pointing outwards. SwinGar Eq. 7 calls the inside positive, with which SwinGar Eq. 10 would
+move a vertex further in; the displacement here is along the outward gradient, as intended there.
+
+- :class:`BodySDFNet` ``S(x | code)``: eight fully connected layers of 512 (three on the point, three on the
+  body code (shape and pose), two fusing both), a residual link in each branch from its first layer's
+  output to its last, Softplus(beta=100), geometric initialisation (Atzmon and Lipman 2020: the
+  initial field is close to a sphere's, the code branch starting silent). :func:`sdf_loss` is SwinGar
+  Eqs. 8-9 (``mu_e = 0.15``); :func:`sdf_samples` draws training points on, near and inside a body.
+- :func:`resolve_collisions`: SwinGar Eq. 10 for any SDF (the network, :class:`ExactSDF` from libigl, or
+  a closed-form one), and :func:`push_out` the fixed-distance baseline (TailorNet) the paper compares with.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import torch
+from torch import nn
+
+from loosefit.errors import InputError
+from loosefit.geometry.laplacian import edges
+from loosefit.geometry.signed_distance import BodySDF
+
+#: Softplus sharpness of the SDF network (SwinGar Sec. IV).
+SOFTPLUS_BETA = 100.0
+#: Weight of the Eikonal term, ``mu_e`` of SwinGar Eq. 8.
+EIKONAL_WEIGHT = 0.15
+
+#: An SDF as a function: points ``(N, 3)`` -> signed distances ``(N,)`` (differentiable in the points).
+SDFFunction = Callable[[torch.Tensor], torch.Tensor]
+
+
+@dataclass(frozen=True)
+class BodySDFConfig:
+    """Sizes of :class:`BodySDFNet` (SwinGar Sec. IV) and the radius of its initial sphere (ours)."""
+
+    hidden: int = 512
+    point_layers: int = 3
+    code_layers: int = 3
+    fusion_layers: int = 2
+    init_radius: float = 0.5
+
+    def __post_init__(self):
+        if min(self.hidden, self.point_layers, self.code_layers) < 1 or self.fusion_layers < 1:
+            raise InputError("BodySDFNet needs hidden >= 1, at least one layer per branch and one fusion layer")
+        if not self.init_radius > 0:
+            raise InputError(f"init_radius must be positive, got {self.init_radius}")
+
+
+class BodySDFNet(nn.Module):
+    """``S(x | code)``: points ``(..., N, 3)`` metres and codes ``(..., C)`` -> signed distances ``(..., N)``, metres.
+
+    The code is the body's shape and pose as a vector (e.g. shape values and the pose features of
+    :class:`~loosefit.models.swingar.SwinGar`); points are in the frame the body was posed in without its
+    translation (SwinGar Sec. IV).
+    """
+
+    def __init__(self, code_size: int, config: BodySDFConfig = BodySDFConfig()):
+        super().__init__()
+        if code_size < 0:
+            raise InputError(f"code size must be >= 0, got {code_size}")
+        H = config.hidden
+        self.code_size, self.config = code_size, config
+        self.point = nn.ModuleList(nn.Linear(3 if i == 0 else H, H) for i in range(config.point_layers))
+        self.code = nn.ModuleList(nn.Linear(max(code_size, 1) if i == 0 else H, H) for i in range(config.code_layers))
+        sizes = [2 * H] + [H] * (config.fusion_layers - 1) + [1]
+        self.fusion = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
+        self.act = nn.Softplus(beta=SOFTPLUS_BETA)
+        self.geometric_init()
+
+    def geometric_init(self) -> None:
+        """Atzmon and Lipman's initialisation on the point path (an initial field near ``|x| - r``); the first
+        fusion layer's weights on the code branch start at zero, so the body code only enters through training."""
+        with torch.no_grad():
+            for layer in [*self.point, *self.fusion[:-1]]:
+                nn.init.normal_(layer.weight, 0.0, math.sqrt(2.0) / math.sqrt(layer.out_features))
+                nn.init.zeros_(layer.bias)
+            for layer in self.code:
+                nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5))
+                nn.init.zeros_(layer.bias)
+            self.fusion[0].weight[:, self.config.hidden:] = 0.0  # the code's half of the first fusion layer
+            last = self.fusion[-1]
+            nn.init.normal_(last.weight, math.sqrt(math.pi) / math.sqrt(last.in_features), 1e-4)
+            nn.init.constant_(last.bias, -self.config.init_radius)
+
+    def _branch(self, layers: nn.ModuleList, x: torch.Tensor) -> torch.Tensor:
+        first = h = self.act(layers[0](x))
+        for layer in layers[1:]:
+            h = self.act(layer(h))
+        return h + first if len(layers) > 1 else h
+
+    def forward(self, points: torch.Tensor, code: torch.Tensor | None = None) -> torch.Tensor:
+        if points.shape[-1] != 3:
+            raise InputError(f"SDF points must be (..., N, 3), got {tuple(points.shape)}")
+        if code is None:
+            code = points.new_zeros(points.shape[:-2] + (self.code_size,))
+        if code.shape[-1] != self.code_size:
+            raise InputError(f"SDF code must have {self.code_size} values, got {code.shape[-1]}")
+        if self.code_size == 0:
+            code = points.new_zeros(code.shape[:-1] + (1,))
+        p = self._branch(self.point, points)
+        c = self._branch(self.code, code)[..., None, :].expand(p.shape)
+        h = torch.cat([p, c], -1)
+        for layer in self.fusion[:-1]:
+            h = self.act(layer(h))
+        return self.fusion[-1](h)[..., 0]
+
+
+def sdf_and_gradient(sdf: SDFFunction, points: torch.Tensor, create_graph: bool = False):
+    """``S (N,)`` and ``grad S (N, 3)`` of an SDF at ``points (N, 3)`` by autograd."""
+    with torch.enable_grad():
+        x = points.detach().requires_grad_(True)
+        s = sdf(x)
+        (g,) = torch.autograd.grad(s.sum(), x, create_graph=create_graph)
+    return (s if create_graph else s.detach()), g
+
+
+def sdf_loss(net: BodySDFNet, points: torch.Tensor, target: torch.Tensor, normals: torch.Tensor,
+             code: torch.Tensor | None = None, eikonal: float = EIKONAL_WEIGHT) -> tuple[torch.Tensor, dict]:
+    """SwinGar Eqs. 8-9 on ``points (N, 3)`` with true signed distances ``target (N,)`` and true gradients
+    ``normals (N, 3)`` (unit): ``mean(|S - s| + |grad S - n|) + mu_e mean((|grad S| - 1)^2)``."""
+    with torch.enable_grad():
+        x = points.detach().requires_grad_(True)
+        s = net(x, code)
+        (g,) = torch.autograd.grad(s.sum(), x, create_graph=True)
+    value = (s - target).abs().mean()
+    normal = (g - normals).norm(dim=-1).mean()
+    eik = ((g.norm(dim=-1) - 1) ** 2).mean()
+    terms = {"value": float(value.detach()), "normal": float(normal.detach()), "eikonal": float(eik.detach())}
+    return value + normal + eikonal * eik, terms
+
+
+class ExactSDF:
+    """The body's exact signed distance (libigl, :class:`BodySDF`) as an :data:`SDFFunction`: values from the
+    mesh, gradients the unit direction from the closest surface point (outwards), so that
+    :func:`resolve_collisions` can use it as the reference for the network.
+
+    Args:
+        mesh: a :class:`BodySDF` (the posed body, its tree built once).
+    """
+
+    def __init__(self, mesh: BodySDF):
+        self.mesh = mesh
+
+    def __call__(self, points: torch.Tensor) -> torch.Tensor:
+        p = points.detach().cpu().double().numpy()
+        dist, closest, face = self.mesh.closest(p)
+        away = p - closest
+        norm = np.linalg.norm(away, axis=1, keepdims=True)
+        direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None],
+                             self.mesh.face_normals[face])  # on the surface: the face normal
+        direction = torch.as_tensor(direction, dtype=points.dtype, device=points.device)
+        value = torch.as_tensor(dist, dtype=points.dtype, device=points.device)
+        # the value with the exact gradient attached: d/dx (value + n . (x - x0)) = n
+        return value + (direction * (points - points.detach())).sum(-1)
+
+
+def vertex_neighbours(faces: np.ndarray, num_verts: int) -> tuple[np.ndarray, np.ndarray]:
+    """Both directions of every mesh edge: ``src, dst (2E,)`` int64."""
+    e = edges(np.asarray(faces, np.int64))
+    return np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
+
+
+def resolve_collisions(verts: torch.Tensor, faces: np.ndarray, sdf: SDFFunction, sigma: float | None = None):
+    """Move every vertex inside the body out of it (SwinGar Eq. 10).
+
+    For a vertex with ``S(x_i) < 0``: ``x_i + grad S / |grad S| * (|S(x_i)| + delta_i)``, where ``delta_i`` is the
+    Gaussian-weighted average of ``|S|`` over its mesh neighbours that are not inside (weights
+    ``exp(-d^2 / (2 sigma^2))`` of their distances, normalised to mean 1; 0 without such a neighbour).
+    One step leaves a vertex inside only where the field's gradient is not a unit vector: on the medial
+    axis of a non-smooth field, or where a learned field is not yet a distance.
+
+    Args:
+        verts: ``(V, 3)`` garment vertices, metres, in the SDF's frame.
+        faces: ``(F, 3)`` triangles (the neighbourhoods).
+        sdf: an :data:`SDFFunction` (a :class:`BodySDFNet` with its code bound, :class:`ExactSDF`, ...).
+        sigma: Gaussian width, metres; None: the mean edge length.
+
+    Returns:
+        ``(V, 3)`` corrected vertices and the ``(V,)`` bool mask of the vertices that were inside.
+    """
+    if verts.ndim != 2 or verts.shape[1] != 3:
+        raise InputError(f"resolve_collisions takes one garment (V, 3), got {tuple(verts.shape)}")
+    src, dst = (torch.from_numpy(a).to(verts.device) for a in vertex_neighbours(faces, len(verts)))
+    s, g = sdf_and_gradient(sdf, verts)
+    s, g = s.detach(), g.detach()
+    inside = s < 0
+    d = (verts[src] - verts[dst]).norm(dim=-1)
+    if sigma is None:
+        sigma = float(d.mean()) if len(d) else 1.0
+    free = ~inside[dst]  # neighbours dst of src that are not inside
+    w = torch.exp(-d**2 / (2 * sigma**2)) * free
+    count = torch.zeros_like(s).index_add_(0, src, free.to(s.dtype))
+    wsum = torch.zeros_like(s).index_add_(0, src, w)
+    # weights normalised to mean 1 over the free neighbours, then averaged: sum(w |S|) / sum(w)
+    weighted = torch.zeros_like(s).index_add_(0, src, w * s[dst].abs())
+    delta = torch.where(count > 0, weighted / wsum.clamp_min(1e-30), torch.zeros_like(s))
+    direction = g / g.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    move = direction * (s.abs() + delta)[:, None]
+    return torch.where(inside[:, None], verts + move, verts), inside
+
+
+def push_out(verts: np.ndarray, body: BodySDF, distance: float = 0.004) -> tuple[np.ndarray, np.ndarray]:
+    """The baseline (TailorNet): each vertex inside the body moves to its closest surface point plus
+    ``distance`` along the outward direction, whatever its neighbours do. Returns vertices and the mask."""
+    v = np.asarray(verts, np.float64)
+    dist, closest, face = body.closest(v)
+    inside = dist < 0
+    away = closest - v
+    norm = np.linalg.norm(away, axis=1, keepdims=True)
+    direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12), body.face_normals[face])
+    out = v.copy()
+    out[inside] = closest[inside] + distance * direction[inside]
+    return out.astype(np.float32), inside
+
+
+def sdf_samples(body: BodySDF, surface: int, near: int, inside: int, near_sigma: float = 0.02,
+                seed: int = 0) -> dict[str, np.ndarray]:
+    """Training points for the SDF network around one posed body: ``surface`` points on it, ``near`` points
+    within about ``near_sigma`` metres of it, and ``inside`` points uniformly inside it.
+
+    Returns ``points (N, 3)``, ``sdf (N,)`` (negative inside) and ``normals (N, 3)`` (the unit gradient of the
+    true field: outward from the closest point; the face normal on the surface), float32.
+    """
+    rng = np.random.default_rng(seed)
+    v, f = body.verts, body.faces
+    tri = v[f]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    n_on = surface + near
+    face = rng.choice(len(f), n_on, p=area / area.sum())
+    a, b = rng.random((2, n_on))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    on = tri[face, 0] + a[:, None] * (tri[face, 1] - tri[face, 0]) + b[:, None] * (tri[face, 2] - tri[face, 0])
+    on[surface:] += rng.normal(0.0, near_sigma, (near, 3))
+    lo, hi = v.min(0), v.max(0)
+    found = np.zeros((0, 3))
+    for _ in range(100):
+        if len(found) >= inside:
+            break
+        cand = rng.uniform(lo, hi, (max(4 * inside, 64), 3))
+        found = np.concatenate([found, cand[body.query(cand) < 0]])
+    points = np.concatenate([on, found[:inside]])
+    dist, closest, fid = body.closest(points)
+    dist[:surface] = 0.0
+    away = points - closest
+    norm = np.linalg.norm(away, axis=1, keepdims=True)
+    normals = np.where(norm > 1e-6, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None], body.face_normals[fid])
+    normals[:surface] = body.face_normals[face[:surface]]
+    return {"points": points.astype(np.float32), "sdf": dist.astype(np.float32), "normals": normals.astype(np.float32)}
+
+
+# ---------------------------------------------------------------------------------------------- on Anny bodies
+
+
+def body_code(shape_values: np.ndarray, root: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """The code the body SDF network is conditioned on, per frame: ``(T, S + 7 + 6 (J-1))`` float32 from the
+    body's shape values ``(S,)`` and the motion features ``root (T, 11)``, ``joints (T, J-1, 6)``
+    (:mod:`loosefit.models.motion_features`): shape, root height, root tilt and joint rotations, everything
+    that places the body in the canonical heading frame."""
+    T = len(root)
+    shape = np.broadcast_to(np.asarray(shape_values, np.float32), (T, len(shape_values)))
+    return np.concatenate([shape, root[:, :1], root[:, 5:11], joints.reshape(T, -1)], 1).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class SDFTrainConfig:
+    """How :func:`train_body_sdf` samples posed bodies and fits the network.
+
+    Attributes:
+        frames: posed frames drawn from each (shape, motion) pair.
+        surface, near, inside: sample points per posed frame (:func:`sdf_samples`).
+        near_sigma: metres. steps, lr, batch_frames: Adam steps, learning rate, frames per step. seed.
+    """
+
+    frames: int = 8
+    surface: int = 2048
+    near: int = 2048
+    inside: int = 512
+    near_sigma: float = 0.02
+    steps: int = 2000
+    lr: float = 5e-4
+    batch_frames: int = 4
+    seed: int = 0
+
+
+def body_sdf_samples(shapes, motions, config: SDFTrainConfig) -> dict[str, np.ndarray]:
+    """Samples of many posed Anny bodies (the collision proxy), canonical: ``points (P, N, 3)``, ``sdf (P, N)``,
+    ``normals (P, N, 3)`` and ``code (P, C)`` for ``P`` posed frames (``config.frames`` per shape and motion)."""
+    from loosefit.body import AnnyBody
+    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+
+    rng = np.random.default_rng(config.seed)
+    out: dict[str, list] = {"points": [], "sdf": [], "normals": [], "code": []}
+    for shape in shapes:
+        proxy = AnnyBody(shape, resolution="low")
+        for motion in motions:
+            feats = motion_features(motion)
+            rot, origin = heading_frames(motion)
+            frames = np.sort(rng.choice(motion.num_frames, min(config.frames, motion.num_frames), replace=False))
+            posed = to_canonical(proxy.pose(motion).verts[frames], rot[frames], origin[frames])
+            code = body_code(shape.to_array(), feats["root"][frames], feats["joints"][frames])
+            for k, verts in enumerate(posed):
+                s = sdf_samples(BodySDF(verts, proxy.faces), config.surface, config.near, config.inside,
+                                config.near_sigma, seed=int(rng.integers(2**31)))
+                for key in ("points", "sdf", "normals"):
+                    out[key].append(s[key])
+                out["code"].append(code[k])
+    return {k: np.stack(v) for k, v in out.items()}
+
+
+def train_body_sdf(samples: dict[str, np.ndarray], config: SDFTrainConfig = SDFTrainConfig(),
+                   net_config: BodySDFConfig = BodySDFConfig(), progress: bool = False) -> tuple[BodySDFNet, list]:
+    """Fit a :class:`BodySDFNet` to :func:`body_sdf_samples` with SwinGar Eqs. 8-9 (Adam). Returns the network
+    and the loss per step."""
+    torch.manual_seed(config.seed)
+    pts, sdf, nrm, code = (torch.from_numpy(samples[k]) for k in ("points", "sdf", "normals", "code"))
+    net = BodySDFNet(code.shape[1], net_config)
+    opt = torch.optim.Adam(net.parameters(), config.lr)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
+    gen = torch.Generator().manual_seed(config.seed)
+    history = []
+    for step in range(config.steps):
+        pick = torch.randperm(len(pts), generator=gen)[:config.batch_frames]
+        loss, terms = sdf_loss(net, pts[pick], sdf[pick], nrm[pick], code[pick])
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        history.append(float(loss.detach()))
+        if progress and step % 100 == 0:
+            print(f"step {step}: loss {history[-1]:.4g} {terms}")
+    return net, history
+
+
+def save_body_sdf(path, net: BodySDFNet) -> None:
+    """Write the network and its sizes to one file (``torch.save`` of tensors and plain values)."""
+    from loosefit.paths import atomic_path
+
+    state = {"format": "loosefit-body-sdf", "code_size": net.code_size, "config": dict(vars(net.config)),
+             "model": net.state_dict()}
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
+
+
+def load_body_sdf(path) -> BodySDFNet:
+    """Read a network written by :func:`save_body_sdf`; a bad file is an :class:`InputError` naming it."""
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        if state.get("format") != "loosefit-body-sdf":
+            raise ValueError("not a loosefit body SDF")
+        net = BodySDFNet(int(state["code_size"]), BodySDFConfig(**state["config"]))
+        net.load_state_dict(state["model"])
+    except Exception as e:  # missing, truncated or foreign files
+        raise InputError(f"cannot read a body SDF network: {e}", path) from None
+    return net.eval()
+
+
+def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
+                             net: BodySDFNet | None = None, push_distance: float = 0.004) -> np.ndarray:
+    """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
+    Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
+
+    ``mode``: ``"neural"`` (SwinGar Eq. 10 with ``net``, in the canonical frame, the code from the motion),
+    ``"exact"`` (SwinGar Eq. 10 with libigl's distance to the posed collision proxy) or ``"pushout"`` (the
+    fixed-distance baseline).
+    """
+    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical, to_world
+
+    if mode not in ("neural", "exact", "pushout"):
+        raise InputError(f"collision mode must be 'neural', 'exact' or 'pushout', got {mode!r}")
+    if mode == "neural" and net is None:
+        raise InputError("neural collision handling needs a body SDF network")
+    proxy = body.collision_proxy()
+    out = np.array(verts, np.float32, copy=True)
+    if mode == "neural":
+        feats = motion_features(motion)
+        rot, origin = heading_frames(motion)
+        canonical = torch.from_numpy(to_canonical(out, rot, origin))
+        code = torch.from_numpy(body_code(body.shape.to_array(), feats["root"], feats["joints"]))
+        fixed = [resolve_collisions(canonical[t], faces, lambda p, c=code[t]: net(p[None], c[None])[0])[0]
+                 for t in range(len(out))]
+        return to_world(torch.stack(fixed).detach().numpy(), rot, origin)
+    posed = proxy.pose(motion).verts
+    for t in range(len(out)):
+        mesh = BodySDF(posed[t], proxy.faces)
+        if mode == "pushout":
+            out[t] = push_out(out[t], mesh, push_distance)[0]
+        else:
+            out[t] = resolve_collisions(torch.from_numpy(out[t]).double(), faces, ExactSDF(mesh))[0].numpy()
+    return out
+
+
+#: The files of a body SDF run folder (``loosefit train --method collision``).
+SDF_FILE, SDF_META = "body_sdf.pt", "model.json"
+
+
+@dataclass(frozen=True)
+class SDFRunConfig:
+    """What ``loosefit train --method collision`` reads: ``train`` (:class:`SDFTrainConfig`) and ``net``
+    (:class:`BodySDFConfig`), e.g. ``--set train.steps=500 --set net.hidden=256``."""
+
+    train: SDFTrainConfig = SDFTrainConfig()
+    net: BodySDFConfig = BodySDFConfig()
+
+
+def train_sdf_run(data, out, run_config: SDFRunConfig = SDFRunConfig(), progress: bool = True) -> dict:
+    """``loosefit train --method collision``: fit the body SDF network on every body shape and training motion
+    of a dataset store (the collision proxy of each, canonical); write ``out/body_sdf.pt`` and ``out/model.json``.
+    Returns the summary written to ``model.json``."""
+    import json
+    from pathlib import Path
+
+    from loosefit.body import AnnyShape
+    from loosefit.data.store import DatasetStore
+    from loosefit.paths import atomic_path
+
+    store = DatasetStore.open(data, mode="r")
+    train = store.sequence_names(split="train")
+    bodies = sorted({store.sequence(n).body for n in train})
+    motions = sorted({store.sequence(n).motion for n in train})
+    if not bodies or not motions:
+        raise InputError("no training sequences: the body SDF trains on their bodies and motions", store.path)
+    config, net_config = run_config.train, run_config.net
+    shapes = [AnnyShape.from_array(store.body(b)) for b in bodies]
+    samples = body_sdf_samples(shapes, [store.motion(m) for m in motions], config)
+    net, history = train_body_sdf(samples, config, net_config, progress)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_body_sdf(out / SDF_FILE, net)
+    summary = {"method": "collision", "data": str(Path(data).resolve()), "bodies": bodies, "motions": motions,
+               "frames": int(len(samples["code"])), "first_loss": history[0] if history else None,
+               "final_loss": history[-1] if history else None,
+               "config": dict(vars(config)), "net": dict(vars(net_config))}
+    with atomic_path(out / SDF_META) as tmp:
+        tmp.write_text(json.dumps(summary, indent=2))
+    return summary

@@ -1,0 +1,79 @@
+"""LSTM-GAT-LN: an LSTM over a sequence of graphs whose maps are GAT-LN layers (SwinGar Eq. 6, Fig. 5).
+
+For node features ``X^t (V, in)`` of a fixed graph, hidden state ``H`` and cell state ``C`` ``(V, hidden)``::
+
+    i^t = sigma(A_i(X^t) + S_i(H^{t-1}) + w_i o C^{t-1})
+    f^t = sigma(A_f(X^t) + S_f(H^{t-1}) + w_f o C^{t-1})
+    o^t = sigma(A_o(X^t) + S_o(H^{t-1}) + w_o o C^{t-1})
+    C^t = i^t o tanh(A_g(X^t) + S_g(H^{t-1})) + f^t o C^{t-1}
+    H^t = o^t o tanh(C^t)
+
+``A`` (input-to-state) and ``S`` (state-to-state) are GAT-LN layers (:mod:`loosefit.models.layers.gat_ln`)
+without output activation, each giving the four gates' pre-activations at once (``4 * hidden`` channels
+in torch's gate order i, f, g, o, sharing one attention per head), and ``w_i, w_f, w_o (hidden,)`` are the
+peephole weights on the previous cell state, as SwinGar Eq. 6 writes them (all three on ``C^{t-1}``).
+
+The peepholes start at zero, so with every node attending only to itself and one head the cell is
+exactly ``torch.nn.LSTMCell`` applied per node (``A``'s weight and bias are ``weight_ih.T`` and
+``bias_ih``, ``S``'s are ``weight_hh.T`` and ``bias_hh``).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from loosefit.errors import InputError
+from loosefit.models.layers.gat_ln import GATLN
+
+
+class LSTMGATLN(nn.Module):
+    """The LSTM-GAT-LN cell and its loop over frames.
+
+    Args:
+        in_channels: node feature size of the input graphs.
+        hidden: hidden and cell state size per node.
+        heads: attention heads of both maps.
+        alpha: GAT-LN score scale (SwinGar Eq. 4); None for plain GAT maps.
+    """
+
+    def __init__(self, in_channels: int, hidden: int, heads: int = 1, alpha: float | None = 2.0):
+        super().__init__()
+        if hidden < 1:
+            raise InputError(f"LSTM-GAT-LN hidden size must be >= 1, got {hidden}")
+        self.hidden = hidden
+        self.input_map = GATLN(in_channels, 4 * hidden, heads, alpha, activation=None)
+        self.state_map = GATLN(hidden, 4 * hidden, heads, alpha, activation=None)
+        self.peephole = nn.Parameter(torch.zeros(3, hidden))  # w_i, w_f, w_o
+
+    def cell(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
+             state: tuple[torch.Tensor, torch.Tensor] | None = None,
+             x_gates: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """One step (SwinGar Eq. 6): ``x (..., V, in)``, ``state (H, C)`` each ``(..., V, hidden)`` or None
+        (zeros) -> the new ``(H, C)``. ``x_gates``: ``self.input_map(x)`` when already computed."""
+        gx = self.input_map(x, table, valid) if x_gates is None else x_gates
+        if state is None:
+            h = c = gx.new_zeros(gx.shape[:-1] + (self.hidden,))
+        else:
+            h, c = state
+        gates = gx + self.state_map(h, table, valid)
+        gi, gf, gg, go = gates.chunk(4, -1)
+        i = torch.sigmoid(gi + self.peephole[0] * c)
+        f = torch.sigmoid(gf + self.peephole[1] * c)
+        o = torch.sigmoid(go + self.peephole[2] * c)
+        c = i * torch.tanh(gg) + f * c
+        return o * torch.tanh(c), c
+
+    def forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
+                state: tuple[torch.Tensor, torch.Tensor] | None = None):
+        """A sequence ``x (..., T, V, in)`` -> hidden states ``(..., T, V, hidden)`` and the last ``(H, C)``.
+
+        The input-to-state map of every frame is computed in one call before the loop."""
+        if x.dim() < 3:
+            raise InputError(f"LSTM-GAT-LN expects a sequence (..., T, V, in), got {tuple(x.shape)}")
+        gx = self.input_map(x, table, valid)
+        outputs = []
+        for t in range(x.shape[-3]):
+            state = self.cell(x[..., t, :, :], table, valid, state, x_gates=gx[..., t, :, :])
+            outputs.append(state[0])
+        return torch.stack(outputs, -3), state

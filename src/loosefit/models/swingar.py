@@ -1,0 +1,483 @@
+"""SwinGar (Li et al. 2024): one dynamic deformation network for many garments of any topology.
+
+Per frame ``t`` and garment (``V`` vertices, any count), in the canonical heading frame of
+:mod:`loosefit.models.motion_features` (SwinGar Sec. III-C and IV):
+
+1. **Garment information** (once per garment, at rest). Graph encoder ``E_g``: two GAT-LN layers
+   ([64, 128], 24 heads; :mod:`loosefit.models.layers.gat_ln`) on ``[n_i, x_i, a_i]`` (normal, position, fit
+   attribute) -> ``G (V, 128)``. Shape encoder ``E_a``: fully connected [256, 128, 24] on the spectral
+   descriptor ``lambda`` (:mod:`loosefit.rig.spectral`) -> ``a (24,)``.
+2. **Body information.** Motion encoder ``E_m``: an LSTM (128) over the poses of frames ``t-63 .. t``
+   (64 frames; pose = the frame's motion features: root height, displacement and heading change since
+   the previous frame, root tilt, joint rotations) -> ``m_t (128,)``. Body encoder ``E_b``: fully
+   connected [256, 128, 64] on the body shape and the current pose -> ``b_t (64,)``.
+3. **Coarse deformation.** State encoder ``E_s``: GAT-LN (128, 24 heads) on ``G * m_t`` -> ``S_t``.
+   Dynamic skinning weights: ``W_t = softmax_J(P(Q(S_t) * a))`` (``Q``: 128 -> 24, ``P``: 24 -> J, the body's
+   joints). Unposed blend shapes: two GAT-LN layers ([256, 128], 3 heads) on ``S_t``, times ``m_t``, then
+   a linear map to ``B_t (V, 3)``. Linear blend skinning of ``rest + B_t`` with ``W_t`` by the body's joint
+   transforms, the root held at its rest position -> ``M_c^t``.
+4. **Corrective.** Node features ``[M_c^t, |M_c^t - joint_k|]`` (position and distances to every joint); an
+   LSTM-GAT-LN (64, 8 heads; :mod:`loosefit.models.layers.lstm_gat_ln`) over ``M_c^{t-2}, M_c^{t-1}, M_c^t``,
+   times ``b_t``, then two single-head GAT-LN layers [64, 3] -> the correction, added to ``M_c^t``.
+5. **Root translation last**: the root's canonical position minus its rest position.
+
+Every GAT-LN layer uses tanh and ``alpha = 2``; fully connected layers ReLU (SwinGar Sec. IV).
+GAT-LN weights are Glorot-initialised, the motion LSTM's weights Kaiming-uniform with its default
+settings, linear layers torch's default (Kaiming-uniform with ``a = sqrt(5)``); the two layers whose
+outputs are displacements start scaled by :data:`OUTPUT_INIT` (ours: the garment starts near its skinned
+rest shape).
+
+Losses (SwinGar Eqs. 11-14), each averaged over frames: vertex ``k_v mean_i |X_i - X_i^GT|^2``; consistency
+``k_e mean_e (|e| - |e^GT|)^2 + k_b mean_f |(L N)_f|^2`` (``L`` the uniform Laplacian of the face adjacency,
+``N`` the face normals); gravity ``k_g g sum_i m_i (z_i - z_i^GT)`` (SwinGar Eq. 13 less its value at the
+simulation, a constant: zero at the ground truth, the same gradient); collision
+``k_c mean_i min(h_i - eps, 0)^2`` with ``h_i`` the signed distance along the normal of the body vertex
+closest to the simulated vertex. Training stage ``supervised`` uses the vertex term only, stage ``all``
+every term (SwinGar switches when the vertex error falls by less than 2 % over 50 epochs; here each stage
+has its epochs).
+
+Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather
+than axis-angles; the fit attribute ``a_i`` is each vertex's rest distance to the body (FitGar's
+quantity before its factor analysis, which describes a garment, not a vertex); heads are averaged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Optional
+
+import numpy as np
+import torch
+from torch import nn
+
+from loosefit.errors import InputError
+from loosefit.geometry.lbs import forward_kinematics, skinning_transforms
+from loosefit.geometry.rotations import sixd_to_matrix
+from loosefit.models.layers.gat_ln import GATLN
+from loosefit.models.layers.lstm_gat_ln import LSTMGATLN
+from loosefit.models.multi_garment import DEFAULT_DENSITY, MultiGarmentData, collate_by_graph
+from loosefit.train import StageConfig, TrainConfig
+from loosefit.train.losses import face_normals
+
+STAGES = ("supervised", "all")
+GRAVITY = 9.8  # m/s^2, along -Z
+#: Scale of the initial weights of the layers whose outputs are displacements (metres): the garment
+#: starts from its skinned rest shape.
+OUTPUT_INIT = 1e-2
+
+
+@dataclass(frozen=True)
+class SwinGarConfig:
+    """SwinGar's hyper-parameters (defaults: the paper's Sec. IV, unless noted).
+
+    Attributes:
+        graph_hidden, graph_heads: garment graph encoder GAT-LN sizes and heads ([64, 128], [24, 24]).
+        shape_mlp: shape encoder sizes ([256, 128, 24]); its last size is the shape feature size.
+        motion_hidden: motion encoder LSTM size (128); equals ``graph_hidden[-1]`` (they are multiplied).
+        motion_frames: poses the motion encoder sees, ``m`` (64).
+        body_mlp: body encoder sizes ([256, 128, 64]).
+        state_hidden, state_heads: garment state encoder (128, 24).
+        blend_hidden, blend_heads: unposed blend shape GAT-LN layers ([256, 128], 3); the last size
+            equals ``motion_hidden``.
+        corrective_hidden, corrective_heads: LSTM-GAT-LN (64, 8); ``corrective_hidden`` equals ``body_mlp[-1]``.
+        corrective_layers: single-head GAT-LN sizes after it ([64, 3]; the last must be 3).
+        corrective_frames: coarse meshes the LSTM-GAT-LN runs over (3).
+        alpha: GAT-LN score scale (2); null: plain GAT layers (the ablation of SwinGar Fig. 8, 9).
+        descriptor_samples: spectral descriptor length ``z`` (256).
+        k_vert, k_edge, k_bend, k_gravity, k_collision: loss weights (50, 10, 3, 0.2, 1.5).
+        collision_eps: ``epsilon`` of SwinGar Eq. 14, metres (the paper: "a small positive value"; ours 2 mm).
+        density: fabric density for the vertex masses of the gravity term, kg/m^2 (ours).
+    """
+
+    graph_hidden: list[int] = field(default_factory=lambda: [64, 128])
+    graph_heads: list[int] = field(default_factory=lambda: [24, 24])
+    shape_mlp: list[int] = field(default_factory=lambda: [256, 128, 24])
+    motion_hidden: int = 128
+    motion_frames: int = 64
+    body_mlp: list[int] = field(default_factory=lambda: [256, 128, 64])
+    state_hidden: int = 128
+    state_heads: int = 24
+    blend_hidden: list[int] = field(default_factory=lambda: [256, 128])
+    blend_heads: int = 3
+    corrective_hidden: int = 64
+    corrective_heads: int = 8
+    corrective_layers: list[int] = field(default_factory=lambda: [64, 3])
+    corrective_frames: int = 3
+    alpha: Optional[float] = 2.0
+    descriptor_samples: int = 256
+    k_vert: float = 50.0
+    k_edge: float = 10.0
+    k_bend: float = 3.0
+    k_gravity: float = 0.2
+    k_collision: float = 1.5
+    collision_eps: float = 0.002
+    density: float = DEFAULT_DENSITY
+
+    def __post_init__(self):
+        sizes = [*self.graph_hidden, *self.graph_heads, *self.shape_mlp, self.motion_hidden, self.motion_frames,
+                 *self.body_mlp, self.state_hidden, self.state_heads, *self.blend_hidden, self.blend_heads,
+                 self.corrective_hidden, self.corrective_heads, *self.corrective_layers, self.corrective_frames,
+                 self.descriptor_samples]
+        if min(sizes) < 1:
+            raise InputError(f"SwinGar sizes must be >= 1, got {sizes}")
+        if len(self.graph_hidden) != len(self.graph_heads) or not self.graph_hidden:
+            raise InputError(f"graph_hidden {self.graph_hidden} and graph_heads {self.graph_heads} must be equally long")
+        if not (self.graph_hidden[-1] == self.motion_hidden == self.blend_hidden[-1]):
+            raise InputError(f"graph_hidden[-1] ({self.graph_hidden[-1]}), motion_hidden ({self.motion_hidden}) and "
+                             f"blend_hidden[-1] ({self.blend_hidden[-1]}) must be equal: they are multiplied")
+        if self.body_mlp[-1] != self.corrective_hidden:
+            raise InputError(f"body_mlp[-1] ({self.body_mlp[-1]}) must equal corrective_hidden ({self.corrective_hidden})")
+        if self.corrective_layers[-1] != 3:
+            raise InputError(f"corrective_layers must end with 3 (a displacement), got {self.corrective_layers}")
+        weights = (self.k_vert, self.k_edge, self.k_bend, self.k_gravity, self.k_collision, self.collision_eps)
+        if min(weights) < 0 or (self.alpha is not None and self.alpha < 0) or not self.density > 0:
+            raise InputError("loss weights, collision_eps and alpha must be >= 0 and density > 0")
+
+
+def _paper_training() -> TrainConfig:
+    # Adam 1e-3 with cosine annealing (paper Sec. IV); batch 64 there, epochs per stage ours.
+    return TrainConfig(optimizer="adam", lr=1e-3, batch_size=8, schedule="cosine", monitor="rmse_mm",
+                       stages={"supervised": StageConfig(epochs=50), "all": StageConfig(epochs=50)})
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """Training windows: ``window`` frames every ``stride``; each carries its motion history, so no burn-in."""
+
+    window: int = 32
+    stride: int = 32
+
+    def __post_init__(self):
+        if self.window < 1 or self.stride < 1:
+            raise InputError(f"window and stride must be >= 1, got {self.window}, {self.stride}")
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything ``loosefit train --method swingar`` reads (``configs/models/swingar.yaml``)."""
+
+    model: SwinGarConfig = field(default_factory=SwinGarConfig)
+    train: TrainConfig = field(default_factory=_paper_training)
+    data: DataConfig = field(default_factory=DataConfig)
+
+
+def mlp_relu(channels: list[int]) -> nn.Sequential:
+    """Fully connected layers with ReLU after each (SwinGar Sec. IV), Kaiming-uniform weights."""
+    layers: list[nn.Module] = []
+    for a, b in zip(channels[:-1], channels[1:]):
+        layers += [nn.Linear(a, b), nn.ReLU()]
+    return nn.Sequential(*layers)
+
+
+def _graph(g: dict) -> tuple[torch.Tensor, torch.Tensor]:
+    return g["table"], g["valid"]
+
+
+class SwinGar(nn.Module):
+    """SwinGar (see the module doc). Garment-independent: the garment comes with every call.
+
+    ``sizes``: ``num_joints`` (J, root included), ``parents`` (J parent indices, -1 for the root),
+    ``shape_values`` (S, the body shape vector's length).
+
+    Buffers: ``root_mean/std (11,)``, ``joints_mean/std (J-1, 6)``: motion feature statistics.
+    """
+
+    method: ClassVar[str] = "swingar"
+    Config: ClassVar[type] = SwinGarConfig
+    needs_rig: ClassVar[bool] = False
+    multi_garment: ClassVar[bool] = True
+
+    def __init__(self, sizes: dict, config: SwinGarConfig):
+        super().__init__()
+        self._sizes = dict(sizes)
+        self.config = c = config
+        J, S = int(sizes["num_joints"]), int(sizes["shape_values"])
+        self.parents = np.asarray(sizes["parents"], np.int64)
+        if len(self.parents) != J:
+            raise InputError(f"sizes give {len(self.parents)} parents for {J} joints")
+        self.register_buffer("root_mean", torch.zeros(11))
+        self.register_buffer("root_std", torch.ones(11))
+        self.register_buffer("joints_mean", torch.zeros(J - 1, 6))
+        self.register_buffer("joints_std", torch.ones(J - 1, 6))
+        pose = 11 + 6 * (J - 1)
+        a = c.alpha
+        chans = [7, *c.graph_hidden]
+        self.graph_encoder = nn.ModuleList(GATLN(i, o, h, a) for i, o, h in zip(chans[:-1], chans[1:], c.graph_heads))
+        self.shape_encoder = mlp_relu([c.descriptor_samples, *c.shape_mlp])
+        self.motion_encoder = nn.LSTM(pose, c.motion_hidden, batch_first=True)
+        self.body_encoder = mlp_relu([S + pose, *c.body_mlp])
+        self.state_encoder = GATLN(c.graph_hidden[-1], c.state_hidden, c.state_heads, a)
+        self.weight_state = nn.Linear(c.state_hidden, c.shape_mlp[-1])
+        self.weight_out = nn.Linear(c.shape_mlp[-1], J)
+        chans = [c.state_hidden, *c.blend_hidden]
+        self.blend_layers = nn.ModuleList(GATLN(i, o, c.blend_heads, a) for i, o in zip(chans[:-1], chans[1:]))
+        self.blend_out = nn.Linear(c.blend_hidden[-1], 3)
+        self.corrective_lstm = LSTMGATLN(3 + J, c.corrective_hidden, c.corrective_heads, a)
+        chans = [c.corrective_hidden, *c.corrective_layers]
+        self.corrective_layers = nn.ModuleList(GATLN(i, o, 1, a) for i, o in zip(chans[:-1], chans[1:]))
+        with torch.no_grad():
+            for name, w in self.motion_encoder.named_parameters():
+                if name.startswith("weight"):
+                    nn.init.kaiming_uniform_(w)  # SwinGar Sec. IV: Kaiming for the LSTM, default settings
+            self.blend_out.weight.mul_(OUTPUT_INIT)
+            self.blend_out.bias.zero_()
+            self.corrective_layers[-1].weight.mul_(OUTPUT_INIT)
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def data_sizes(cls, data: MultiGarmentData) -> dict:
+        from loosefit.models.body_lbs import training_body
+
+        body = training_body(data.sequences[0])
+        return {"num_joints": data.num_joints, "parents": [int(p) for p in body.parents],
+                "shape_values": int(len(data.graphs[0].body_shape))}
+
+    @classmethod
+    def from_data(cls, data: MultiGarmentData, config: SwinGarConfig) -> "SwinGar":
+        model = cls(cls.data_sizes(data), config)
+        stats = data.feature_stats()
+        with torch.no_grad():
+            for key in ("root", "joints"):
+                getattr(model, f"{key}_mean").copy_(torch.from_numpy(stats[key][0]))
+                getattr(model, f"{key}_std").copy_(torch.from_numpy(stats[key][1]))
+        return model
+
+    def sizes(self) -> dict:
+        return dict(self._sizes)
+
+    # ------------------------------------------------------------------ the garment, once
+
+    def garment_features(self, g: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        """Graph features ``G (V, graph_hidden[-1])`` and shape features ``a (shape_mlp[-1],)`` of a garment
+        (:meth:`GarmentGraph.tensors`)."""
+        x = torch.cat([g["normals"], g["rest"], g["fit"][:, None]], -1)
+        for layer in self.graph_encoder:
+            x = layer(x, *_graph(g))
+        descriptor = g["descriptor"]
+        if descriptor.shape[-1] != self.config.descriptor_samples:
+            raise InputError(f"the garment's spectral descriptor has {descriptor.shape[-1]} values, the model "
+                             f"takes {self.config.descriptor_samples}")
+        return x, self.shape_encoder(descriptor * descriptor.shape[-1])  # mean 1: the eigenvalues sum to 1
+
+    # ------------------------------------------------------------------ per frame
+
+    def poses(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+        """Standardised pose vectors ``(B, T, 11 + 6 (J-1))`` from raw features."""
+        r = (root - self.root_mean) / self.root_std
+        j = (joints - self.joints_mean) / self.joints_std
+        return torch.cat([r, j.flatten(-2)], -1)
+
+    def motion_features(self, poses: torch.Tensor, frames: int) -> torch.Tensor:
+        """``m_t (B, frames, motion_hidden)`` of the last ``frames`` of ``poses (B, H + frames, P)`` (``H =
+        motion_frames - 1`` poses of history first): the LSTM run from zero over each frame's last
+        ``motion_frames`` poses."""
+        m = self.config.motion_frames
+        windows = poses.unfold(1, m, 1)[:, -frames:]  # (B, frames, P, m)
+        B = windows.shape[0]
+        seq = windows.permute(0, 1, 3, 2).reshape(B * frames, m, -1)
+        out, _ = self.motion_encoder(seq)
+        return out[:, -1].reshape(B, frames, -1)
+
+    def joint_transforms(self, root: torch.Tensor, joints: torch.Tensor, rest_joints: torch.Tensor):
+        """Canonical skinning transforms ``(B, T, J, 4, 4)`` and joint positions ``(B, T, J, 3)``, the root held
+        at its rest position ``rest_joints[0]`` (translation comes last), from raw features."""
+        B, T = root.shape[:2]
+        local = torch.cat([sixd_to_matrix(root[..., None, 5:11]), sixd_to_matrix(joints)], 2)  # (B, T, J, 3, 3)
+        rest = rest_joints.to(local.dtype)
+        world = forward_kinematics(local.flatten(0, 1), rest[0].expand(B * T, 3), rest, self.parents)
+        return skinning_transforms(world, rest).unflatten(0, (B, T)), world[..., :3, 3].unflatten(0, (B, T))
+
+    def coarse(self, g: dict, G: torch.Tensor, shape: torch.Tensor, m: torch.Tensor, root: torch.Tensor,
+               joints: torch.Tensor) -> dict:
+        """The first stage for frames with motion features ``m (B, T, motion_hidden)``: ``weights`` (skinning,
+        ``(B, T, V, J)``), ``blend`` (``(B, T, V, 3)``), ``coarse`` (``M_c (B, T, V, 3)``) and ``nodes`` (the corrective
+        node features ``(B, T, V, 3 + J)``: position and distance to every joint)."""
+        table, valid = _graph(g)
+        S = self.state_encoder(G * m[:, :, None], table, valid)  # (B, T, V, state)
+        weights = torch.softmax(self.weight_out(self.weight_state(S) * shape), -1)
+        h = S
+        for layer in self.blend_layers:
+            h = layer(h, table, valid)
+        blend = self.blend_out(h * m[:, :, None])
+        A, joint_pos = self.joint_transforms(root, joints, g["rest_joints"])
+        rest = g["rest"] + blend  # (B, T, V, 3)
+        M = torch.einsum("btvj,btjxy->btvxy", weights, A[..., :3, :])  # (B, T, V, 3, 4)
+        Mc = (M[..., :3] @ rest[..., None])[..., 0] + M[..., 3]
+        dist = (Mc[..., :, None, :] - joint_pos[..., None, :, :]).norm(dim=-1)  # (B, T, V, J)
+        return {"weights": weights, "blend": blend, "coarse": Mc, "nodes": torch.cat([Mc, dist], -1)}
+
+    def corrective(self, g: dict, gates: torch.Tensor, body: torch.Tensor) -> torch.Tensor:
+        """Corrections ``(B, T, V, 3)`` from the LSTM-GAT-LN's input-to-state maps of the corrective node features,
+        ``gates (B, K - 1 + T, V, 4 corrective_hidden)`` (``K = corrective_frames``; each frame's ``K - 1``
+        predecessors first), and body features ``(B, T, body)``: per frame the cell runs from a zero state over
+        its last ``K`` frames."""
+        table, valid = _graph(g)
+        K = self.config.corrective_frames
+        T = gates.shape[1] - (K - 1)
+        state = None
+        for k in range(K):
+            state = self.corrective_lstm.cell(None, table, valid, state, x_gates=gates[:, k:k + T])
+        h = state[0] * body[:, :, None]
+        for layer in self.corrective_layers:
+            h = layer(h, table, valid)
+        return h
+
+    def forward(self, g: dict, root: torch.Tensor, joints: torch.Tensor, body_shape: torch.Tensor | None = None,
+                state: Any = None, features: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict:
+        """Predict ``T`` frames of one garment.
+
+        Args:
+            g: the garment, :meth:`GarmentGraph.tensors`.
+            root ``(B, T, 11)``, joints ``(B, T, J-1, 6)``: raw motion features.
+            body_shape: ``(B, S)``; None: the garment's own body (``g["body_shape"]``).
+            state: None at the start of a motion (the first frame's pose repeated before it), or the
+                ``"state"`` of the previous call: ``{"root": (B, m-1, 11), "joints": (B, m-1, J-1, 6)}``
+                (the poses before this call) and optionally ``"gates": (B, K-1, V, 4 corrective_hidden)`` (the
+                LSTM-GAT-LN's input-to-state maps of the last ``K-1`` frames' corrective node features; without
+                it they are computed from ``K-1`` more poses of history).
+            features: ``garment_features(g)`` when already computed (they do not change with the motion).
+
+        Returns:
+            ``{"verts": (B, T, V, 3) canonical, "coarse": M_c (B, T, V, 3), "weights": (B, T, V, J),
+            "blend": (B, T, V, 3), "correction": (B, T, V, 3), "state": ...}``.
+        """
+        B, T = root.shape[:2]
+        K, m = self.config.corrective_frames, self.config.motion_frames
+        if root.shape[-1] != 11 or joints.shape[-2:] != self.joints_mean.shape or joints.shape[:2] != (B, T):
+            raise InputError(f"SwinGar expects root (B, T, 11) and joints (B, T, {self.joints_mean.shape[0]}, 6), "
+                             f"got {tuple(root.shape)} and {tuple(joints.shape)}")
+        G, shape = self.garment_features(g) if features is None else features
+        if body_shape is None:
+            body_shape = g["body_shape"].expand(B, -1)
+        if state is None:
+            extra = 0
+            hist_root, hist_joints = root[:, :1].expand(B, m - 1, -1), joints[:, :1].expand(B, m - 1, -1, -1)
+        else:
+            hist_root, hist_joints = state["root"], state["joints"]
+            extra = 0 if "gates" in state else K - 1
+            if hist_root.shape[1] != m - 1 + extra:
+                raise InputError(f"SwinGar state holds {hist_root.shape[1]} poses, expected {m - 1 + extra}")
+        all_root, all_joints = torch.cat([hist_root, root], 1), torch.cat([hist_joints, joints], 1)
+        poses = self.poses(all_root, all_joints)
+        n = T + extra  # frames whose coarse mesh is computed
+        mfeat = self.motion_features(poses, n)
+        out = self.coarse(g, G, shape, mfeat, all_root[:, -n:], all_joints[:, -n:])
+        gates = self.corrective_lstm.input_map(out.pop("nodes"), *_graph(g))  # each frame's input map once
+        if state is None:
+            gates = torch.cat([gates[:, :1].expand(-1, K - 1, -1, -1), gates], 1)
+        elif extra == 0:
+            gates = torch.cat([state["gates"], gates], 1)
+        else:
+            out = {k: v[:, extra:] for k, v in out.items()}
+        body = self.body_encoder(torch.cat([body_shape[:, None].expand(-1, T, -1), poses[:, -T:]], -1))
+        correction = self.corrective(g, gates, body)
+        translation = torch.stack([-g["rest_joints"][0, 0].expand(B, T), -g["rest_joints"][0, 1].expand(B, T),
+                                   root[..., 0] - g["rest_joints"][0, 2]], -1)  # canonical root minus rest root
+        verts = out["coarse"] + correction + translation[:, :, None]
+        new_state = {"root": all_root[:, -(m - 1):], "joints": all_joints[:, -(m - 1):], "gates": gates[:, -(K - 1):]}
+        return {"verts": verts, "coarse": out["coarse"], "weights": out["weights"], "blend": out["blend"],
+                "correction": correction, "state": new_state}
+
+    # ------------------------------------------------------------------ losses (SwinGar Eqs. 11-14)
+
+    def loss_terms(self, pred: torch.Tensor, batch: dict) -> dict[str, torch.Tensor]:
+        """Unweighted terms of SwinGar Eqs. 11-14 for ``pred (B, T, V, 3)`` against ``batch``: ``vert`` (m^2),
+        ``edge`` (m^2), ``bend``, ``gravity`` (J), ``collision`` (m^2; 0 without a body in the batch)."""
+        g, target = batch["graph_tensors"], batch["verts"]
+        terms = {"vert": ((pred - target) ** 2).sum(-1).mean()}
+        e = g["edges"]
+
+        def lengths(x):
+            return (x[..., e[:, 0], :] - x[..., e[:, 1], :]).norm(dim=-1)
+
+        terms["edge"] = ((lengths(pred) - lengths(target)) ** 2).mean()
+        n = face_normals(pred, g["faces"])
+        pairs = g["face_pairs"]
+        diff = n[..., pairs[:, 1], :] - n[..., pairs[:, 0], :]
+        lap = torch.zeros_like(n).index_add_(-2, pairs[:, 0], diff).index_add_(-2, pairs[:, 1], -diff)
+        terms["bend"] = lap.square().sum(-1).mean()
+        terms["gravity"] = GRAVITY * (g["mass"] * (pred[..., 2] - target[..., 2])).sum(-1).mean()
+        if "body" in batch:
+            idx = batch["body_nearest"][..., None].expand(-1, -1, -1, 3)
+            b, bn = torch.gather(batch["body"], 2, idx), torch.gather(batch["body_normals"], 2, idx)
+            h = ((pred - b) * bn).sum(-1)
+            terms["collision"] = torch.clamp(h - self.config.collision_eps, max=0.0).square().mean()
+        else:
+            terms["collision"] = pred.new_zeros(())
+        return terms
+
+    def weights(self) -> dict[str, float]:
+        c = self.config
+        return {"vert": c.k_vert, "edge": c.k_edge, "bend": c.k_bend, "gravity": c.k_gravity, "collision": c.k_collision}
+
+    def predict_batch(self, batch: dict) -> torch.Tensor:
+        """Predicted canonical vertices ``(B, T, V, 3)`` of a collated group (history in the batch)."""
+        K = self.config.corrective_frames
+        state = {"root": batch["history_root"], "joints": batch["history_joints"]}
+        if state["root"].shape[1] != self.config.motion_frames - 1 + K - 1:
+            raise InputError("the windows' history does not match the model's motion and corrective frames")
+        return self(batch["graph_tensors"], batch["root"], batch["joints"], state=state)["verts"]
+
+    # ------------------------------------------------------------------ trainer protocol
+
+    def stages(self) -> list[str]:
+        return list(STAGES)
+
+    def collate(self, items: list[dict]) -> list[dict]:
+        return collate_by_graph(items)
+
+    def batch_size(self, batch: list[dict]) -> int:
+        return int(sum(b["root"].shape[0] for b in batch))
+
+    def training_loss(self, batch: list[dict], stage: str):
+        weights = self.weights()
+        total, logged, count = 0.0, {}, self.batch_size(batch)
+        for group in batch:
+            share = group["root"].shape[0] / count
+            terms = self.loss_terms(self.predict_batch(group), group)
+            used = ("vert",) if stage == "supervised" else tuple(terms)
+            total = total + share * sum(weights[k] * terms[k] for k in used)
+            for k, v in terms.items():
+                logged[k] = logged.get(k, 0.0) + share * float(v.detach())
+        return total, logged
+
+    def validation_metrics(self, batch: list[dict], stage: str) -> dict[str, float]:
+        """``rmse_mm`` and ``mean_vertex_error_mm`` over every frame of the batch."""
+        sq = dist = frames = 0.0
+        with torch.no_grad():
+            for group in batch:
+                err = self.predict_batch(group) - group["verts"]
+                sq += float((err ** 2).sum(-1).mean(-1).sum())
+                dist += float(err.norm(dim=-1).mean(-1).sum())
+                frames += err.shape[0] * err.shape[1]
+        return {"rmse_mm": (sq / frames) ** 0.5 * 1e3, "mean_vertex_error_mm": dist / frames * 1e3}
+
+
+class BoundSwinGar(nn.Module):
+    """A trained :class:`SwinGar` bound to one garment on one body: the per-garment interface of
+    :class:`~loosefit.models.base.GarmentModel` (``forward(root, joints, state) -> {"verts", "state", ...}``,
+    ``faces``), so that :class:`loosefit.animate.Animator` animates it in batches or frame by frame.
+    The garment's graph and shape features are computed once here.
+
+    Args:
+        model: a (trained) SwinGar.
+        graph: the garment on its body, :class:`~loosefit.models.multi_garment.GarmentGraph`; any vertex count.
+    """
+
+    method: ClassVar[str] = "swingar"
+
+    def __init__(self, model: SwinGar, graph):
+        super().__init__()
+        self.model, self.graph_name = model, graph.name
+        self.g = graph.tensors()
+        self.register_buffer("faces", self.g["faces"].clone())
+        with torch.no_grad():
+            self.features = model.garment_features(self.g)
+
+    def sizes(self) -> dict:
+        return {**self.model.sizes(), "num_verts": len(self.g["rest"]), "num_faces": len(self.g["faces"])}
+
+    def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None) -> dict:
+        """Raw features ``root (B, T, 11)``, ``joints (B, T, J-1, 6)`` -> :meth:`SwinGar.forward`'s outputs."""
+        return self.model(self.g, root, joints, state=state, features=self.features)
