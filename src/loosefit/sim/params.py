@@ -18,6 +18,7 @@ import yaml
 from loosefit.errors import InputError
 
 COLLIDERS = ("proxy", "full")
+BACKENDS = ("blender", "newton")
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,8 @@ class SimParams:
         collider: body mesh Blender collides with: ``"proxy"`` (1,229 vertices inflated to enclose
             the full body, fast; :mod:`loosefit.sim.collider`) or ``"full"``.
         gravity: m/s^2, along -Z.
+        backend: the cloth simulator: ``"blender"`` (:mod:`loosefit.sim.blender`) or ``"newton"``
+            (NVIDIA Newton's VBD solver, :mod:`loosefit.sim.newton`; needs ``pip install newton``).
     """
 
     density: float = 0.15
@@ -69,6 +72,7 @@ class SimParams:
     preroll: float = 1.0
     collider: str = "proxy"
     gravity: float = 9.81
+    backend: str = "blender"
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -94,6 +98,12 @@ class SimParams:
                 raise InputError(f"simulation parameter {name} must be > 0, got {getattr(self, name)}")
         if self.collider not in COLLIDERS:
             raise InputError(f"simulation parameter collider={self.collider!r} must be one of {list(COLLIDERS)}")
+        if self.backend not in BACKENDS:
+            raise InputError(f"simulation parameter backend={self.backend!r} must be one of {list(BACKENDS)}")
+        if self.backend == "newton":
+            from loosefit.sim.newton import check_installed
+
+            check_installed()
 
     @classmethod
     def names(cls) -> list[str]:
