@@ -1,6 +1,6 @@
 """Why the Newton backend uses SolverVBD: SolverStyle3D on the collider scene of the tests.
 
-A measurement, not a test. The scene of ``tests/sim/test_newton.py::test_cloth_dropped_on_a_moving_box_stays_outside``
+A measurement, not a test. The scene of ``tests/sim/test_backends.py::test_cloth_dropped_on_a_moving_box_stays_outside``
 (an 11 x 11 cloth dropped 5 cm onto a 20 cm box that then rises and slides), with the box as
 zero-mass particles and triangles as in :mod:`loosefit.sim.newton`, stepped by Style3D instead.
 Run from the project root: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/newton_style3d_box.py [substeps]``.
@@ -20,7 +20,7 @@ wp.config.quiet = True
 import newton  # noqa: E402
 from newton.solvers import style3d  # noqa: E402
 
-from tests.sim.test_newton import box, box_signed_distance, patch  # noqa: E402
+from tests.sim.test_backends import box, box_signed_distance, patch  # noqa: E402
 
 
 def main(substeps: int = 8, frames: int = 40) -> None:
