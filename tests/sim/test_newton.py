@@ -59,9 +59,9 @@ def test_identical_across_processes(tmp_path):
 
 @needs_newton
 def test_too_few_substeps_let_the_box_through():
-    # Why NEWTON_TRAVEL_PER_STEP is half a collision distance: with 3 substeps the box's lid moves
+    # Why NEWTON_TRAVEL_PER_STEP is below one collision distance: with 3 substeps the box's lid moves
     # 4.4 mm per substep while rising, more than the 4 mm gap the contact keeps, and passes through
-    # the cloth (test_backends: with the rule's 8 substeps no vertex gets in).
+    # the cloth (test_backends: with the rule's 5 substeps no vertex gets in).
     _, sd = run_box("newton", 3)
     assert sd[:15].min() > -0.001  # lying still on the box is fine...
     assert sd.min() < -0.01  # ...the rising lid goes through

@@ -68,6 +68,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
@@ -250,6 +251,13 @@ def run_cloth(
         # Pairs closer than this in the reference are skipped: body-body always, garment-garment
         # without self-collision (their reference distance is 0), garment-body never (_FAR).
         particle_rest_shape_contact_exclusion_radius=1.0 if not params.self_collision else 1e-6,
+        # Search contacts before each substep and again after the inertial prediction: with the
+        # first search only, a box rising 0.93 collision distances per substep went through the
+        # cloth; with both it did not (measured).
+        collision_frequency_type={
+            newton.solvers.SolverBase.CollisionSlot.SOFT_SELF_CONTACT:
+                newton.solvers.SolverBase.CollisionFrequencyType.PRE_POST_INIT
+        },
         **kwargs,
     )
 
@@ -265,7 +273,7 @@ def run_cloth(
     out = np.empty((num_frames, num_verts, 3), np.float32)
     seconds = np.zeros(num_frames)
     out[0] = rest
-    for frame in range(1, num_frames):
+    for frame in tqdm(range(1, num_frames), desc="newton cloth", unit="frame", mininterval=10.0, leave=False):
         start = time.perf_counter()
         for sub in range(params.quality):
             w = (sub + 1) / params.quality
