@@ -49,7 +49,8 @@ area per vertex and ``h`` its mean edge length:
   air), applied explicitly at the start of each substep.
 - gravity: ``-gravity`` along Z; time: a substep lasts ``time_scale / (fps * quality)`` s.
 - contact: the contact distance (VBD's self-contact margin) is ``collision_distance``, contacts
-  are searched within twice that. Stiffness :data:`CONTACT_KE` (N/m; with VBD's default of 1e3 a
+  are searched within twice that, before each substep and after its inertial prediction. VBD has
+  one contact distance for all pairs, so ``self_collision_distance`` is not used. Stiffness :data:`CONTACT_KE` (N/m; with VBD's default of 1e3 a
   cloth sank 70 mm into a body, 1e5 kept it out). Friction coefficient ``friction / 100``
   (Blender's cloth collision multiplies its 0-80 setting by 0.01). The body's own velocity does
   not enter friction (its vertices are placed, not integrated), so a sliding body drags cloth a

@@ -1,7 +1,8 @@
 """Cloth simulation parameters: a typed config in physical units, loaded from YAML with overrides.
 
-Fabric properties are physical and independent of the garment's mesh resolution; the Blender
-backend converts them per mesh (see :func:`loosefit.sim.blender.cloth_settings`). The three
+Fabric properties are physical and independent of the garment's mesh resolution; each backend
+converts them per mesh (see :func:`loosefit.sim.blender.cloth_settings` and
+:func:`loosefit.sim.newton.material`). The three
 parameters varied by the VirtualBones paper map onto ``bending`` (bending stiffness), ``density``
 (mass density) and ``time_scale``.
 """
@@ -35,9 +36,11 @@ class SimParams:
             velocity along a spring decays at this rate).
         bending_damping: damping of folding velocities, 1/s.
         air_drag: linear air drag per unit area, N*s/m^3.
-        quality: solver steps per frame (the fewest, with ``adaptive_quality``).
+        quality: solver steps per frame (the fewest, with ``adaptive_quality``); Newton: substeps.
         adaptive_quality: raise the steps per frame so that the body near the garment moves at most
-            two collision distances per step (:func:`loosefit.sim.collider.steps_per_frame`).
+            two collision distances per step with Blender, 0.75 with Newton (whose contact lets a
+            body triangle that passes a cloth vertex within one step through;
+            :func:`loosefit.sim.collider.steps_per_frame`).
         collision_quality: collision iterations per solver step.
         collision_distance: distance kept between cloth and body, m.
         friction: cloth-body friction (Blender's 0-80 scale).
