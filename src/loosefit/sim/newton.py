@@ -208,7 +208,7 @@ def run_cloth(
         particle_radius=params.collision_distance,
     )
     builder.add_cloth_mesh(
-        **cloth_args, vertices=collider_frames[0].tolist(), indices=(collider_faces + 0).ravel().tolist(),
+        **cloth_args, vertices=collider_frames[0].tolist(), indices=collider_faces.ravel().tolist(),
         density=0.0, tri_ke=0.0, tri_ka=0.0, tri_kd=0.0, edge_ke=0.0, edge_kd=0.0,
         particle_radius=params.collision_distance,
     )
