@@ -11,6 +11,7 @@ import pytest
 
 from loosefit.errors import InputError
 from loosefit.sim.params import SimParams
+from loosefit.sim.plan import load_plan
 from loosefit.sim.sequence import backend_run_cloth
 from tests.sim.test_backends import FAR_COLLIDER, hang, run_box, strip
 
@@ -85,3 +86,17 @@ def test_newton_missing_is_an_input_error(monkeypatch):
     collider = np.repeat(FAR_COLLIDER[None], 2, 0)
     with pytest.raises(InputError, match="pip install newton==1.8.0"):
         backend_run_cloth("newton")(faces, pinned, garment, collider, np.array([[0, 1, 2]]), SimParams(), 30.0)
+
+
+def test_plan_hash_names_the_backend_only_when_it_is_not_blender(tmp_path):
+    # Stores simulated before SimParams had a backend keep their hashes (no re-simulation on
+    # resume); a Newton parameter set is another sequence.
+    from tests.sim.test_plan import PLAN, _write
+
+    def hashes(params):
+        plan = load_plan(_write(tmp_path, {**PLAN, "sim_params": {"default": params, "stiff": {"bending": 1e-4}}}))
+        return {job.id: job.hash for job in plan.jobs}["skirt+tall+walk+default"]
+
+    assert hashes({}) == hashes({"backend": "blender"})
+    if importlib.util.find_spec("newton") is not None:
+        assert hashes({}) != hashes({"backend": "newton"})
