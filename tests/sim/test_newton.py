@@ -100,3 +100,32 @@ def test_plan_hash_names_the_backend_only_when_it_is_not_blender(tmp_path):
     assert hashes({}) == hashes({"backend": "blender"})
     if importlib.util.find_spec("newton") is not None:
         assert hashes({}) != hashes({"backend": "newton"})
+
+
+def test_simulate_sequence_dispatches_to_the_backend_with_its_step_rule(monkeypatch, body, skirt):
+    # The one code path (pre-roll, collider, gate) hands the backend its own substep count.
+    import loosefit.sim.blender
+    import loosefit.sim.newton
+    from loosefit.sim import simulate_sequence
+    from loosefit.sim.collider import NEWTON_TRAVEL_PER_STEP, TRAVEL_PER_STEP
+    from tests.sim.conftest import walk
+
+    calls = {}
+
+    def fake(name):
+        def run_cloth(faces, pinned, garment_frames, collider, collider_faces, params, fps, workdir=None):
+            calls[name] = params.quality
+            return garment_frames.copy(), np.full(len(garment_frames), 0.001)
+        return run_cloth
+
+    monkeypatch.setattr(loosefit.sim.newton, "run_cloth", fake("newton"))
+    monkeypatch.setattr(loosefit.sim.blender, "run_cloth", fake("blender"))
+    motion = walk(body, 20)
+    for backend in ("blender", "newton"):
+        params = SimParams(preroll=0.3, quality=1, backend=backend)
+        result = simulate_sequence(skirt, body, motion, params)
+        assert result.stats["quality"] == calls[backend]
+    # Same body travel, so the step counts are in the ratio of the allowed travel per step (up to rounding).
+    ratio = TRAVEL_PER_STEP / NEWTON_TRAVEL_PER_STEP
+    assert calls["newton"] == pytest.approx(ratio * calls["blender"], abs=ratio + 1)
+    assert calls["blender"] > 1
