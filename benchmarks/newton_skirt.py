@@ -2,8 +2,8 @@
 
 A measurement, not a test. Run from the project root:
   OMP_NUM_THREADS=1 .venv/bin/python benchmarks/newton_skirt.py --seconds 2 [--noise] [--set KEY=VALUE ...]
-Writes ``benchmarks/results/newton-skirt-walk.json``, the simulated sequence as ``.npz`` and a PNG
-of its last frame.
+Writes ``benchmarks/results/newton-skirt-walk.json``, the simulated sequence as ``/tmp/NAME.npz``
+and a PNG of one frame (``--png``).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ def main() -> None:
     ap.add_argument("--noise", action="store_true", help="also run with 10 um start noise and report the spread")
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--name", default="newton-skirt-walk")
+    ap.add_argument("--png", type=int, default=45, help="frame to render to results/NAME.png (-1: none)")
     a = ap.parse_args()
 
     plan = load_plan(a.plan)
@@ -56,6 +57,11 @@ def main() -> None:
     npz = Path("/tmp") / f"{a.name}.npz"
     save_result(npz, result, garment.faces, body.faces, motion.fps)
     report["sequence"] = str(npz)
+    if 0 <= a.png < len(result.verts):
+        from loosefit.viz.inputs import load_panels
+        from loosefit.viz.render import render_frames, save_png
+
+        save_png(RESULTS / f"{a.name}.png", render_frames(load_panels(npz), size=(800, 600), frames=[a.png])[0])
 
     if a.noise:
         noisy = dataclasses.replace(garment, verts=(garment.verts + np.random.default_rng(0).normal(
