@@ -1,4 +1,4 @@
-"""Ground-truth cloth simulation with Blender (bpy): parameters, one sequence, plans and parallel runs."""
+"""Ground-truth cloth simulation (Blender through bpy, or NVIDIA Newton): parameters, one sequence, plans and parallel runs."""
 
 from loosefit.sim.params import SimParams
 from loosefit.sim.quality import QualityGate

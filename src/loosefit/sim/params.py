@@ -1,7 +1,8 @@
 """Cloth simulation parameters: a typed config in physical units, loaded from YAML with overrides.
 
-Fabric properties are physical and independent of the garment's mesh resolution; the Blender
-backend converts them per mesh (see :func:`loosefit.sim.blender.cloth_settings`). The three
+Fabric properties are physical and independent of the garment's mesh resolution; each backend
+converts them per mesh (see :func:`loosefit.sim.blender.cloth_settings` and
+:func:`loosefit.sim.newton.material`). The three
 parameters varied by the VirtualBones paper map onto ``bending`` (bending stiffness), ``density``
 (mass density) and ``time_scale``.
 """
@@ -18,6 +19,7 @@ import yaml
 from loosefit.errors import InputError
 
 COLLIDERS = ("proxy", "full")
+BACKENDS = ("blender", "newton")
 
 
 @dataclass(frozen=True)
@@ -42,9 +44,11 @@ class SimParams:
         air_drag: linear air drag per unit area, N*s/m^3. Air's quadratic drag on cloth moving at
             about 1 m/s, linearised, is about 1 (air density 1.2 kg/m^3, drag coefficient about 1). It is
             also what makes the swing repeatable: at 0.05 the start-state spread was 37 mm, at 1.0 16 mm.
-        quality: solver steps per frame (the fewest, with ``adaptive_quality``).
+        quality: solver steps per frame (the fewest, with ``adaptive_quality``); Newton: substeps.
         adaptive_quality: raise the steps per frame so that the body near the garment moves at most
-            two collision distances per step (:func:`loosefit.sim.collider.steps_per_frame`).
+            two collision distances per step with Blender, 0.75 with Newton (whose contact lets a
+            body triangle that passes a cloth vertex within one step through;
+            :func:`loosefit.sim.collider.steps_per_frame`).
         collision_quality: collision iterations per solver step.
         collision_distance: distance kept between cloth and body, m.
         friction: cloth-body friction (Blender's 0-80 scale). Kept low: with the other defaults and the
@@ -58,6 +62,8 @@ class SimParams:
         collider: body mesh Blender collides with: ``"proxy"`` (1,229 vertices inflated to enclose
             the full body, fast; :mod:`loosefit.sim.collider`) or ``"full"``.
         gravity: m/s^2, along -Z.
+        backend: the cloth simulator: ``"blender"`` (:mod:`loosefit.sim.blender`) or ``"newton"``
+            (NVIDIA Newton's VBD solver, :mod:`loosefit.sim.newton`; needs ``pip install newton``).
     """
 
     density: float = 0.15
@@ -79,6 +85,7 @@ class SimParams:
     preroll: float = 1.0
     collider: str = "proxy"
     gravity: float = 9.81
+    backend: str = "blender"
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -104,6 +111,12 @@ class SimParams:
                 raise InputError(f"simulation parameter {name} must be > 0, got {getattr(self, name)}")
         if self.collider not in COLLIDERS:
             raise InputError(f"simulation parameter collider={self.collider!r} must be one of {list(COLLIDERS)}")
+        if self.backend not in BACKENDS:
+            raise InputError(f"simulation parameter backend={self.backend!r} must be one of {list(BACKENDS)}")
+        if self.backend == "newton":
+            from loosefit.sim.newton import check_installed
+
+            check_installed()
 
     @classmethod
     def names(cls) -> list[str]:

@@ -248,6 +248,8 @@ def _expand(plan: Plan, groups, split: dict) -> list[SequenceJob]:
                 "sim_params": plan.sim_params[params].to_dict(),
                 "gate": vars(plan.gate),
             }
+            if content["sim_params"]["backend"] == "blender":
+                del content["sim_params"]["backend"]  # sequences stored before there were backends stay valid
             digest = hashlib.sha256(json.dumps(content, sort_keys=True, default=str).encode()).hexdigest()[:16]
             jobs[job_id] = SequenceJob(job_id, garment, shape, motion, params, job_split, digest)
     if not jobs:

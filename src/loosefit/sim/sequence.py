@@ -1,4 +1,4 @@
-"""Simulate one garment on one body motion: pre-roll, Blender cloth, quality measures and gate."""
+"""Simulate one garment on one body motion: pre-roll, cloth simulation (Blender or Newton), quality measures and gate."""
 
 from __future__ import annotations
 
@@ -16,9 +16,8 @@ from loosefit.errors import InputError
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.motion.motion import Motion
 from loosefit.sim.attach import garment_weights, skin_garment
-from loosefit.sim.blender import run_cloth
-from loosefit.sim.collider import collider_frames, steps_per_frame
-from loosefit.sim.params import SimParams
+from loosefit.sim.collider import NEWTON_TRAVEL_PER_STEP, TRAVEL_PER_STEP, collider_frames, steps_per_frame
+from loosefit.sim.params import BACKENDS, SimParams
 from loosefit.sim.preroll import preroll_frames, with_preroll
 from loosefit.sim.quality import QualityGate, measure
 
@@ -42,6 +41,17 @@ class SimResult:
     status: str = "ok"
     reason: str = ""
     body_verts: np.ndarray = field(default=None, repr=False)
+
+
+def backend_run_cloth(backend: str):
+    """The ``run_cloth`` function of a backend (``"blender"`` or ``"newton"``); each imports its simulator lazily."""
+    if backend == "newton":
+        from loosefit.sim.newton import run_cloth
+    elif backend == "blender":
+        from loosefit.sim.blender import run_cloth
+    else:
+        raise InputError(f"unknown simulation backend {backend!r}; known: {list(BACKENDS)}")
+    return run_cloth
 
 
 def simulate_sequence(
@@ -86,10 +96,13 @@ def simulate_sequence(
     collider, collider_faces = collider_frames(body, full, shape, params.collider)
     garment_frames = skin_garment(rest, garment_weights(rest, body, shape), body, full, shape)
     if params.adaptive_quality:
-        params = dataclasses.replace(
-            params, quality=steps_per_frame(collider, garment_frames[0], params.collision_distance, params.quality)
-        )
-    verts, seconds = run_cloth(faces, pinned, garment_frames, collider, collider_faces, params, motion.fps)
+        # Newton's contact needs smaller body steps than Blender's (loosefit.sim.collider).
+        travel = NEWTON_TRAVEL_PER_STEP if params.backend == "newton" else TRAVEL_PER_STEP
+        steps = steps_per_frame(collider, garment_frames[0], params.collision_distance, params.quality, travel_per_step=travel)
+        params = dataclasses.replace(params, quality=steps)
+    verts, seconds = backend_run_cloth(params.backend)(
+        faces, pinned, garment_frames, collider, collider_faces, params, motion.fps
+    )
     verts = verts[lead:]
     body_verts = body.pose(motion, shape).verts
     stats = measure(verts, rest, faces, pinned, body_verts, body.faces, body.rest_verts(shape), motion.fps)
