@@ -31,8 +31,8 @@ area per vertex and ``h`` its mean edge length:
   ``E = 4 mu (mu + lambda) / (2 mu + lambda)``, which is set to ``tension``: a hanging strip
   stretches as ``rho g L^2 / (2 tension)``, as with Blender's springs. Poisson's ratio is
   ``nu = clip(tension / (2 shear) - 1, 0, NU_MAX)``: an isotropic sheet has shear stiffness
-  ``E / (2 (1 + nu))``, so a ``shear`` below ``tension / (2 (1 + NU_MAX))`` (woven fabric, and
-  the defaults) cannot be honoured and the sheet shears at ``E / (2 (1 + NU_MAX))``.
+  ``E / (2 (1 + nu))``, so a ``shear`` below ``tension / (2 (1 + NU_MAX))`` (stiff woven
+  fabric) cannot be honoured and the sheet shears at ``E / (2 (1 + NU_MAX))``.
   ``compression`` is not used: the membrane resists compression with the same modulus at
   small strain (cloth buckles out of plane long before, which bending decides).
 - bending: each hinge stores ``ke`` with energy ``ke * l * theta^2 / 2`` (``l`` its length,
