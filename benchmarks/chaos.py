@@ -169,21 +169,26 @@ def main() -> None:
         base_futures = {k: pool.submit(simulate, t) for k, t in bases.items()}
         probe_futures = {k: {name: pool.submit(simulate, t) for name, t in
                              probe_tasks(bases[k], probes, seeds, args.sigma, degrees).items()} for k in bases}
-        base_runs = {k: f.result() for k, f in base_futures.items()}
+        base_runs = {k: _outcome(f) for k, f in base_futures.items()}
         if "steps" in probes:  # N is the base's own (adaptive) step count
             for k, run in base_runs.items():
-                doubled = dataclasses.replace(bases[k], quality=2 * run["stats"]["quality"])
-                probe_futures[k]["steps"] = pool.submit(simulate, doubled)
-        probe_runs = {k: {name: f.result() for name, f in fs.items()} for k, fs in probe_futures.items()}
+                if "error" not in run:
+                    doubled = dataclasses.replace(bases[k], quality=2 * run["stats"]["quality"])
+                    probe_futures[k]["steps"] = pool.submit(simulate, doubled)
+        probe_runs = {k: {name: _outcome(f) for name, f in fs.items()} for k, fs in probe_futures.items()}
 
     figures, runs = {}, {}
     for (g, m), base in base_runs.items():
         key = f"{g}/{m}"
         runs[f"{key}/base"] = _run_summary(base)
+        if "error" in base:
+            continue
         if args.save is not None:
             _save(Path(args.save) / f"{g}-{m}.npz", base)
         for name, run in probe_runs[(g, m)].items():
             runs[f"{key}/{name}"] = _run_summary(run)
+            if "error" in run:
+                continue
             for measure, value in difference(run["verts"], base["verts"], base["below_knees"], base["fps"]).items():
                 figures[f"{key}/{name}/{measure}"] = value
             if name == "repeat":
@@ -199,7 +204,17 @@ def main() -> None:
     print_table(figures, garments, motions)
 
 
+def _outcome(future) -> dict:
+    """A finished run, or ``{"error": ...}`` when it raised: one crashed run must not lose the others."""
+    try:
+        return future.result()
+    except Exception as e:  # noqa: BLE001 - reported in the results, the other runs go on
+        return {"error": f"{type(e).__name__}: {e}"}
+
+
 def _run_summary(run: dict) -> dict:
+    if "error" in run:
+        return {"status": "crashed", "reason": run["error"]}
     keys = ("quality", "ms_per_frame", "penetration", "penetration_depth", "max_strain", "strain_p99", "pinned_drift")
     return {"status": run["status"], "reason": run["reason"],
             **{k: run["stats"][k] for k in keys if k in run["stats"]}}
