@@ -24,6 +24,26 @@ from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
 
 
+def load_run(run_dir: str | Path, checkpoint: str = "last"):
+    """The trained model of a run folder: ``(meta (model.json), model with the checkpoint's weights, config)``.
+
+    ``checkpoint``: ``"last"``, ``"best"`` (falls back to ``"last"``) or a checkpoint path.
+    """
+    run = RunDir(run_dir)
+    meta_path = run.path / MODEL_META
+    if not meta_path.is_file():
+        raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
+    meta = json.loads(meta_path.read_text())
+    cls = model_class(meta["method"])
+    cfg = load_config(run_config_class(meta["method"]), run.path / METHOD_CONFIG)
+    model = cls(meta["sizes"], cfg.model)
+    path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
+    if checkpoint == "best" and not path.is_file():
+        path = run.last_checkpoint
+    load_weights(model, path)
+    return meta, model, cfg
+
+
 class Animator:
     """A trained garment model ready to animate.
 
@@ -41,21 +61,11 @@ class Animator:
 
     def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1, garment=None,
                  body=None):
-        run = RunDir(run_dir)
-        meta_path = run.path / MODEL_META
-        if not meta_path.is_file():
-            raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
-        self.meta = json.loads(meta_path.read_text())
-        cls = model_class(self.meta["method"])
+        self.meta, model, cfg = load_run(run_dir, checkpoint)
+        cls = type(model)
         if getattr(cls, "static", False):
             raise InputError(f"{self.meta['method']} animates frame by frame: use loosefit.animate_any.AnyGarmentAnimator",
-                             run.path)
-        cfg = load_config(run_config_class(self.meta["method"]), run.path / METHOD_CONFIG)
-        model = cls(self.meta["sizes"], cfg.model)
-        path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
-        if checkpoint == "best" and not path.is_file():
-            path = run.last_checkpoint
-        load_weights(model, path)
+                             run_dir)
         if getattr(cls, "multi_garment", False):
             model = _bind_garment(model, cfg.model, garment, body)
         elif garment is not None:

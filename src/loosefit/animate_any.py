@@ -14,15 +14,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from loosefit.config import load_config
+from loosefit.animate import load_run
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import collate_frames, frame_items
 from loosefit.models.fitgar_inputs import GarmentBodyPair
 from loosefit.models.motion_features import to_world
-from loosefit.models.registry import model_class, run_config_class
+from loosefit.models.registry import model_class
 from loosefit.motion.motion import Motion
-from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
-from loosefit.train.run import RunDir, load_weights
+from loosefit.train.pipeline import MODEL_META
 
 #: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (Eq. 5).
 OUTPUTS = ("verts", "coarse")
@@ -51,20 +50,9 @@ class AnyGarmentAnimator:
 
     def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1,
                  frames_per_pass: int = 16):
-        run = RunDir(run_dir)
-        meta_path = run.path / MODEL_META
-        if not meta_path.is_file():
-            raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
-        self.meta = json.loads(meta_path.read_text())
-        cls = model_class(self.meta["method"])
-        if not getattr(cls, "static", False):
-            raise InputError(f"{self.meta['method']} animates along a motion: use loosefit.animate.Animator", run.path)
-        cfg = load_config(run_config_class(self.meta["method"]), run.path / METHOD_CONFIG)
-        model = cls(self.meta["sizes"], cfg.model)
-        path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
-        if checkpoint == "best" and not path.is_file():
-            path = run.last_checkpoint
-        load_weights(model, path)
+        self.meta, model, _ = load_run(run_dir, checkpoint)
+        if not getattr(type(model), "static", False):
+            raise InputError(f"{self.meta['method']} animates along a motion: use loosefit.animate.Animator", run_dir)
         self._use(model, threads, frames_per_pass)
 
     @classmethod
