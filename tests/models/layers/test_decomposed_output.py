@@ -1,4 +1,4 @@
-"""Output reconstruction (FitGar Sec. 4.2, Eq. 4) against its closed form."""
+"""Output reconstruction (FitGar Sec. 4.2, FitGar Eq. 4) against its closed form."""
 
 import math
 
