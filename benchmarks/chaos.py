@@ -45,8 +45,6 @@ import numpy as np  # noqa: E402
 
 from loosefit.errors import InputError  # noqa: E402
 
-#: Joints whose rest height, averaged, is the knee line.
-KNEES = ("LeftLeg", "RightLeg")
 #: The joint the nudge probe turns.
 NUDGE_JOINT = "LeftArm"
 PROBES = ("noise", "steps", "nudge", "repeat")
@@ -69,7 +67,7 @@ class Task:
 
 def simulate(task: Task) -> dict:
     """Run ``task`` (in a worker process); returns the garment ``verts (T, V, 3)`` and the run's stats."""
-    from accuracy import perturb_joint
+    from accuracy import knee_height, perturb_joint
 
     from loosefit.body import AnnyShape
     from loosefit.sim import SimParams, simulate_sequence
@@ -91,9 +89,8 @@ def simulate(task: Task) -> dict:
     if task.quality is not None:
         params = dataclasses.replace(params, quality=task.quality, adaptive_quality=False)
     result = simulate_sequence(garment, body, motion, params)
-    knee = float(np.mean([body.rest_joints()[body.joint_names.index(k)][2] for k in KNEES]))
     return {"verts": result.verts, "status": result.status, "reason": result.reason, "stats": result.stats,
-            "below_knees": garment.verts[:, 2] < knee, "fps": motion.fps, "pid": os.getpid(),
+            "below_knees": garment.verts[:, 2] < knee_height(body), "fps": motion.fps, "pid": os.getpid(),
             "faces": garment.faces, "body_verts": result.body_verts, "body_faces": body.faces}
 
 

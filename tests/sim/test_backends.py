@@ -7,7 +7,7 @@ import importlib.util
 import numpy as np
 import pytest
 
-from loosefit.sim.collider import NEWTON_TRAVEL_PER_STEP, TRAVEL_PER_STEP, steps_per_frame
+from loosefit.sim.collider import steps_per_frame, travel_per_step
 from loosefit.sim.params import SimParams
 from loosefit.sim.sequence import backend_run_cloth
 
@@ -113,8 +113,8 @@ def run_box(backend, quality):
 def test_cloth_dropped_on_a_moving_box_stays_outside(backend):
     verts, _, collider, _, centre = box_scene()
     params = SimParams()
-    travel = NEWTON_TRAVEL_PER_STEP if backend == "newton" else TRAVEL_PER_STEP
-    steps = steps_per_frame(collider, verts, params.collision_distance, params.quality, travel_per_step=travel)
+    steps = steps_per_frame(collider, verts, params.collision_distance, params.quality,
+                            travel_per_step=travel_per_step(backend))
     # The box moves hypot(0.4, 0.2) / 30 = 14.9 mm per frame: 5 steps of at most 3 mm for Newton;
     # Blender's 2 steps of 8 mm are raised to the minimum, quality = 5.
     assert steps == 5

@@ -64,6 +64,13 @@ TRAVEL_PER_STEP = 2.0
 #: (tests/sim/test_backends.py): 0.93 collision distances per step kept the cloth out, 1.24 let
 #: the box through; 0.75 leaves a margin.
 NEWTON_TRAVEL_PER_STEP = 0.75
+
+
+def travel_per_step(backend: str) -> float:
+    """Body travel allowed per solver step, in collision distances, for a simulation backend."""
+    return NEWTON_TRAVEL_PER_STEP if backend == "newton" else TRAVEL_PER_STEP
+
+
 #: Never more solver steps per frame than this.
 MAX_STEPS = 64
 

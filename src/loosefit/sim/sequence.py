@@ -16,7 +16,7 @@ from loosefit.errors import InputError
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.motion.motion import Motion
 from loosefit.sim.attach import garment_weights, skin_garment
-from loosefit.sim.collider import NEWTON_TRAVEL_PER_STEP, TRAVEL_PER_STEP, collider_frames, steps_per_frame
+from loosefit.sim.collider import collider_frames, steps_per_frame, travel_per_step
 from loosefit.sim.params import BACKENDS, SimParams
 from loosefit.sim.preroll import preroll_frames, with_preroll
 from loosefit.sim.quality import QualityGate, measure
@@ -97,8 +97,8 @@ def simulate_sequence(
     garment_frames = skin_garment(rest, garment_weights(rest, body, shape), body, full, shape)
     if params.adaptive_quality:
         # Newton's contact needs smaller body steps than Blender's (loosefit.sim.collider).
-        travel = NEWTON_TRAVEL_PER_STEP if params.backend == "newton" else TRAVEL_PER_STEP
-        steps = steps_per_frame(collider, garment_frames[0], params.collision_distance, params.quality, travel_per_step=travel)
+        steps = steps_per_frame(collider, garment_frames[0], params.collision_distance, params.quality,
+                                travel_per_step=travel_per_step(params.backend))
         params = dataclasses.replace(params, quality=steps)
     verts, seconds = backend_run_cloth(params.backend)(
         faces, pinned, garment_frames, collider, collider_faces, params, motion.fps
