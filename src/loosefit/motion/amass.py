@@ -24,14 +24,9 @@ from loosefit.errors import InputError
 from loosefit.geometry.lbs import forward_kinematics
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from loosefit.motion.motion import DEFAULT_FPS, Motion
-from loosefit.motion.retarget import (
-    SourceAnimation,
-    TargetRig,
-    builtin_joint_maps,
-    resolve_joint_map,
-    retarget,
-    to_motion,
-)
+from loosefit.motion.joint_map import builtin_joint_maps, resolve_joint_map
+from loosefit.motion.retarget import SourceAnimation, retarget, to_motion
+from loosefit.motion.rig import TargetRig
 from loosefit.paths import atomic_path
 
 _BODY = (

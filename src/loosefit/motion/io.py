@@ -11,7 +11,7 @@ from loosefit.errors import InputError
 from loosefit.motion.amass import import_amass
 from loosefit.motion.bvh import import_bvh
 from loosefit.motion.motion import DEFAULT_FPS, Motion
-from loosefit.motion.retarget import JointMap
+from loosefit.motion.joint_map import JointMap
 
 
 def load_motion(path: str | Path, body, joint_map: JointMap | str | Path | None = None, fps: float = DEFAULT_FPS) -> Motion:
