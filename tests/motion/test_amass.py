@@ -67,7 +67,7 @@ def test_frame_rate_is_resampled(body, tmp_path):
     "arrays,message",
     [
         ({"trans": np.zeros((3, 3)), "mocap_framerate": 30.0}, "missing arrays ['poses']"),
-        ({"poses": np.zeros((3, 156)), "trans": np.zeros((3, 3))}, "missing arrays ['mocap_framerate']"),
+        ({"poses": np.zeros((3, 156)), "trans": np.zeros((3, 3))}, "no frame rate"),
         ({"poses": np.zeros((3, 100)), "trans": np.zeros((3, 3)), "mocap_framerate": 30.0}, "poses must have shape"),
         ({"poses": np.zeros((3, 156)), "trans": np.zeros((2, 3)), "mocap_framerate": 30.0}, "trans must have shape (3, 3)"),
         ({"poses": np.full((3, 156), np.nan), "trans": np.zeros((3, 3)), "mocap_framerate": 30.0}, "NaN"),

@@ -21,6 +21,13 @@ from loosefit.motion.axes import parse_axis
 from loosefit.motion.rig import TargetRig
 
 
+#: The keys a joint map YAML may have.
+MAP_KEYS = ("name", "target_rig", "joints", "ignore", "optional", "calibration", "up", "front")
+#: What an error for a skeleton no map fits tells the user to do.
+WRITE_A_MAP = ("write a starting map with `loosefit motion map FILE.bvh --out MAP.yaml`, check it, and pass it "
+               "with --joint-map MAP.yaml")
+
+
 @dataclass(frozen=True)
 class JointMap:
     """Which source joint drives which target joint.
@@ -58,9 +65,9 @@ class JointMap:
         """Build and validate a map from its YAML content; errors name ``path``."""
         if not isinstance(data, dict):
             raise InputError("joint map must be a mapping with a 'joints' key", path)
-        unknown = sorted(set(data) - {"name", "target_rig", "joints", "ignore", "optional", "calibration", "up", "front"})
+        unknown = sorted(set(map(str, data)) - set(MAP_KEYS))
         if unknown:
-            raise InputError(f"joint map has unknown keys {unknown}", path)
+            raise InputError(f"joint map has unknown keys {unknown}; the allowed keys are {', '.join(MAP_KEYS)}", path)
         joints = data.get("joints")
         if not isinstance(joints, dict) or not joints:
             raise InputError("joint map needs a non-empty 'joints' mapping (target joint: source joint)", path)
@@ -166,9 +173,9 @@ def resolve_joint_map(
     if joint_map is None:
         candidates = [m for m in builtin_joint_maps().values() if m.target_rig == target.name]
         if not candidates:
-            raise InputError(f"no built-in joint map targets rig {target.name!r}; pass a joint map", path)
+            raise InputError(f"no built-in joint map targets rig {target.name!r}; {WRITE_A_MAP}", path)
         joint_map = max(candidates, key=lambda m: _coverage(m, source_names))
-        hint = " (the closest built-in map; for another skeleton pass a YAML joint map)"
+        hint = f" (the closest built-in map; for another skeleton {WRITE_A_MAP})"
     elif isinstance(joint_map, str) and joint_map in builtin_joint_maps():
         joint_map = builtin_joint_maps()[joint_map]
     elif not isinstance(joint_map, JointMap):

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from loosefit.errors import InputError
-from loosefit.geometry.lbs import topological_order
+from loosefit.geometry.lbs import forward_kinematics, topological_order
 from loosefit.geometry.rotations import (
     axis_angle_to_matrix,
     matrix_to_quaternion,
@@ -48,6 +48,8 @@ from loosefit.motion.rig import Roles, TargetRig
 _CALIBRATION_SIGMA = np.radians(15.0)
 # A bone shorter than this fraction of the leg length has no usable direction.
 _SHORT_BONE = 1e-3
+#: How far (metres) a retargeted motion's lowest foot joint at contact may be from its standing height.
+FEET_TOLERANCE = 0.12
 
 
 @dataclass
@@ -285,6 +287,35 @@ def retarget(
     parents = target.parents
     local[:, parents >= 0] = np.swapaxes(W[:, parents[parents >= 0]], -1, -2) @ W[:, parents >= 0]
     return local, _root_positions(solver, source, ref_pos[0] if calibration == "rest" else None)
+
+
+def check_feet_on_floor(local: np.ndarray, root: np.ndarray, target: TargetRig, path: Path | None = None,
+                        tolerance: float = FEET_TOLERANCE) -> float:
+    """Check that a retargeted motion stands on the floor; return its foot height error, metres.
+
+    The lowest foot joint (:attr:`Roles.feet`) of each frame, at contact (5th percentile over the
+    frames, so jumps and steps do not count), must be within ``tolerance`` of its height when the rig
+    stands in its rest pose on the floor.
+
+    Args:
+        local: ``(T, J, 3, 3)`` local rotations of ``target``'s joints.
+        root: ``(T, 3)`` root joint positions, metres.
+
+    Raises:
+        InputError: naming ``path``, with how far the feet are above or below the floor.
+    """
+    up = np.asarray(target.roles.up, np.float64)
+    feet = [target.joint_names.index(n) for n in target.roles.feet]
+    with torch.no_grad():
+        world = forward_kinematics(torch.from_numpy(local), torch.from_numpy(np.asarray(root, np.float64)),
+                                   torch.from_numpy(target.rest), target.parents)
+    contact = float(np.percentile((world[:, feet, :3, 3].numpy() @ up).min(1), 5))
+    error = contact - float((target.rest[feet] @ up).min())
+    if abs(error) > tolerance:
+        where = "above" if error > 0 else "below"
+        raise InputError(f"the imported body's feet are {abs(error):.2f} m {where} the floor where they touch it "
+                         f"(more than {tolerance:g} m): the file's root translation does not fit its skeleton", path)
+    return error
 
 
 def _calibrate(solver: _Solver, ref_pos: np.ndarray, ref_rot: np.ndarray) -> tuple[dict, np.ndarray]:
