@@ -79,3 +79,20 @@ def test_corrupt_run_record_is_a_clear_error(lbs_run, tmp_path, capsys, text, pr
     assert main(["animate", str(run), "--motion", str(motion), "--out", str(tmp_path / "a.npz")]) == 2
     err = capsys.readouterr().err
     assert problem in err and str(run / "model.json") in err and "Traceback" not in err
+
+
+def test_animate_npz_carries_the_posed_body_for_render(lbs_run, test_sequence, tmp_path, body):
+    """`loosefit animate --out x.npz` stores the body posed along the motion beside the garment, so
+    `loosefit render x.npz` draws both."""
+    from loosefit.cli import main
+    from loosefit.viz.inputs import load_panels
+
+    motion, _ = test_sequence
+    motion.save(tmp_path / "m.npz")
+    assert main(["animate", str(lbs_run), "--motion", str(tmp_path / "m.npz"), "--out", str(tmp_path / "a.npz")]) == 0
+    with np.load(tmp_path / "a.npz") as z:
+        assert np.abs(z["body_verts"] - body.pose(motion).verts).max() < 1e-6
+        assert np.array_equal(z["body_faces"], body.faces)
+        assert np.abs(z["verts"] - Animator(lbs_run).animate(motion)).max() < 1e-5
+    (panel,) = load_panels(tmp_path / "a.npz")
+    assert [t.label for t in panel] == ["body", "a"]

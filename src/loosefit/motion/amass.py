@@ -9,9 +9,9 @@ upright. SMPL adds ``trans`` to the *unrotated* rest pelvis: the pelvis is at ``
 Files from other sources differ: poses stored as ``(T, 52, 3)``, no frame rate (give it as
 ``source_fps``), a Y-up world (detected from the head-over-pelvis direction), or a ``trans`` that
 is only an offset with no floor in mind (the pelvis near the origin, the feet a metre below it).
-The floor is where the source's feet touch it: when the lowest foot joints (ankles, toes) at
-contact are not within :data:`FLOOR_TOLERANCE` of the file's ``z = 0``, the body is lowered or
-raised so they are, and the imported motion's feet are checked against the floor
+The floor is where the source's feet touch it: when the lowest foot joint (ankles, toes) at
+contact is not within :data:`FLOOR_TOLERANCE` of its standing height above the file's ``z = 0``,
+the body is lowered or raised so it is, and the imported motion's feet are checked against the floor
 (:func:`~loosefit.motion.retarget.check_feet_on_floor`).
 
 Without the SMPL model files the rest skeleton comes from :data:`SMPLH_REST`, approximate SMPL-H
@@ -135,7 +135,9 @@ def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS, source_fps: f
         world = forward_kinematics(local, torch.from_numpy(trans) + rest[0], rest, SMPLH_PARENTS).numpy()
     A = _world_axes(world[..., :3, 3])
     positions = world[..., :3, 3] @ A.T
-    positions[..., 2] -= source_floor(positions)
+    target = TargetRig.from_body(body)
+    feet = [target.joint_names.index(n) for n in target.roles.feet]
+    positions[..., 2] -= source_floor(positions, float(np.min(target.rest[feet] @ np.asarray(target.roles.up))))
     source = SourceAnimation(
         joint_names=list(SMPLH_NAMES),
         parents=SMPLH_PARENTS,
@@ -145,7 +147,6 @@ def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS, source_fps: f
         rest_positions=SMPLH_REST @ _Y_UP_TO_Z_UP.T,
         rest_rotations=np.broadcast_to(_Y_UP_TO_Z_UP, (len(SMPLH_NAMES), 3, 3)),
     )
-    target = TargetRig.from_body(body)
     resolved = resolve_joint_map(list(SMPLH_NAMES), SMPLH_PARENTS, target, builtin_joint_maps()["smplh"], path)
     local_t, root = retarget(source, target, resolved, calibration="rest", path=path)
     check_feet_on_floor(local_t, root, target, path)
@@ -159,12 +160,13 @@ def _world_axes(positions: np.ndarray) -> np.ndarray:
     return _Y_UP_TO_Z_UP if rise[1] > max(rise[2], 0.5) else np.eye(3)
 
 
-def source_floor(positions: np.ndarray) -> float:
+def source_floor(positions: np.ndarray, standing: float) -> float:
     """The floor height (metres) of SMPL-H world positions ``(T, 52, 3)``, Z up: ``0`` (the file's own
     floor) when the lowest foot joint at contact (5th percentile over frames) is within
-    :data:`FLOOR_TOLERANCE` of it, else that contact height."""
+    :data:`FLOOR_TOLERANCE` of ``standing`` (the height of the body's lowest foot joint when it stands
+    on the floor), else the height that puts it there."""
     contact = float(np.percentile(positions[:, _FEET, 2].min(1), 5))
-    return 0.0 if abs(contact) <= FLOOR_TOLERANCE else contact
+    return 0.0 if abs(contact - standing) <= FLOOR_TOLERANCE else contact - standing
 
 
 def _read(path: Path, source_fps: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
