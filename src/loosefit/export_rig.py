@@ -77,6 +77,9 @@ def garment_rig(run_dir: str | Path, motion: Motion, checkpoint: str = "last", t
     :mod:`loosefit.io.skinned_mesh`), so skinning reproduces the low-frequency prediction.
     """
     animator = Animator(run_dir, checkpoint=checkpoint, threads=threads)
+    if motion.num_joints != animator.num_joints:
+        raise InputError(f"motion {motion.name!r} has {motion.num_joints} joints, the run was trained on "
+                         f"{animator.num_joints}", run_dir)
     R, T = predict_bones(animator, motion)
     rest, weights, centres = _rig_buffers(animator.model)
     idx, val = dense_to_sparse(weights)
