@@ -152,10 +152,11 @@ class SkinnedMesh:
         parent = np.where(self.parents[:, None] >= 0, bind[np.maximum(self.parents, 0)], 0.0)
         return bind - parent
 
-    def world_transforms(self) -> np.ndarray:
-        """``(T, J, 4, 4)`` float64 world transforms ``G_j(t)`` of the joints."""
-        local = np.zeros((self.num_frames, self.num_joints, 4, 4))
-        local[..., :3, :3], local[..., :3, 3], local[..., 3, 3] = self.rotations, self.translations, 1.0
+    def world_transforms(self, frames=slice(None)) -> np.ndarray:
+        """``(T', J, 4, 4)`` float64 world transforms ``G_j(t)`` of the joints at ``frames`` (a slice or indices)."""
+        rotations, translations = self.rotations[frames], self.translations[frames]
+        local = np.zeros(rotations.shape[:2] + (4, 4))
+        local[..., :3, :3], local[..., :3, 3], local[..., 3, 3] = rotations, translations, 1.0
         world = np.empty_like(local)
         for j, p in enumerate(self.parents):
             world[:, j] = local[:, j] if p < 0 else world[:, p] @ local[:, j]
@@ -163,7 +164,7 @@ class SkinnedMesh:
 
     def skinning_transforms(self, frames=slice(None)) -> np.ndarray:
         """``(T', J, 3, 4)`` float64 ``G_j(t) [I | -b_j]`` of ``frames`` (a slice or indices): bind-pose points to frame ``t``."""
-        G = self.world_transforms()[frames][..., :3, :]
+        G = self.world_transforms(frames)[..., :3, :]
         out = G.copy()
         out[..., 3] = G[..., 3] - (G[..., :3, :3] @ self.bind_positions.astype(np.float64)[:, :, None])[..., 0]
         return out
