@@ -91,3 +91,14 @@ def test_bad_input_is_refused_and_nothing_written(tmp_path):
     with pytest.raises(InputError, match="rig.glb: no mesh to write"):
         write_skinned_glb(tmp_path / "rig.glb", [])
     assert list(tmp_path.iterdir()) == []
+
+
+def test_more_than_256_joints_use_short_indices(tmp_path):
+    mesh = random_skinned(seed=4, joints=300, influences=4, free=True, frames=2)
+    write_skinned_glb(tmp_path / "rig.glb", [mesh])
+    gltf = GLTF2.load_binary(tmp_path / "rig.glb")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert validate(gltf) == []
+    joints = _accessor(gltf, gltf.meshes[0].primitives[0].attributes.JOINTS_0)
+    assert joints.dtype == np.uint16 and np.array_equal(joints, mesh.weight_indices) and joints.max() > 255

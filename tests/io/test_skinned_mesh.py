@@ -95,3 +95,10 @@ def test_bad_meshes_are_refused(change, problem):
                                             "rotations", "translations", "weight_indices", "weight_values", "fps")}
     with pytest.raises(InputError, match=f"skinned mesh 'garment': .*{problem}"):
         SkinnedMesh(**{**fields, **change})
+
+
+def test_skinning_is_linear_in_the_weights():
+    mesh = random_skinned(seed=5)
+    limited = mesh.limited(3)
+    delta = limited.dense_weights() - mesh.dense_weights()
+    assert np.abs(mesh.skin(weights=delta) - (limited.skin() - mesh.skin())).max() < 1e-9

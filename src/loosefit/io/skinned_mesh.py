@@ -169,11 +169,23 @@ class SkinnedMesh:
         out[..., 3] = G[..., 3] - (G[..., :3, :3] @ self.bind_positions.astype(np.float64)[:, :, None])[..., 0]
         return out
 
-    def skin(self, frames=slice(None)) -> np.ndarray:
+    def dense_weights(self) -> np.ndarray:
+        """``(V, J)`` float64 skinning weights."""
+        W = np.zeros((len(self.rest_verts), self.num_joints))
+        np.add.at(W, (np.arange(len(W))[:, None], self.weight_indices), self.weight_values.astype(np.float64))
+        return W
+
+    def skin(self, frames=slice(None), weights: np.ndarray | None = None) -> np.ndarray:
         """``(T', V, 3)`` float64 skinned vertices of ``frames`` (a slice or indices; default all), by linear
-        blend skinning (module docstring). Memory: ``T' * V * K * 96`` bytes; skin long motions in slices."""
+        blend skinning (module docstring): the blended transforms are one dense product ``W A``.
+
+        ``weights``: dense ``(V, J)`` weights used instead of the mesh's (the difference of two weight sets
+        gives the difference of their skinned meshes). Memory: ``T' * V * 96`` bytes; skin long motions in slices.
+        """
         A = self.skinning_transforms(frames)  # (T', J, 3, 4)
-        w = self.weight_values.astype(np.float64)
-        blend = np.einsum("vk,tvkab->tvab", w, A[:, self.weight_indices])  # (T, V, 3, 4)
-        p = self.rest_verts.astype(np.float64)
-        return np.einsum("tvab,vb->tva", blend[..., :3], p) + blend[..., 3]
+        T, J = A.shape[:2]
+        W = self.dense_weights() if weights is None else np.asarray(weights, np.float64)
+        blend = (W @ A.transpose(1, 0, 2, 3).reshape(J, -1)).reshape(-1, T, 3, 4)  # (V, T', 3, 4)
+        p = self.rest_verts.astype(np.float64)[:, None, None]  # (V, 1, 1, 3)
+        skinned = blend[..., 0] * p[..., 0] + blend[..., 1] * p[..., 1] + blend[..., 2] * p[..., 2] + blend[..., 3]
+        return skinned.transpose(1, 0, 2)
