@@ -226,6 +226,23 @@ def cmd_animate(args):
         print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method})")
 
 
+def cmd_export_rig(args):
+    from loosefit.export_rig import export_rig
+    from loosefit.motion.io import load_motion
+
+    body = _body(args)
+    motion = load_motion(args.motion, body, joint_map=args.joint_map)
+    summary = export_rig(args.run, motion, args.out, body=None if args.no_body else body, influences=args.influences,
+                         checkpoint=args.checkpoint, threads=args.threads)
+    print(f"wrote {args.out}: {summary['bytes']} bytes, {summary['frames']} frames at {summary['fps']:g} fps, "
+          f"{args.influences} influences per vertex")
+    for name in ("garment", "body"):
+        if name in summary:
+            m = summary[name]
+            print(f"  {name}: {m['vertices']} vertices, {m['joints']} joints; {m['vertices_truncated']} vertices had more "
+                  f"influences: moved {m['rms_mm']:.2f} mm RMS, {m['max_mm']:.2f} mm at most")
+
+
 def cmd_demo(args):
     from loosefit.demo import run_demo
 
@@ -396,6 +413,19 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
                     "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
     sp.set_defaults(func=cmd_animate)
+
+    sp = sub.add_parser("export-rig", help="a virtualbones / jointnet garment as an engine-ready skinned rig "
+                        "(its virtual bones animated along a motion) with the skinned body: .glb or .usdc")
+    sp.add_argument("run", help="run folder written by loosefit train (virtualbones or jointnet)")
+    sp.add_argument("--motion", required=True, help="motion .npz / .bvh / AMASS .npz")
+    sp.add_argument("--joint-map", default=None, help="joint map for a BVH motion")
+    body_options(sp)
+    sp.add_argument("--out", required=True, help="dress.glb (skinned glTF) or dress.usdc / .usda (UsdSkel)")
+    sp.add_argument("--influences", type=int, choices=[4, 8], default=4, help="skinning weights kept per vertex")
+    sp.add_argument("--no-body", action="store_true", help="write the garment only")
+    sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
+    sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    sp.set_defaults(func=cmd_export_rig)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
     sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")
