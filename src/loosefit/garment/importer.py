@@ -31,6 +31,7 @@ from loosefit.garment.garment import Garment
 from loosefit.garment.landmarks import measure_body
 from loosefit.garment.mesh_checks import face_areas, face_components, mesh_report, nonmanifold_vertices, unique_edges
 from loosefit.garment.obj_io import read_obj
+from loosefit.garment.placement import place, to_z_up
 from loosefit.garment.templates import CLEARANCE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -155,35 +156,6 @@ def _unit_scale(verts: np.ndarray, unit: str | None, path) -> tuple[float, str]:
     return UNITS[unit], unit
 
 
-def _to_z_up(verts: np.ndarray, up: str) -> np.ndarray:
-    return verts if up == "z" else np.stack([verts[:, 0], -verts[:, 2], verts[:, 1]], 1)
-
-
-def _place(verts: np.ndarray, lm, height: float) -> tuple[np.ndarray, float]:
-    """Position ``verts`` on the body: centred over the body and slid vertically to the best
-    :func:`_fit_score`, unless where they are scores about as well. Returns the offset ``(3,)``
-    and its score."""
-    sample = verts[np.linspace(0, len(verts) - 1, min(len(verts), 600)).astype(int)]
-    stay = _fit_score(lm.sdf.query(sample), sample[:, 2])
-    lo, hi = verts.min(0), verts.max(0)
-    shift = np.array([-(lo[0] + hi[0]) / 2, lm.center_y - (lo[1] + hi[1]) / 2, -lo[2]])
-    best = (np.inf, 0.0)
-    for z in np.arange(0.0, height - (hi[2] - lo[2]) + 0.011, 0.01):
-        moved = sample + shift + [0.0, 0.0, z]
-        best = min(best, (_fit_score(lm.sdf.query(moved), moved[:, 2]), z))
-    if stay <= best[0] + 0.005:
-        return np.zeros(3), stay
-    return shift + [0.0, 0.0, best[1]], best[0]
-
-
-def _fit_score(dist: np.ndarray, z: np.ndarray) -> float:
-    """How badly points at heights ``z`` with body distances ``dist`` sit on the body, metres: a
-    garment rests on its top (waistband, shoulders), so the mean gap of its top 4 cm, plus
-    two metres times the fraction of points inside the body."""
-    top = z > z.max() - 0.04
-    return float(np.abs(dist[top]).mean() + 2.0 * (dist < 0).mean())
-
-
 def import_garment(
     path: str | Path, body: BodyModel, unit: str | None = None, up: str | None = None, clearance: float = CLEARANCE
 ) -> Garment:
@@ -217,21 +189,16 @@ def import_garment(
     scale, unit = _unit_scale(verts, unit, path)
     verts = verts * scale
     lm = measure_body(body)
-    height = float(lm.verts[:, 2].max())
     if up is not None and up not in ("y", "z"):
         raise InputError(f"up axis must be 'y' or 'z', got {up!r}", path)
-    fits = []
-    for axis in (up,) if up else ("z", "y"):
-        v = _to_z_up(verts, axis)
-        offset, score = _place(v, lm, height)
-        fits.append((score, axis, v + offset, offset))
-    _, up, verts, offset = min(fits, key=lambda fit: fit[0])
+    placement = place(verts, faces, lm, path, up)
+    verts = to_z_up(verts, placement.up) + placement.offset
     faces = orient_outward(verts, faces, lm.sdf)
     verts = push_out(verts, faces, lm.sdf, clearance)
     report = mesh_report(verts, faces)
     if not report.ok:
         raise InputError(f"mesh is still broken after repair: {report}", path)
     pinned = verts[:, 2] > verts[:, 2].max() - 0.03
-    params = {"source": str(path), "unit": unit, "up": up, "offset": np.round(offset, 6).tolist(), "repairs": repairs}
+    params = {"source": str(path), "unit": unit, **placement.as_dict(), "repairs": repairs}
     return Garment(verts=verts, faces=faces, pinned=pinned, kind="imported", params=params, name=path.stem)
 
