@@ -1,21 +1,20 @@
 """Importing a garment mesh from OBJ or PLY: validation and repair, unit and up-axis detection,
 alignment to the body and removal of initial body penetration.
 
-What is repaired silently (and counted in ``params["repairs"]``): duplicate vertices (merged),
-degenerate faces (repeated vertex or zero area), duplicate faces, unreferenced vertices,
-inconsistent face orientation (re-oriented), small loose pieces (under 2 % of the area: dropped).
+What is repaired (and counted in ``params["repairs"]``): duplicated vertices (welded within
+:data:`WELD` of the size: seams written as separate panels), degenerate faces (repeated vertex or
+zero area), sliver faces (height under 1e-3 of the longest edge), duplicate faces, non-manifold
+edges where three or more panels meet and pinched vertices (split into manifold fans,
+:mod:`loosefit.garment.seam_repair`), unreferenced vertices, inconsistent face orientation
+(re-oriented), small loose pieces (under 2 % of the area: dropped, such as a flap cut off by a
+split seam).
 What is an error (:class:`~loosefit.errors.InputError` naming the file): unreadable lines, face
-indices out of range, NaN or infinite coordinates, an empty mesh, non-manifold edges or vertices,
-a non-orientable surface, several large pieces.
+indices out of range, NaN or infinite coordinates, an empty mesh, a non-orientable surface,
+several large pieces, no plausible placement on the body.
 
 Units: the largest bounding-box side below 5 is metres, below 500 centimetres, else millimetres.
-Up axis: the mesh is tried Z-up as stored and Y-up turned to Z-up (``(x, y, z) -> (x, -z, y)``,
-which also turns a +Z front into loosefit's -Y front); each is placed on the body (below) and the
-better placement wins.
-Placement: a garment rests on its top (waistband or shoulders), so the score of a placement is the
-mean distance to the body of its top 4 cm plus a penalty for vertices inside the body. The mesh is
-centred over the body's root joint and slid vertically (1 cm steps) to the best score, unless it
-already scores within 5 mm of that where it is (a mesh made for this body keeps its position).
+Up axis, attachment (waistband, strapless top, shoulders, straps) and placement:
+:mod:`loosefit.garment.placement`.
 """
 
 from __future__ import annotations
@@ -29,12 +28,15 @@ from loosefit.errors import InputError
 from loosefit.garment.fitting import orient_outward, push_out
 from loosefit.garment.garment import Garment
 from loosefit.garment.landmarks import measure_body
-from loosefit.garment.mesh_checks import face_areas, face_components, mesh_report, nonmanifold_vertices, unique_edges
+from loosefit.garment.mesh_checks import face_areas, face_components, mesh_report, unique_edges
 from loosefit.garment.obj_io import read_obj
 from loosefit.garment.placement import place, to_z_up
+from loosefit.garment.seam_repair import slivers, split_nonmanifold, weld
 from loosefit.garment.templates import CLEARANCE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+#: Vertices closer than this fraction of the bounding-box diagonal are welded (0.17 mm on a 1.7 m dress).
+WELD = 1e-4
 
 
 def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -62,37 +64,21 @@ def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.n
         raise InputError(f"a face index is out of range 1..{len(verts)}", path)
     repairs = {}
     diag = float(np.linalg.norm(verts.max(0) - verts.min(0)))
-    # Merge vertices closer than a millionth of the size.
-    key = np.round(verts / max(diag * 1e-6, 1e-12)).astype(np.int64)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    repairs["merged_vertices"] = int(len(verts) - len(first))
-    order = np.argsort(first)  # keep the file's vertex order
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    verts, faces = verts[first[order]], rank[inverse.reshape(-1)[faces]]
+    verts, faces, repairs["merged_vertices"] = weld(verts, faces, WELD * diag)
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
     degenerate = repeated | (face_areas(verts, faces) <= (diag * 1e-7) ** 2)
     repairs["degenerate_faces"] = int(degenerate.sum())
     faces = faces[~degenerate]
+    thin = slivers(verts, faces)
+    repairs["sliver_faces"] = int(thin.sum())
+    faces = faces[~thin]
     _, first = np.unique(np.sort(faces, 1), axis=0, return_index=True)
     repairs["duplicate_faces"] = int(len(faces) - len(first))
     faces = faces[np.sort(first)]
     if len(faces) == 0:
         raise InputError("every face is degenerate", path)
-    edges, _, count = unique_edges(faces)
-    if (count > 2).any():
-        where = 0.5 * (verts[edges[count > 2, 0]] + verts[edges[count > 2, 1]])
-        raise InputError(
-            f"{int((count > 2).sum())} non-manifold edges (shared by more than 2 faces), near "
-            f"{np.round(where[:3], 3).tolist()}",
-            path,
-        )
-    pinch = nonmanifold_vertices(len(verts), faces)
-    if len(pinch):
-        raise InputError(
-            f"{len(pinch)} non-manifold vertices (surface pinched to a point), near {np.round(verts[pinch[:3]], 3).tolist()}",
-            path,
-        )
+    verts, faces, split = split_nonmanifold(verts, faces)
+    repairs.update(split)
     labels = face_components(faces)
     area = np.bincount(labels, weights=face_areas(verts, faces))
     if len(area[area > 0]) > 1:
@@ -100,7 +86,8 @@ def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.n
         if area[order[1:]].sum() > 0.02 * area.sum():
             raise InputError(
                 f"{np.count_nonzero(area)} separate pieces; the second largest has "
-                f"{100 * area[order[1]] / area.sum():.0f}% of the area (join them or keep one)",
+                f"{100 * area[order[1]] / area.sum():.0f}% of the area (join them or keep one)"
+                + (f", after splitting {split['nonmanifold_edges']} non-manifold edges" if split["nonmanifold_edges"] else ""),
                 path,
             )
         repairs["dropped_pieces"] = int(np.count_nonzero(area) - 1)
