@@ -156,11 +156,13 @@ def import_garment(
         clearance: vertices and edge midpoints closer to the body than this (metres) are pushed out.
 
     Returns:
-        A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, up axis, offset
-        and repairs. The vertices within 3 cm of the garment's top are pinned.
+        A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, the
+        placement (:meth:`loosefit.garment.placement.Placement.as_dict`: up axis, attachment,
+        offset, top height, top gap, inside fraction) and the repairs. The vertices within 3 cm of the garment's top are pinned.
 
     Raises:
-        InputError: the file is unreadable or broken beyond safe repair (see the module docstring).
+        InputError: the file is unreadable or broken beyond safe repair, or no placement on the
+            body is plausible (see the module docstring).
     """
     path = Path(path)
     if not path.is_file():
