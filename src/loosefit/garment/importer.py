@@ -12,7 +12,8 @@ What is an error (:class:`~loosefit.errors.InputError` naming the file): unreada
 indices out of range, NaN or infinite coordinates, an empty mesh, a non-orientable surface,
 several large pieces, no plausible placement on the body.
 
-Units: the largest bounding-box side below 5 is metres, below 500 centimetres, else millimetres.
+Units: each of metres, centimetres and millimetres that makes the garment's largest side
+between 0.15 and 2.5 m is tried (at most two of them can), and the better placement wins.
 Up axis, attachment (waistband, strapless top, shoulders, straps) and placement:
 :mod:`loosefit.garment.placement`.
 """
@@ -37,6 +38,8 @@ from loosefit.garment.templates import CLEARANCE
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 #: Vertices closer than this fraction of the bounding-box diagonal are welded (0.17 mm on a 1.7 m dress).
 WELD = 1e-4
+#: Plausible garment sizes (largest bounding-box side), m: they pick the file's unit.
+SIZE_RANGE = (0.15, 2.5)
 
 
 def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -134,13 +137,17 @@ def _orient(faces: np.ndarray, path) -> tuple[np.ndarray, int]:
     return out, int((flip == 1).sum())
 
 
-def _unit_scale(verts: np.ndarray, unit: str | None, path) -> tuple[float, str]:
-    if unit is None:
-        size = float((verts.max(0) - verts.min(0)).max())
-        unit = "m" if size < 5 else "cm" if size < 500 else "mm"
-    if unit not in UNITS:
-        raise InputError(f"unknown unit {unit!r}; use one of {list(UNITS)}", path)
-    return UNITS[unit], unit
+def _units(verts: np.ndarray, unit: str | None, path) -> list[str]:
+    """The units to try: ``unit`` when given, else those giving a garment size (largest
+    bounding-box side) between :data:`SIZE_RANGE` metres, else the closest one."""
+    if unit is not None:
+        if unit not in UNITS:
+            raise InputError(f"unknown unit {unit!r}; use one of {list(UNITS)}", path)
+        return [unit]
+    size = float((verts.max(0) - verts.min(0)).max())
+    lo, hi = SIZE_RANGE
+    fits = [u for u, s in UNITS.items() if lo <= size * s <= hi]
+    return fits or [min(UNITS, key=lambda u: abs(np.log(size * UNITS[u] / np.sqrt(lo * hi))))]
 
 
 def import_garment(
@@ -175,13 +182,20 @@ def import_garment(
     else:
         raise InputError(f"unsupported garment format {suffix!r}; use .obj or .ply", path)
     verts, faces, repairs = repair(verts, faces, path)
-    scale, unit = _unit_scale(verts, unit, path)
-    verts = verts * scale
+    units = _units(verts, unit, path)
     lm = measure_body(body)
     if up is not None and up not in ("y", "z"):
         raise InputError(f"up axis must be 'y' or 'z', got {up!r}", path)
-    placement = place(verts, faces, lm, path, up)
-    verts = to_z_up(verts, placement.up) + placement.offset
+    fits, refusals = [], []
+    for unit in units:
+        try:
+            fits.append((place(verts * UNITS[unit], faces, lm, path, up), unit))
+        except InputError as err:
+            refusals.append(f"as {unit}: {err.problem}" if len(units) > 1 else err.problem)
+    if not fits:
+        raise InputError("; ".join(refusals), path)
+    placement, unit = min(fits, key=lambda fit: fit[0].score)
+    verts = to_z_up(verts * UNITS[unit], placement.up) + placement.offset
     faces = orient_outward(verts, faces, lm.sdf)
     verts = push_out(verts, faces, lm.sdf, clearance)
     report = mesh_report(verts, faces)

@@ -2,9 +2,14 @@
 
 A garment hangs from one attachment: a **waistband** (skirt, trousers), a **strapless bodice**
 (the top edge around the chest), **shoulders** or **straps**. The attachment is read from the
-geometry of the garment's top 3 cm: a horizontal ring of near-vertical cloth is a waistband or a
-strapless chest line (``"ring"``); cloth lying over the top (mean ``|n_z| > 0.5``) rests on the
-shoulders (the top 10 cm in one piece) or on straps (in two pieces).
+geometry of the garment's top 3 cm: where it goes all around the garment's axis (all eight 45
+degree sectors) or is near-vertical cloth (area-weighted mean ``|n_z| <= 0.5``: a strapless top
+edge higher at the front than at the back) it is a ring, a waistband or a strapless chest line;
+otherwise cloth lies over the top and rests on the shoulders (the top 10 cm in one piece) or on
+straps (in two pieces). Measured ``|n_z|`` on the templates: 0.84-0.90 for shoulders and straps,
+0.51-0.55 for 1.5 cm straps, 0.19 for a strapless top, 0.44-0.71 for skirts (flare 0 to 45 degrees,
+all rings by the sector rule). Where the type read finds no plausible placement, the other
+(ring or hanging) is tried too.
 
 Up axis: a garment is a tube open at its hem, so the plane of its longest boundary loop (the hem)
 is horizontal. Its normal picks the file's up axis among Y and Z (the file's own sign is kept: a
@@ -17,9 +22,9 @@ body's landmarks (:mod:`loosefit.garment.landmarks`):
 * ring (waistband or strapless): from 18 cm below the natural waist to 15 cm above the armpits;
 * shoulders / straps: from 3 cm above the armpits to 12 cm above the neck joint.
 
-Within the window the garment is slid vertically and front-back (1 cm steps over +-4 cm; scored
-on 400 points), then around the best in 1 cm, 5 mm and 2 mm steps (all :data:`SAMPLES` points),
-scored by :func:`fit_score`: how uneven the gap to the body is over the garment's upper band (a
+Within the window the garment is slid vertically in 1 cm steps and front-back by -2, 0 and 2 cm
+(scored on 400 points), then around the best in 1 cm, 5 mm and 2 mm steps both ways (all
+:data:`SAMPLES` points). The score is :func:`fit_score`: how uneven the gap to the body is over the garment's upper band (a
 garment made for a body keeps an even gap there; moved up or down, one part comes closer and
 another moves away) plus penalties for cloth inside the body. The band is the top 4 cm for rings
 (a waistband hangs from its edge) and the top 10 cm for shoulders and straps. The mesh's
@@ -116,23 +121,25 @@ def detect_up(verts: np.ndarray, faces: np.ndarray) -> str | None:
 
 
 def attachment_type(verts: np.ndarray, faces: np.ndarray) -> str:
-    """``"ring"`` (waistband or strapless top), ``"shoulders"`` or ``"straps"`` from the faces of
-    the top 3 cm of Z-up ``verts (V, 3)`` (see the module docstring)."""
+    """``"ring"`` (waistband or strapless top), ``"shoulders"`` or ``"straps"`` from the top of
+    Z-up ``verts (V, 3)`` (see the module docstring)."""
     top = verts[:, 2] > verts[:, 2].max() - 0.03
+    upper = verts[verts[:, 2] > verts[:, 2].max() - 0.15, :2].mean(0)
+    angle = np.arctan2(verts[top, 1] - upper[1], verts[top, 0] - upper[0])
+    sectors = np.unique(np.floor((angle + np.pi) / (np.pi / 4)).astype(int) % 8)
+    if len(sectors) == 8:  # the top goes all around: a waistband or a flared top edge
+        return "ring"
     sel = faces[top[faces].all(1)]
     if len(sel) == 0:
         sel = faces[top[faces].any(1)]
     tri = verts[sel]
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area = np.linalg.norm(cross, axis=1)
-    nz = np.abs(cross[:, 2]) / np.maximum(area, 1e-20)
-    if (nz * area).sum() / max(area.sum(), 1e-20) <= 0.5:
-        return "ring"
+    if np.abs(cross[:, 2]).sum() <= 0.5 * np.linalg.norm(cross, axis=1).sum():
+        return "ring"  # near-vertical cloth at the top: a strapless top edge, higher at the front
     slab = faces[(verts[faces, 2] > verts[:, 2].max() - 0.10).all(1)]
     labels = face_components(slab)
     sizes = np.bincount(labels, weights=face_areas(verts, slab))
-    big = np.count_nonzero(sizes > 0.2 * sizes.max())
-    return "straps" if big >= 2 else "shoulders"
+    return "straps" if np.count_nonzero(sizes > 0.2 * sizes.max()) >= 2 else "shoulders"
 
 
 def top_windows(kind: str, lm: BodyLandmarks) -> tuple[float, float]:
@@ -172,7 +179,7 @@ def _search(sample: np.ndarray, lm: BodyLandmarks, window: tuple[float, float], 
         return fit_score(lm.sdf.query(moved), moved[:, 2], band)
 
     coarse = sample[:: max(1, len(sample) // 400)]
-    grid = [(score(dy, dz, coarse)[0], dy, dz) for dz in zs for dy in np.arange(-0.04, 0.0401, 0.01)]
+    grid = [(score(dy, dz, coarse)[0], dy, dz) for dz in zs for dy in (-0.02, 0.0, 0.02)]
     _, by, bz = min(grid)
     best = (np.inf, by, bz)
     for step in (0.01, 0.005, 0.002):  # refine: 5 mm then 2 mm steps around the best
@@ -206,9 +213,12 @@ def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str
     pick = np.linspace(0, len(verts) - 1, min(len(verts), SAMPLES)).astype(int)
     body_x = float(0.5 * (lm.joints["hip"][0][0] + lm.joints["hip"][1][0]))
     found, tried = [], []
+    attempts, fallback = [], False
     for axis in axes:
+        kind = attachment_type(to_z_up(verts, axis), faces)
+        attempts.append((axis, kind))
+    for axis, kind in attempts:
         v = to_z_up(verts, axis)
-        kind = attachment_type(v, faces)
         window = top_windows(kind, lm)
         lo, hi = v.min(0), v.max(0)
         top_band = v[v[:, 2] > hi[2] - 0.04]
@@ -232,6 +242,9 @@ def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str
                      f"{100 * gap:.1f} cm gap at the top")
         if inside <= MAX_INSIDE and gap <= MAX_TOP_GAP:
             found.append(Placement(axis, kind, offset, top_z, score, gap, inside))
+        elif len(tried) == len(attempts) and not found and not fallback:
+            fallback = True  # the first reading of the top found nothing: try the other one
+            attempts += [(a, "shoulders" if k == "ring" else "ring") for a, k in attempts]
     if not found:
         raise InputError(
             "no plausible placement on the body (at most "
