@@ -249,3 +249,19 @@ def weld_all(verts, faces):
 
     v, f, _ = weld(verts, faces, 1e-4)
     return v, f
+
+
+def test_garment_made_for_another_body(tmp_path, body):
+    """A strap dress made for a taller Anny (height 0.8), written Y-up in cm about that body's
+    pelvis: its top lands as far above this body's neck joint as it was above that body's, within 2 cm."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+
+    tall = AnnyBody(AnnyShape(height=0.8))
+    dress = make_garment("dress", tall, seed=5, edge_length=0.05)
+    v = dress.verts.astype(np.float64)
+    g = import_garment(write_obj(tmp_path / "tall.obj", pelvis_y_up(tall, v, 100.0), dress.faces), body)
+    neck = lambda b: measure_body(b).joints["neck"][0][2]  # noqa: E731
+    assert g.params["attachment"] == "straps"
+    assert g.params["top_z"] - neck(body) == pytest.approx(v[:, 2].max() - neck(tall), abs=0.02)
+    assert measure_body(tall).joints["neck"][0][2] - neck(body) > 0.05  # the bodies really differ
