@@ -109,7 +109,11 @@ def cmd_garment_import(args):
 
     garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up)
     garment.save(args.out)
-    print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces")
+    p = garment.params
+    repaired = {k: v for k, v in p["repairs"].items() if v}
+    print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces; {p['unit']}, {p['up']} up, "
+          f"attachment {p['attachment']}, top at {p['top_z']:.3f} m (moved by {p['offset']} m)"
+          + (f"; repaired {repaired}" if repaired else ""))
 
 
 def cmd_info(args):

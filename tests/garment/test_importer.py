@@ -47,10 +47,11 @@ TRI = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nhello world\nf 1 2 3\n", "line 4: not an OBJ statement"),
         ("v 0 0 0\nv 1 0 zero\nv 0 1 0\nf 1 2 3\n", "line 2: vertex coordinates are not numbers"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "line 4: a face needs at least 3 vertices"),
-        # Three triangles on one edge: a non-manifold fan.
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n", "1 non-manifold edges"),
-        # Two fans touching at one vertex.
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv -1 0 0\nv 0 -1 0\nf 1 2 3\nf 1 4 5\n", "non-manifold vertices"),
+        # Three equal triangles on one edge: split, the third is a piece as large as the others.
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n",
+         "2 separate pieces; the second largest has 33% .* after splitting 1 non-manifold edges"),
+        # Two fans touching at one vertex: split into two pieces of equal size.
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv -1 0 0\nv 0 -1 0\nf 1 2 3\nf 1 4 5\n", "2 separate pieces; the second largest has 50%"),
     ],
 )
 def test_broken_obj(tmp_path, body, text, message):
@@ -128,3 +129,139 @@ def test_penetration_is_removed_and_ply_reads(tmp_path, body, skirt, sdf):
     g = import_garment(path, body)
     assert g.params["up"] == "z" and mesh_report(g.verts, g.faces).ok
     assert clearance(g, sdf) > 0.003
+
+
+# Garments as other tools write them: centred at their own pelvis origin, Y-up (+Z front), in
+# metres or centimetres. Each must land where the same template made for the body is.
+
+
+@pytest.fixture(scope="module")
+def tops(body, skirt):
+    """Template garments with the three kinds of top, made for the body: ``name -> (verts, faces)``."""
+    from loosefit.garment.level_cut import cut_mesh
+
+    lm = measure_body(body)
+    straps = make_garment("dress", body, seed=2, edge_length=0.045, sleeve_length=0.0)
+    v, f, _ = cut_mesh(straps.verts, straps.faces, straps.verts[:, 2] - (lm.armpit_z - 0.05))
+    sleeves = make_garment("dress", body, seed=4, edge_length=0.045, sleeve_length=0.4)
+    return {
+        "waistband": (skirt.verts, skirt.faces),
+        "shoulders": (sleeves.verts, sleeves.faces),
+        "straps": (straps.verts, straps.faces),
+        "strapless": (v, f),
+    }
+
+
+def pelvis_y_up(body, verts, scale):
+    """Vertices of a Z-up garment made for ``body`` as a Y-up file centred at the pelvis (root) joint."""
+    v = np.asarray(verts, np.float64) - body.rest_joints()[0]
+    return np.stack([v[:, 0], v[:, 2], -v[:, 1]], 1) * scale
+
+
+@pytest.mark.parametrize(
+    "top, unit", [("waistband", "cm"), ("waistband", "m"), ("shoulders", "cm"), ("shoulders", "m"),
+                  ("straps", "m"), ("strapless", "cm"), ("strapless", "m")]
+)
+def test_foreign_garment_lands_where_it_was_made(tmp_path, body, tops, top, unit):
+    verts, faces = tops[top]
+    path = write_obj(tmp_path / f"{top}.obj", pelvis_y_up(body, verts, {"m": 1.0, "cm": 100.0}[unit]), faces)
+    g = import_garment(path, body)
+    assert g.params["unit"] == unit and g.params["up"] == "y" and g.params["attachment"] == top
+    # The offset that undoes the pelvis origin is the pelvis joint: within 2 cm on every axis.
+    err = np.asarray(g.params["offset"]) - body.rest_joints()[0]
+    assert np.abs(err).max() < 0.02, err
+    assert g.params["top_z"] == pytest.approx(float(np.max(verts[:, 2])), abs=0.02)
+
+
+def test_implausible_placements_are_refused(tmp_path, body, skirt, tops):
+    v = skirt.verts.astype(np.float64)
+    wide = write_obj(tmp_path / "wide.obj", v * [2.2, 2.2, 1.0], skirt.faces)  # a 2.2 times too wide cape
+    with pytest.raises(InputError, match=r"no plausible placement.*cm gap at the top") as err:
+        import_garment(wide, body)
+    assert str(wide) in str(err.value) and "tried z-up as" in str(err.value)
+    tight = write_obj(tmp_path / "tight.obj", v * [0.6, 0.6, 1.0], skirt.faces)  # would sit inside the hips
+    with pytest.raises(InputError, match=r"tight.obj: no plausible placement.*1[0-9]% of points over 1 cm inside"):
+        import_garment(tight, body)
+    dress, faces = tops["shoulders"]
+    side = write_obj(tmp_path / "side.obj", pelvis_y_up(body, dress, 1.0), faces)
+    with pytest.raises(InputError, match="side.obj: no plausible placement.*tried z-up as"):
+        import_garment(side, body, up="z")  # the dress on its side, forced
+
+
+def test_file_position_is_kept_only_where_plausible(tmp_path, body, tops):
+    dress, faces = tops["shoulders"]
+    # The dress around the shins (hugging them at 90 cm below its place): moved up to the shoulders.
+    g = import_garment(write_obj(tmp_path / "shins.obj", dress - [0.0, 0.0, 0.9], faces), body)
+    assert g.params["attachment"] == "shoulders" and g.params["offset"][2] == pytest.approx(0.9, abs=0.02)
+    g = import_garment(write_obj(tmp_path / "here.obj", dress, faces), body)
+    assert g.params["offset"] == [0.0, 0.0, 0.0]
+
+
+def test_nonmanifold_seams_are_repaired_and_simulated(tmp_path, body, skirt):
+    """The skirt as two panel edges of a front seam written twice (1e-5 m apart), with a 1 cm ruffle
+    stitched into the seam (three faces on each seam edge): welded, split, the ruffle dropped,
+    the skirt as made, and Blender simulates it with the quality gate passing."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from loosefit.motion.procedural import generate
+    from loosefit.sim import SimParams, simulate_sequence
+
+    v, f = skirt.verts.astype(np.float64), skirt.faces
+    edges, _, _ = unique_edges(f)
+    length = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+    graph = coo_matrix((length, (edges[:, 0], edges[:, 1])), shape=(len(v), len(v)))
+    front = np.nonzero(v[:, 1] < 0)[0]
+    top = front[np.argmin(np.abs(v[front, 0]) + 10 * (v[:, 2].max() - v[front, 2]))]
+    low = front[np.argmin(np.abs(v[front, 0]) + 10 * (v[front, 2] - v[:, 2].min()))]
+    _, pred = dijkstra(graph, directed=False, indices=top, return_predecessors=True)
+    seam = [low]
+    while seam[-1] != top:
+        seam.append(pred[seam[-1]])
+    seam = np.array(seam[::-1])
+    # Panel copies: faces right of the seam use their own copies of the seam vertices.
+    copies = np.arange(len(v), len(v) + len(seam))
+    faces = f.copy()
+    right = v[f].mean(1)[:, 0] > 0
+    for s, c in zip(seam, copies):
+        faces[right & (f == s).any(1)] = np.where(faces[right & (f == s).any(1)] == s, c, faces[right & (f == s).any(1)])
+    ruffle = v[seam] + [0.0, -0.01, 0.0]
+    r = np.arange(len(v) + len(seam), len(v) + 2 * len(seam))
+    stitched = [[seam[i], seam[i + 1], r[i]] for i in range(len(seam) - 1)]
+    stitched += [[seam[i + 1], r[i + 1], r[i]] for i in range(len(seam) - 1)]
+    verts = np.vstack([v, v[seam] + 1e-5, ruffle])
+    path = write_obj(tmp_path / "seams.obj", verts, np.vstack([faces, stitched]))
+    # Welded, the seam edges really carry three faces each.
+    assert len(mesh_report(*weld_all(verts, np.vstack([faces, stitched]))).nonmanifold_edges) == len(seam) - 1
+    g = import_garment(path, body)
+    rep = g.params["repairs"]
+    assert rep["merged_vertices"] == len(seam) and rep["nonmanifold_edges"] == len(seam) - 1
+    assert rep["dropped_pieces"] == 1 and g.num_verts == skirt.num_verts and len(g.faces) == len(skirt.faces)
+    np.testing.assert_allclose(g.verts, skirt.verts, atol=1e-4)
+    motion = generate("walk", 0.5, 0, body)
+    result = simulate_sequence(g, body, motion, SimParams(preroll=0.3))
+    assert result.status == "ok", result.reason
+    assert result.verts.shape == (motion.num_frames, skirt.num_verts, 3)
+
+
+def weld_all(verts, faces):
+    from loosefit.garment.seam_repair import weld
+
+    v, f, _ = weld(verts, faces, 1e-4)
+    return v, f
+
+
+def test_garment_made_for_another_body(tmp_path, body):
+    """A strap dress made for a taller Anny (height 0.8), written Y-up in cm about that body's
+    pelvis: its top lands as far above this body's neck joint as it was above that body's, within 2 cm."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+
+    tall = AnnyBody(AnnyShape(height=0.8))
+    dress = make_garment("dress", tall, seed=5, edge_length=0.05)
+    v = dress.verts.astype(np.float64)
+    g = import_garment(write_obj(tmp_path / "tall.obj", pelvis_y_up(tall, v, 100.0), dress.faces), body)
+    neck = lambda b: measure_body(b).joints["neck"][0][2]  # noqa: E731
+    assert g.params["attachment"] == "straps"
+    assert g.params["top_z"] - neck(body) == pytest.approx(v[:, 2].max() - neck(tall), abs=0.02)
+    assert measure_body(tall).joints["neck"][0][2] - neck(body) > 0.05  # the bodies really differ

@@ -4,7 +4,7 @@ import pytest
 from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.signed_distance import BodySDF
-from loosefit.sim.quality import PENETRATION_DEPTH, QualityGate, body_contact, edge_strain, measure
+from loosefit.sim.quality import PENETRATION_DEPTH, QualityGate, body_contact, edge_strain, hanging, measure, shape_change
 
 
 def test_edge_strain_closed_form():
@@ -88,3 +88,68 @@ def test_gate_limits_from_dict():
         QualityGate.from_dict({"strain": 1})
     with pytest.raises(InputError, match="max_speed"):
         QualityGate.from_dict({"max_speed": -1})
+
+
+def test_shape_change_closed_form():
+    rest = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float64)
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    folded = rest.copy()
+    folded[3] = [1.0, 1.0, 1.0]  # the second triangle tilted up about the diagonal
+    shrunk = rest * [1.0, 0.4, 1.0]  # both triangles at 40% of their area
+    area_p99, small, dihedral = shape_change(np.stack([rest, folded, shrunk]), rest, faces)
+    n2 = np.cross(folded[3] - folded[1], folded[2] - folded[1])
+    tilt = np.degrees(np.arccos(n2[2] / np.linalg.norm(n2)))
+    np.testing.assert_allclose(dihedral, [0.0, 0.0, tilt, 0.0], atol=1e-6)
+    area2 = np.linalg.norm(n2) / 2 / 0.5  # second triangle's area ratio, the larger change
+    np.testing.assert_allclose(area_p99, [0.0, 0.99 * abs(area2 - 1), 0.6], atol=1e-9)  # 99th percentile of (0, x)
+    np.testing.assert_allclose(small, [0.0, 0.0, 1.0])
+
+
+def test_hanging_closed_form():
+    body = np.array([[[0.0, 0, 0], [0, 0, 1.7]]] * 2)  # soles at 0, head top at 1.7 m
+    garment = np.array([[[0.0, 0, 1.0], [0, 0, 0.5], [0, 0, 0.3], [0, 0, 0.2]],
+                        [[0.0, 0, 1.0], [0, 0, 1.1], [0, 0, 1.8], [0, 0, -0.02]]])
+    pinned = np.array([True, False, False, False])
+    above_pins, above_head, below_feet = hanging(garment, pinned, body)
+    np.testing.assert_allclose(above_pins, [0.0, 2 / 3])
+    np.testing.assert_allclose(above_head, [0.0, 0.25])
+    np.testing.assert_allclose(below_feet, [0.0, 0.25])
+
+
+@pytest.fixture(scope="module")
+def wrong_sims(body):
+    """A template skirt simulated on a half-second walk as made, upside down (pinned at what is
+    then its top, the hem) and with its waistband around the neck (placed 55 cm too high)."""
+    import dataclasses
+
+    from loosefit.garment import make_garment
+    from loosefit.motion.procedural import generate
+    from loosefit.sim import SimParams, simulate_sequence
+
+    skirt = make_garment("skirt", body, seed=3, edge_length=0.045)
+    v = skirt.verts.astype(np.float64)
+    flipped = np.stack([v[:, 0], v[:, 1], v[:, 2].max() + v[:, 2].min() - v[:, 2]], 1)
+    garments = {
+        "made": skirt,
+        "upside_down": dataclasses.replace(skirt, verts=flipped, faces=skirt.faces[:, ::-1].copy(),
+                                           pinned=flipped[:, 2] > flipped[:, 2].max() - 0.03),
+        "neck": dataclasses.replace(skirt, verts=v + [0.0, 0.0, 0.55]),
+    }
+    motion = generate("walk", 0.5, 0, body)
+    return {k: simulate_sequence(g, body, motion, SimParams(preroll=0.3)) for k, g in garments.items()}
+
+
+def test_gate_fails_wrong_garments(wrong_sims):
+    made, upside, neck = wrong_sims["made"], wrong_sims["upside_down"], wrong_sims["neck"]
+    print({k: {s: round(r.stats[s], 4) for s in ("pinned_gap", "above_pins", "area_change", "shrunk", "fold",
+                                                  "outside_body", "max_strain", "penetration")}
+           for k, r in wrong_sims.items()})
+    assert made.status == "ok", made.reason
+    assert upside.status == "failed" and "not hanging from the body" in upside.reason
+    assert neck.status == "failed" and "not hanging from the body" in neck.reason
+    # The good one passes each new limit with a margin of 2 or more.
+    gate = QualityGate()
+    for key, limit in (("pinned_gap", gate.max_pinned_gap), ("above_pins", gate.max_above_pins),
+                       ("area_change", gate.max_area_change), ("shrunk", gate.max_shrunk),
+                       ("fold", gate.max_fold), ("outside_body", gate.max_outside_body)):
+        assert made.stats[key] <= limit / 2, (key, made.stats[key])

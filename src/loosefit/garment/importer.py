@@ -1,21 +1,21 @@
 """Importing a garment mesh from OBJ or PLY: validation and repair, unit and up-axis detection,
 alignment to the body and removal of initial body penetration.
 
-What is repaired silently (and counted in ``params["repairs"]``): duplicate vertices (merged),
-degenerate faces (repeated vertex or zero area), duplicate faces, unreferenced vertices,
-inconsistent face orientation (re-oriented), small loose pieces (under 2 % of the area: dropped).
+What is repaired (and counted in ``params["repairs"]``): duplicated vertices (welded within
+:data:`WELD` of the size: seams written as separate panels), degenerate faces (repeated vertex or
+zero area), sliver faces (height under 1e-3 of the longest edge), duplicate faces, non-manifold
+edges where three or more panels meet and pinched vertices (split into manifold fans,
+:mod:`loosefit.garment.seam_repair`), unreferenced vertices, inconsistent face orientation
+(re-oriented), small loose pieces (under 2 % of the area: dropped, such as a flap cut off by a
+split seam).
 What is an error (:class:`~loosefit.errors.InputError` naming the file): unreadable lines, face
-indices out of range, NaN or infinite coordinates, an empty mesh, non-manifold edges or vertices,
-a non-orientable surface, several large pieces.
+indices out of range, NaN or infinite coordinates, an empty mesh, a non-orientable surface,
+several large pieces, no plausible placement on the body.
 
-Units: the largest bounding-box side below 5 is metres, below 500 centimetres, else millimetres.
-Up axis: the mesh is tried Z-up as stored and Y-up turned to Z-up (``(x, y, z) -> (x, -z, y)``,
-which also turns a +Z front into loosefit's -Y front); each is placed on the body (below) and the
-better placement wins.
-Placement: a garment rests on its top (waistband or shoulders), so the score of a placement is the
-mean distance to the body of its top 4 cm plus a penalty for vertices inside the body. The mesh is
-centred over the body's root joint and slid vertically (1 cm steps) to the best score, unless it
-already scores within 5 mm of that where it is (a mesh made for this body keeps its position).
+Units: each of metres, centimetres and millimetres that makes the garment's largest side
+between 0.15 and 2.5 m is tried (at most two of them can), and the better placement wins.
+Up axis, attachment (waistband, strapless top, shoulders, straps) and placement:
+:mod:`loosefit.garment.placement`.
 """
 
 from __future__ import annotations
@@ -29,11 +29,17 @@ from loosefit.errors import InputError
 from loosefit.garment.fitting import orient_outward, push_out
 from loosefit.garment.garment import Garment
 from loosefit.garment.landmarks import measure_body
-from loosefit.garment.mesh_checks import face_areas, face_components, mesh_report, nonmanifold_vertices, unique_edges
+from loosefit.garment.mesh_checks import face_areas, face_components, mesh_report, unique_edges
 from loosefit.garment.obj_io import read_obj
+from loosefit.garment.placement import place, to_z_up
+from loosefit.garment.seam_repair import slivers, split_nonmanifold, weld
 from loosefit.garment.templates import CLEARANCE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+#: Vertices closer than this fraction of the bounding-box diagonal are welded (0.17 mm on a 1.7 m dress).
+WELD = 1e-4
+#: Plausible garment sizes (largest bounding-box side), m: they pick the file's unit.
+SIZE_RANGE = (0.15, 2.5)
 
 
 def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -61,37 +67,21 @@ def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.n
         raise InputError(f"a face index is out of range 1..{len(verts)}", path)
     repairs = {}
     diag = float(np.linalg.norm(verts.max(0) - verts.min(0)))
-    # Merge vertices closer than a millionth of the size.
-    key = np.round(verts / max(diag * 1e-6, 1e-12)).astype(np.int64)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    repairs["merged_vertices"] = int(len(verts) - len(first))
-    order = np.argsort(first)  # keep the file's vertex order
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    verts, faces = verts[first[order]], rank[inverse.reshape(-1)[faces]]
+    verts, faces, repairs["merged_vertices"] = weld(verts, faces, WELD * diag)
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
     degenerate = repeated | (face_areas(verts, faces) <= (diag * 1e-7) ** 2)
     repairs["degenerate_faces"] = int(degenerate.sum())
     faces = faces[~degenerate]
+    thin = slivers(verts, faces)
+    repairs["sliver_faces"] = int(thin.sum())
+    faces = faces[~thin]
     _, first = np.unique(np.sort(faces, 1), axis=0, return_index=True)
     repairs["duplicate_faces"] = int(len(faces) - len(first))
     faces = faces[np.sort(first)]
     if len(faces) == 0:
         raise InputError("every face is degenerate", path)
-    edges, _, count = unique_edges(faces)
-    if (count > 2).any():
-        where = 0.5 * (verts[edges[count > 2, 0]] + verts[edges[count > 2, 1]])
-        raise InputError(
-            f"{int((count > 2).sum())} non-manifold edges (shared by more than 2 faces), near "
-            f"{np.round(where[:3], 3).tolist()}",
-            path,
-        )
-    pinch = nonmanifold_vertices(len(verts), faces)
-    if len(pinch):
-        raise InputError(
-            f"{len(pinch)} non-manifold vertices (surface pinched to a point), near {np.round(verts[pinch[:3]], 3).tolist()}",
-            path,
-        )
+    verts, faces, split = split_nonmanifold(verts, faces)
+    repairs.update(split)
     labels = face_components(faces)
     area = np.bincount(labels, weights=face_areas(verts, faces))
     if len(area[area > 0]) > 1:
@@ -99,7 +89,8 @@ def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.n
         if area[order[1:]].sum() > 0.02 * area.sum():
             raise InputError(
                 f"{np.count_nonzero(area)} separate pieces; the second largest has "
-                f"{100 * area[order[1]] / area.sum():.0f}% of the area (join them or keep one)",
+                f"{100 * area[order[1]] / area.sum():.0f}% of the area (join them or keep one)"
+                + (f", after splitting {split['nonmanifold_edges']} non-manifold edges" if split["nonmanifold_edges"] else ""),
                 path,
             )
         repairs["dropped_pieces"] = int(np.count_nonzero(area) - 1)
@@ -146,42 +137,17 @@ def _orient(faces: np.ndarray, path) -> tuple[np.ndarray, int]:
     return out, int((flip == 1).sum())
 
 
-def _unit_scale(verts: np.ndarray, unit: str | None, path) -> tuple[float, str]:
-    if unit is None:
-        size = float((verts.max(0) - verts.min(0)).max())
-        unit = "m" if size < 5 else "cm" if size < 500 else "mm"
-    if unit not in UNITS:
-        raise InputError(f"unknown unit {unit!r}; use one of {list(UNITS)}", path)
-    return UNITS[unit], unit
-
-
-def _to_z_up(verts: np.ndarray, up: str) -> np.ndarray:
-    return verts if up == "z" else np.stack([verts[:, 0], -verts[:, 2], verts[:, 1]], 1)
-
-
-def _place(verts: np.ndarray, lm, height: float) -> tuple[np.ndarray, float]:
-    """Position ``verts`` on the body: centred over the body and slid vertically to the best
-    :func:`_fit_score`, unless where they are scores about as well. Returns the offset ``(3,)``
-    and its score."""
-    sample = verts[np.linspace(0, len(verts) - 1, min(len(verts), 600)).astype(int)]
-    stay = _fit_score(lm.sdf.query(sample), sample[:, 2])
-    lo, hi = verts.min(0), verts.max(0)
-    shift = np.array([-(lo[0] + hi[0]) / 2, lm.center_y - (lo[1] + hi[1]) / 2, -lo[2]])
-    best = (np.inf, 0.0)
-    for z in np.arange(0.0, height - (hi[2] - lo[2]) + 0.011, 0.01):
-        moved = sample + shift + [0.0, 0.0, z]
-        best = min(best, (_fit_score(lm.sdf.query(moved), moved[:, 2]), z))
-    if stay <= best[0] + 0.005:
-        return np.zeros(3), stay
-    return shift + [0.0, 0.0, best[1]], best[0]
-
-
-def _fit_score(dist: np.ndarray, z: np.ndarray) -> float:
-    """How badly points at heights ``z`` with body distances ``dist`` sit on the body, metres: a
-    garment rests on its top (waistband, shoulders), so the mean gap of its top 4 cm, plus
-    two metres times the fraction of points inside the body."""
-    top = z > z.max() - 0.04
-    return float(np.abs(dist[top]).mean() + 2.0 * (dist < 0).mean())
+def _units(verts: np.ndarray, unit: str | None, path) -> list[str]:
+    """The units to try: ``unit`` when given, else those giving a garment size (largest
+    bounding-box side) between :data:`SIZE_RANGE` metres, else the closest one."""
+    if unit is not None:
+        if unit not in UNITS:
+            raise InputError(f"unknown unit {unit!r}; use one of {list(UNITS)}", path)
+        return [unit]
+    size = float((verts.max(0) - verts.min(0)).max())
+    lo, hi = SIZE_RANGE
+    fits = [u for u, s in UNITS.items() if lo <= size * s <= hi]
+    return fits or [min(UNITS, key=lambda u: abs(np.log(size * UNITS[u] / np.sqrt(lo * hi))))]
 
 
 def import_garment(
@@ -197,11 +163,13 @@ def import_garment(
         clearance: vertices and edge midpoints closer to the body than this (metres) are pushed out.
 
     Returns:
-        A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, up axis, offset
-        and repairs. The vertices within 3 cm of the garment's top are pinned.
+        A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, the
+        placement (:meth:`loosefit.garment.placement.Placement.as_dict`: up axis, attachment,
+        offset, top height, top gap, inside fraction) and the repairs. The vertices within 3 cm of the garment's top are pinned.
 
     Raises:
-        InputError: the file is unreadable or broken beyond safe repair (see the module docstring).
+        InputError: the file is unreadable or broken beyond safe repair, or no placement on the
+            body is plausible (see the module docstring).
     """
     path = Path(path)
     if not path.is_file():
@@ -214,24 +182,26 @@ def import_garment(
     else:
         raise InputError(f"unsupported garment format {suffix!r}; use .obj or .ply", path)
     verts, faces, repairs = repair(verts, faces, path)
-    scale, unit = _unit_scale(verts, unit, path)
-    verts = verts * scale
+    units = _units(verts, unit, path)
     lm = measure_body(body)
-    height = float(lm.verts[:, 2].max())
     if up is not None and up not in ("y", "z"):
         raise InputError(f"up axis must be 'y' or 'z', got {up!r}", path)
-    fits = []
-    for axis in (up,) if up else ("z", "y"):
-        v = _to_z_up(verts, axis)
-        offset, score = _place(v, lm, height)
-        fits.append((score, axis, v + offset, offset))
-    _, up, verts, offset = min(fits, key=lambda fit: fit[0])
+    fits, refusals = [], []
+    for unit in units:
+        try:
+            fits.append((place(verts * UNITS[unit], faces, lm, path, up), unit))
+        except InputError as err:
+            refusals.append(f"as {unit}: {err.problem}" if len(units) > 1 else err.problem)
+    if not fits:
+        raise InputError("; ".join(refusals), path)
+    placement, unit = min(fits, key=lambda fit: fit[0].score)
+    verts = to_z_up(verts * UNITS[unit], placement.up) + placement.offset
     faces = orient_outward(verts, faces, lm.sdf)
     verts = push_out(verts, faces, lm.sdf, clearance)
     report = mesh_report(verts, faces)
     if not report.ok:
         raise InputError(f"mesh is still broken after repair: {report}", path)
     pinned = verts[:, 2] > verts[:, 2].max() - 0.03
-    params = {"source": str(path), "unit": unit, "up": up, "offset": np.round(offset, 6).tolist(), "repairs": repairs}
+    params = {"source": str(path), "unit": unit, **placement.as_dict(), "repairs": repairs}
     return Garment(verts=verts, faces=faces, pinned=pinned, kind="imported", params=params, name=path.stem)
 

@@ -2,6 +2,33 @@
 
 Penetration is measured against the full-resolution posed body (whatever collider the simulator
 used): the fraction of garment vertices more than ``depth`` inside it.
+
+What a person sees at once is checked too: a garment not hanging from the body where it is pinned
+(``pinned_gap``, ``above_pins``), crumpled cloth (``area_change``, ``shrunk``, ``fold``: triangle
+area change from the rest shape and the rise of the mean dihedral angle) and cloth above the head
+or below the feet (``outside_body``). Their limits were set on good Blender simulations, with the
+largest value measured on any of them (and the limit):
+
+=============  =====================================================  ===========
+statistic      good simulations (largest)                             limit
+=============  =====================================================  ===========
+pinned_gap     0.025 m (template skirt, 0.5 s walk); every pinned     0.05 m
+               vertex within 0.037 m (demo skirt, 10 motions) and
+               0.031 m (bench skirt and dress, walk-1 and spin-1)
+above_pins     0.14 (demo skirt kick: the hem lifted over the         0.3
+               waistband); 0.022 on spin2; 0 elsewhere
+area_change    0.53 (bench skirt walk-1, default fabric)              1.0
+shrunk         0.009 (demo skirt spin)                                0.05
+fold           24.0 degrees (demo skirt spin, tension 300)            40 degrees
+outside_body   0.014 (bench dress walk-1, air drag 0.3: hem dragged   0.05
+               under a sole)
+=============  =====================================================  ===========
+
+The good simulations: the demo dataset's skirt (1,171 vertices) on 10 procedural motions with the
+default fabric and with tension 100 and 300, the bench skirt (3.4k) and dress (4.2k) on walk-1 and
+spin-1 with four fabrics. Failing ones (tests/sim/test_quality.py): the template skirt simulated
+upside down (pinned at its hem) has ``pinned_gap`` 0.15 m, ``fold`` 42 degrees and strain 4.9; with
+its waistband around the neck (55 cm too high) ``pinned_gap`` 0.061 m.
 """
 
 from __future__ import annotations
@@ -20,6 +47,13 @@ from loosefit.geometry.signed_distance import BodySDF
 
 #: A garment vertex this far inside the body counts as penetrating, m.
 PENETRATION_DEPTH = 0.002
+# Limits of the shape checks (see QualityGate; measured values in the module docstring).
+ABOVE_PINS = 0.3
+AREA_CHANGE = 1.0
+SHRUNK = 0.05
+FOLD = 40.0
+OUTSIDE_BODY = 0.05
+PINNED_GAP = 0.05
 
 
 def edge_strain(frames: np.ndarray, rest: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -77,6 +111,62 @@ def body_contact(
     return inside, deepest, gap
 
 
+def interior_edge_faces(faces: np.ndarray) -> np.ndarray:
+    """``(E, 2)`` int64 pairs of faces sharing an edge (edges with exactly two faces)."""
+    faces = np.asarray(faces, np.int64)
+    half = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2), 1)
+    key = half[:, 0] * (int(faces.max()) + 1) + half[:, 1]
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    starts = np.nonzero(np.r_[True, k[1:] != k[:-1]])[0]
+    count = np.diff(np.r_[starts, len(k)])
+    two = starts[count == 2]
+    return np.stack([order[two] // 3, order[two + 1] // 3], 1)
+
+
+def shape_change(frames: np.ndarray, rest: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How far the surface of ``frames (T, V, 3)`` is from the rest shape ``rest (V, 3)``.
+
+    Returns:
+        ``area_p99 (T,)`` 99th percentile over faces of ``|A / A0 - 1|`` (area change),
+        ``shrunk (T,)`` fraction of faces with less than half their rest area,
+        ``dihedral (T + 1,)`` mean angle between the normals of faces sharing an edge, degrees
+        (element 0 is the rest shape's): cloth crumpled into small folds has a large one.
+    """
+    pairs = interior_edge_faces(faces)
+    shapes = np.concatenate([rest[None], frames]).astype(np.float64)
+    tri = shapes[:, faces]
+    cross = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+    area = np.linalg.norm(cross, axis=-1)
+    ratio = area[1:] / np.maximum(area[:1], 1e-300)
+    normal = cross / np.maximum(area[..., None], 1e-300)
+    cos = np.einsum("tij,tij->ti", normal[:, pairs[:, 0]], normal[:, pairs[:, 1]])
+    dihedral = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).mean(1) if len(pairs) else np.zeros(len(shapes))
+    return np.percentile(np.abs(ratio - 1.0), 99, axis=1), (ratio < 0.5).mean(1), dihedral
+
+
+def hanging(frames: np.ndarray, pinned: np.ndarray, body_frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where a garment is against its pins and the body, per frame.
+
+    Args:
+        frames: ``(T, V, 3)`` garment; pinned: ``(V,)`` bool; body_frames: ``(T, Vb, 3)``.
+
+    Returns:
+        ``above_pins (T,)`` fraction of free vertices more than 2 cm above the highest pinned
+        vertex (zeros when nothing or everything is pinned), ``above_head (T,)`` fraction of
+        vertices above the body's highest point, ``below_feet (T,)`` fraction more than 1 cm below
+        its lowest point.
+    """
+    z = frames[..., 2]
+    if pinned.any() and not pinned.all():
+        above_pins = (z[:, ~pinned] > z[:, pinned].max(1, keepdims=True) + 0.02).mean(1)
+    else:
+        above_pins = np.zeros(len(frames))
+    top = body_frames[..., 2].max(1, keepdims=True)
+    low = body_frames[..., 2].min(1, keepdims=True)
+    return above_pins, (z > top).mean(1), (z < low - 0.01).mean(1)
+
+
 def max_speed(frames: np.ndarray, fps: float) -> float:
     """Largest vertex speed between consecutive frames of ``frames (T, V, 3)``, m/s."""
     if len(frames) < 2:
@@ -98,6 +188,17 @@ class QualityGate:
         max_pinned_drift: how far a pinned vertex may move away from (or into) the body compared
             with the rest pose, m: the waistband and shoulders stay on the body.
         max_speed: fastest vertex, m/s; beyond it the simulation exploded.
+        max_pinned_gap: mean distance of the pinned vertices from the body in the worst frame, m:
+            pins hold a garment on the body (a waistband put around the neck hangs off it).
+        max_above_pins: fraction of free vertices more than 2 cm above the highest pinned one in
+            the worst frame: a garment hangs from its pins (one simulated upside down does not).
+        max_area_change: 99th percentile of the relative triangle area change in the worst frame.
+        max_shrunk: fraction of triangles shrunk below half their rest area in the worst frame.
+        max_fold: increase of the mean dihedral angle (degrees) over the rest shape's in the
+            worst frame: crumpled cloth is folded at every edge.
+        max_outside_body: fraction of vertices above the head or over 1 cm below the feet in
+            the worst frame.
+    See the module docstring for the values measured on good simulations.
     """
 
     max_penetration: float = 0.01
@@ -106,6 +207,12 @@ class QualityGate:
     max_strain_p99: float = 0.5
     max_pinned_drift: float = 0.02
     max_speed: float = 30.0
+    max_pinned_gap: float = PINNED_GAP
+    max_above_pins: float = ABOVE_PINS
+    max_area_change: float = AREA_CHANGE
+    max_shrunk: float = SHRUNK
+    max_fold: float = FOLD
+    max_outside_body: float = OUTSIDE_BODY
 
     @classmethod
     def from_dict(cls, values: dict[str, Any] | None, source=None) -> "QualityGate":
@@ -130,6 +237,12 @@ class QualityGate:
             ("max_strain", self.max_strain, "edge strain {:.2f} > {:.2f}"),
             ("strain_p99", self.max_strain_p99, "99th percentile edge strain {:.2f} > {:.2f}"),
             ("pinned_drift", self.max_pinned_drift, "pinned vertices moved {:.3f} m off the body > {:.3f}"),
+            ("pinned_gap", self.max_pinned_gap, "not hanging from the body: pinned vertices {:.3f} m from it > {:.3f}"),
+            ("above_pins", self.max_above_pins, "not hanging from its pins: {:.1%} of free vertices above them > {:.1%}"),
+            ("area_change", self.max_area_change, "crumpled: 99th percentile area change {:.2f} > {:.2f}"),
+            ("shrunk", self.max_shrunk, "crumpled: {:.1%} of triangles under half their area > {:.1%}"),
+            ("fold", self.max_fold, "crumpled: mean fold angle up by {:.1f} degrees > {:.1f}"),
+            ("outside_body", self.max_outside_body, "{:.1%} of vertices above the head or below the feet > {:.1%}"),
         ]
         reasons = [text.format(stats[key], limit) for key, limit, text in limits if stats[key] > limit]
         return ("failed", "; ".join(reasons)) if reasons else ("ok", "")
@@ -162,15 +275,21 @@ def measure(
         2 mm), ``penetration_max`` (worst frame), ``penetration_depth`` (deepest vertex, m),
         ``max_strain`` (largest edge strain), ``strain_p99`` (largest per-frame 99th percentile),
         ``pinned_distance`` (m, largest distance of a pinned vertex from its nearest body vertex),
-        ``pinned_drift`` (m, largest change of that distance from the rest pose; 0 when nothing is pinned).
+        ``pinned_drift`` (m, largest change of that distance from the rest pose; 0 when nothing is pinned),
+        ``pinned_gap`` (m, mean distance of the pinned vertices from the nearest body vertex, worst frame),
+        ``above_pins``, ``outside_body`` (fractions of vertices, worst frame, :func:`hanging`),
+        ``area_change``, ``shrunk`` and ``fold`` (degrees) from :func:`shape_change`, worst frame.
     """
     if not np.isfinite(frames).all():
         return {"nan": True, "max_speed": float("inf"), "penetration": 1.0, "penetration_max": 1.0,
                 "penetration_depth": float("inf"), "max_strain": float("inf"), "strain_p99": float("inf"),
-                "pinned_distance": float("inf"), "pinned_drift": float("inf")}
+                "pinned_distance": float("inf"), "pinned_drift": float("inf"), "pinned_gap": float("inf"), "above_pins": 1.0,
+                "area_change": float("inf"), "shrunk": 1.0, "fold": float("inf"), "outside_body": 1.0}
     inside, deepest, gap = body_contact(frames, pinned, body_frames, body_faces)
     rest_gap, _ = cKDTree(body_rest).query(rest[pinned])
     strain = edge_strain(frames, rest, faces)
+    area_p99, shrunk, dihedral = shape_change(frames, rest, faces)
+    above_pins, above_head, below_feet = hanging(frames, pinned, body_frames)
     return {
         "nan": False,
         "max_speed": max_speed(frames, fps),
@@ -181,4 +300,10 @@ def measure(
         "strain_p99": float(np.percentile(strain, 99, axis=1).max()),
         "pinned_distance": float(gap.max()) if gap.size else 0.0,
         "pinned_drift": float(np.abs(gap - rest_gap).max()) if gap.size else 0.0,
+        "pinned_gap": float(gap.mean(1).max()) if gap.size else 0.0,
+        "above_pins": float(above_pins.max()),
+        "area_change": float(area_p99.max()),
+        "shrunk": float(shrunk.max()),
+        "fold": float(dihedral[1:].max() - dihedral[0]),
+        "outside_body": float((above_head + below_feet).max()),
     }
