@@ -40,6 +40,7 @@ import torch
 import torch.distributed as dist
 from torch.utils.data import DistributedSampler
 
+from loosefit import device
 from loosefit.errors import InputError, LoosefitError
 
 
@@ -68,24 +69,9 @@ def is_distributed() -> bool:
 
 
 def resolve_device(name: str) -> torch.device:
-    """``"cpu"``, ``"cuda"`` or ``"auto"`` as a device; CUDA in a distributed job is ``cuda:LOCAL_RANK``.
-
-    Raises:
-        InputError: CUDA asked for but unavailable, or fewer GPUs than local processes.
-    """
-    if name not in ("cpu", "cuda", "auto"):
-        raise InputError(f"device must be 'cpu', 'cuda' or 'auto', got {name!r}")
-    if name == "cuda" and not torch.cuda.is_available():
-        raise InputError("device 'cuda' was asked for but CUDA is not available (use 'cpu' or 'auto')")
-    if name == "auto":
-        name = "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cpu":
-        return torch.device("cpu")
+    """:func:`loosefit.device.resolve_device`; CUDA in a distributed job is ``cuda:LOCAL_RANK``."""
     local = int(os.environ.get("LOCAL_RANK", "0")) if is_distributed() else 0
-    if local >= torch.cuda.device_count():
-        raise InputError(f"process with local rank {local} needs a GPU of its own; this machine has "
-                         f"{torch.cuda.device_count()}")
-    return torch.device("cuda", local)
+    return device.resolve_device(name, local)
 
 
 def setup(device: torch.device) -> bool:
