@@ -55,6 +55,10 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         InputError: a missing store or run, a run for a garment none of the sequences wears, an unknown
             sequence, a damaged results file; each names the file.
     """
+    from loosefit.extras import require
+
+    require("jinja2", "loosefit report")
+    require("matplotlib", "loosefit report's plots")
     from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
 
     data, out = Path(data), Path(out)
