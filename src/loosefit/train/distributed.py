@@ -14,7 +14,9 @@ process, ``cuda:LOCAL_RANK``).
 Semantics, so that N processes train the same model as one process with the same config:
 
 - ``batch_size`` is the *global* batch: each process takes ``batch_size / N`` samples a step (it must
-  divide), DDP averages the gradients, so a step sees the same mean loss gradient as one process.
+  divide), DDP averages the gradients, so a step sees the same mean loss gradient as one process. A
+  model whose loss is a mean over a varying count (masked frames) declares it with ``loss_weight``
+  and each process's loss is scaled by its share (:func:`weight_share`).
 - :class:`ShardedSampler` shards the single-process shuffle: the permutation is drawn from the
   same per-epoch generator as one process draws it, and rank ``r`` takes every N-th index from ``r``
   (:class:`torch.utils.data.DistributedSampler`'s sharding), so the union of the ranks' k-th
@@ -125,6 +127,18 @@ class ShardedSampler(DistributedSampler):
         order = torch.randperm(n, generator=self.generator).tolist() if self.shuffle else list(range(n))
         order += (order * (self.total_size // n + 1))[: self.total_size - n]  # pad to a multiple of the ranks
         return iter(order[self.rank : self.total_size : self.num_replicas])
+
+
+def weight_share(weight: float, device: torch.device) -> float:
+    """``N * weight / sum of every rank's weight``: the factor on this rank's loss so that the mean of
+    the N scaled losses (what DDP's gradient averaging computes) is the loss of the whole global batch,
+    for losses that are means normalised by ``weight`` (see ``loss_weight`` in
+    :mod:`loosefit.train.protocol`); 1 in one process."""
+    if not (is_distributed() and dist.is_initialized()):
+        return 1.0
+    total = torch.tensor([float(weight)], dtype=torch.float64, device=device)
+    dist.all_reduce(total)
+    return dist.get_world_size() * float(weight) / max(float(total.item()), 1e-30)
 
 
 def all_finite(value: torch.Tensor) -> bool:

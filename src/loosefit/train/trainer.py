@@ -303,6 +303,7 @@ class _Trainer:
         self.pending: Optional[dict[str, Any]] = None  # last completed epoch, not yet on disk
         self.log: Optional[MetricsLog] = None
         self.main = distributed.is_main()
+        self.distributed = distributed.is_distributed()
         self.step_fn = model.training_loss
 
     def wrap(self) -> None:
@@ -406,12 +407,15 @@ class _Trainer:
             # zero every gradient, not only this stage's, so frozen parameters hold none
             self.model.zero_grad(set_to_none=True)
             loss, terms = self.step_fn(batch, stage)
+            scale = 1.0
+            if self.distributed and hasattr(self.model, "loss_weight"):
+                scale = distributed.weight_share(self.model.loss_weight(batch), self.device)
             if not distributed.all_finite(loss):
                 raise TrainingError(
                     f"stage {stage!r} epoch {epoch} step {self.global_step + 1}: the loss is {loss.item()}; "
                     "lower the learning rate or set grad_clip"
                 )
-            loss.backward()
+            (loss * scale if scale != 1.0 else loss).backward()
             if settings.grad_clip is not None:
                 torch.nn.utils.clip_grad_norm_(params, settings.grad_clip)
             optimizer.step()
