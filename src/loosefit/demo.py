@@ -122,7 +122,7 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     t = _step("report: every method on the held-out sequences")
     from loosefit.report import build_report
 
-    index = build_report(data, [out / "runs" / m for m in DEFAULT_TRAINING], out / "report")
+    index = build_report(data, [out / "runs" / m for m in DEMO_TRAINING], out / "report")
     view = " ".join(["loosefit view", f"{data}:{seq.name}"] + [str(out / "predictions" / f"{m}.npz") for m in predictions])
     print(f"\ndemo finished in {time.perf_counter() - started:.0f} s")
     print(f"report: {index}")

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from loosefit.animate import Animator
-from loosefit.body import AnnyBody, AnnyShape
 from loosefit.cli import main
 from loosefit.data import DatasetStore
 from loosefit.errors import InputError
