@@ -103,6 +103,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         "data": str(data.resolve()),
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "results_dir": None if results_dir is None else str(results_dir),
+        "which": "the named sequences" if sequences is not None else f"the {split} split",
         "headers": [h for _, h, _ in METRIC_COLUMNS],
         "methods": [{"label": e["method"], "run": e["run"],
                      "rows": [{"name": r["name"], "frames": r["frames"], "cells": _metric_cells(r)} for r in e["rows"]],
@@ -120,7 +121,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         "view_command": f"loosefit view {data}:{seqs[0].name}" if seqs else "",
     }
     env = Environment(loader=PackageLoader("loosefit.report", "templates"), undefined=StrictUndefined,
-                      autoescape=select_autoescape(enabled_extensions=("html",), default_for_string=False),
+                      autoescape=select_autoescape(enabled_extensions=("html.j2",), default_for_string=False),
                       trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
     doc = {"data": context["data"], "methods": evaluations, "sequences": context["sequences"], "plots": plots,
            "speed": speed, "claims": claims}
