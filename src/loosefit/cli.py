@@ -169,7 +169,7 @@ def cmd_train(args):
         print(json.dumps(summary, indent=2, default=str))
         return
 
-    from loosefit.train.distributed import launch
+    from loosefit.train.distributed import is_main, launch
 
     from loosefit.models.registry import run_config_class
 
@@ -178,6 +178,8 @@ def cmd_train(args):
         overrides.append(f"train.device={args.device}")
     result = launch(train_model, args.nproc, args.method, args.data, args.garment, args.out, config=args.config,
                     overrides=overrides, resume=args.resume)
+    if not is_main():  # under torchrun every process runs this command: rank 0 reports
+        return
     if result is None:
         print(f"{args.method} has no trainable parameters: wrote its fixed weights to {args.out}")
     else:
