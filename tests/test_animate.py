@@ -53,3 +53,46 @@ def test_wrong_motion_and_folder(lbs_run, tmp_path):
         animator.animate(Motion(np.zeros((3, 5, 3)), np.zeros((3, 3)), rig="x"))
     with pytest.raises(InputError, match="not a loosefit run"):
         Animator(tmp_path)
+
+
+@pytest.mark.parametrize("text, problem", [
+    ('{"method": "body-lbs", "siz', "corrupt or truncated"),
+    ("[1, 2]", "expected a JSON object"),
+    ('{"method": "no-such-method", "sizes": {}}', "unknown method"),
+    ('{"method": "body-lbs", "sizes": {}}', "sizes do not build"),
+])
+def test_corrupt_run_record_is_a_clear_error(lbs_run, tmp_path, capsys, text, problem):
+    """A damaged model.json is refused like a damaged checkpoint: an InputError naming the file, and
+    from the command line exit status 2 with that message (no traceback)."""
+    import shutil
+
+    from loosefit.cli import main
+
+    run = tmp_path / "run"
+    shutil.copytree(lbs_run, run)
+    (run / "model.json").write_text(text)
+    with pytest.raises(InputError, match=problem) as info:
+        Animator(run)
+    assert info.value.path == run / "model.json"
+    motion = tmp_path / "m.npz"
+    Motion(np.zeros((2, 31, 3)), np.zeros((2, 3)) + [0, 0, 0.9], joint_names=[]).save(motion)
+    assert main(["animate", str(run), "--motion", str(motion), "--out", str(tmp_path / "a.npz")]) == 2
+    err = capsys.readouterr().err
+    assert problem in err and str(run / "model.json") in err and "Traceback" not in err
+
+
+def test_animate_npz_carries_the_posed_body_for_render(lbs_run, test_sequence, tmp_path, body):
+    """`loosefit animate --out x.npz` stores the body posed along the motion beside the garment, so
+    `loosefit render x.npz` draws both."""
+    from loosefit.cli import main
+    from loosefit.viz.inputs import load_panels
+
+    motion, _ = test_sequence
+    motion.save(tmp_path / "m.npz")
+    assert main(["animate", str(lbs_run), "--motion", str(tmp_path / "m.npz"), "--out", str(tmp_path / "a.npz")]) == 0
+    with np.load(tmp_path / "a.npz") as z:
+        assert np.abs(z["body_verts"] - body.pose(motion).verts).max() < 1e-6
+        assert np.array_equal(z["body_faces"], body.faces)
+        assert np.abs(z["verts"] - Animator(lbs_run).animate(motion)).max() < 1e-5
+    (panel,) = load_panels(tmp_path / "a.npz")
+    assert [t.label for t in panel] == ["body", "a"]

@@ -81,3 +81,68 @@ def test_cuda_without_cuda_and_bad_nproc_are_clear_errors(tiny_store, tmp_path, 
     assert main(["animate", str(tmp_path / "lbs"), "--motion", str(motion), "--out", str(tmp_path / "a.npz"),
                  "--device", "cuda"]) == 2
     assert "CUDA is not available" in capsys.readouterr().err
+
+
+def test_motion_map_import_with_it_and_cut(tmp_path, body, capsys):
+    """An unknown skeleton: import refuses it naming `loosefit motion map`; the map it writes imports
+    the file, cut by --start / --seconds to the same frames as the whole import; a map with an unknown
+    key lists the allowed ones; --help documents the YAML format; generate cuts too."""
+    from loosefit.motion.bvh import write_bvh
+    from loosefit.motion.procedural import generate
+    from tests.motion.test_retarget import smooth_motion, to_bvh
+
+    bvh, out = tmp_path / "odd.bvh", tmp_path / "m.npz"
+    names = [f"bone{j:02d}" for j in range(body.num_joints)]
+    write_bvh(bvh, to_bvh(body, smooth_motion(body, 60.0, seconds=1.0), names=names, up="y", scale=100.0))
+    assert main(["motion", "import", str(bvh), "--out", str(out)]) == 2
+    assert "loosefit motion map FILE.bvh --out MAP.yaml" in capsys.readouterr().err and not out.exists()
+    assert main(["motion", "map", str(bvh), "--out", str(tmp_path / "map.yaml")]) == 0
+    assert "check it, then pass it with --joint-map" in capsys.readouterr().out
+    assert main(["motion", "import", str(bvh), "--joint-map", str(tmp_path / "map.yaml"), "--out", str(out)]) == 0
+    whole = Motion.load(out)
+    assert main(["motion", "import", str(bvh), "--joint-map", str(tmp_path / "map.yaml"), "--start", "0.2",
+                 "--seconds", "0.5", "--out", str(out)]) == 0
+    part = Motion.load(out)
+    assert part.num_frames == 15 and np.array_equal(part.rotations, whole.rotations[6:21])
+    assert main(["motion", "import", str(bvh), "--joint-map", str(tmp_path / "map.yaml"), "--start", "0.9",
+                 "--seconds", "0.5", "--out", str(out)]) == 2
+    assert "past the end of the motion (1.03333 s" in capsys.readouterr().err
+    (tmp_path / "bad.yaml").write_text("joints: {Hips: bone00}\nup_axis: y\n")
+    assert main(["motion", "import", str(bvh), "--joint-map", str(tmp_path / "bad.yaml"), "--out", str(out)]) == 2
+    assert "unknown keys ['up_axis']; the allowed keys are name, target_rig, joints, ignore" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["motion", "map", "--help"])
+    assert "ignore: [prop_*" in capsys.readouterr().out
+
+    assert main(["motion", "generate", "--kind", "walk", "--seconds", "0.5", "--start", "1", "--out", str(out)]) == 0
+    assert np.array_equal(Motion.load(out).rotations, generate("walk", 1.5, 0, body).rotations[30:45])
+
+
+def test_every_verb_reading_a_bvh_takes_a_joint_map():
+    from loosefit.cli import build_parser
+
+    parser = build_parser()
+    for argv in (["body", "--motion", "x.bvh", "--out", "b.npz"], ["motion", "import", "x.bvh", "--out", "m.npz"],
+                 ["animate", "run", "--motion", "x.bvh", "--out", "a.npz"], ["simulate", "--garment", "g.obj",
+                 "--motion", "x.bvh", "--out", "s.npz"]):
+        assert parser.parse_args(argv + ["--joint-map", "map.yaml"]).joint_map == "map.yaml"
+
+
+def test_render_holds_the_last_frame_of_shorter_sequences(tmp_path):
+    """Two sequences of 4 and 10 frames side by side: 10 frames, the short one standing still after its 4th."""
+    import imageio.v3 as iio
+
+    faces = np.array([[0, 1, 2]])
+    tri = np.array([[0.0, 0, 0], [0.3, 0, 0], [0.0, 0, 0.3]], np.float32)
+    short = tri + np.arange(4, dtype=np.float32)[:, None, None] * [0.0, 0.0, 0.05]
+    long = tri + np.arange(10, dtype=np.float32)[:, None, None] * [0.0, 0.0, 0.05]
+    MeshSequence(short, faces).save(tmp_path / "short.npz")
+    MeshSequence(long, faces).save(tmp_path / "long.npz")
+    frames = tmp_path / "frames"
+    assert main(["render", str(tmp_path / "short.npz"), str(tmp_path / "long.npz"), "--out", str(frames),
+                 "--width", "64", "--height", "48", "--backend", "matplotlib"]) == 0
+    images = [iio.imread(p) for p in sorted(frames.glob("*.png"))]
+    assert len(images) == 10
+    left = [im[:, :64] for im in images]
+    assert not np.array_equal(left[2], left[3]) and all(np.array_equal(left[3], im) for im in left[4:])
+    assert not np.array_equal(images[3][:, 64:], images[9][:, 64:])

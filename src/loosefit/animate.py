@@ -31,18 +31,46 @@ def load_run(run_dir: str | Path, checkpoint: str = "last"):
     ``checkpoint``: ``"last"``, ``"best"`` (falls back to ``"last"``) or a checkpoint path.
     """
     run = RunDir(run_dir)
-    meta_path = run.path / MODEL_META
-    if not meta_path.is_file():
-        raise InputError(f"not a loosefit run folder (no {MODEL_META})", run.path)
-    meta = json.loads(meta_path.read_text())
-    cls = model_class(meta["method"])
+    meta = read_run_meta(run.path)
+    try:
+        cls = model_class(meta["method"])
+    except InputError as e:
+        raise InputError(f"run record is corrupt: {e.problem}", run.path / MODEL_META) from None
     cfg = load_config(run_config_class(meta["method"]), run.path / METHOD_CONFIG)
-    model = cls(meta["sizes"], cfg.model)
+    try:
+        model = cls(meta["sizes"], cfg.model)
+    except (KeyError, TypeError, ValueError) as e:
+        raise InputError(f"run record is corrupt: its sizes do not build a {meta['method']} model "
+                         f"({type(e).__name__}: {e})", run.path / MODEL_META) from None
     path = {"best": run.best_checkpoint, "last": run.last_checkpoint}.get(checkpoint, Path(checkpoint))
     if checkpoint == "best" and not path.is_file():
         path = run.last_checkpoint
     load_weights(model, path)
     return meta, model, cfg
+
+
+def read_run_meta(run_dir: str | Path) -> dict:
+    """A run folder's ``model.json``: the method, the model's sizes and what it was trained on.
+
+    Raises:
+        InputError: no ``model.json`` (not a run folder), or a file that is truncated, not JSON, or lacks
+            ``method`` (a string) or ``sizes`` (a mapping); the message names the file, as for a corrupt
+            checkpoint.
+    """
+    path = Path(run_dir) / MODEL_META
+    if not path.is_file():
+        raise InputError(f"not a loosefit run folder (no {MODEL_META})", Path(run_dir))
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise InputError(f"run record is corrupt or truncated ({type(e).__name__}: {e})", path) from None
+    if not isinstance(meta, dict):
+        raise InputError(f"run record is corrupt: expected a JSON object, got {type(meta).__name__}", path)
+    if not isinstance(meta.get("method"), str):
+        raise InputError("run record is corrupt: no 'method' name", path)
+    if not isinstance(meta.get("sizes"), dict):
+        raise InputError("run record is corrupt: no 'sizes' mapping", path)
+    return meta
 
 
 class Animator:

@@ -123,5 +123,5 @@ def is_static_run(run_dir: str | Path) -> bool:
     try:
         method = json.loads(path.read_text())["method"]
         return bool(getattr(model_class(method), "static", False))
-    except (ValueError, KeyError, InputError):
+    except (ValueError, KeyError, TypeError, InputError):  # a corrupt record: Animator's load_run says what is wrong
         return False

@@ -31,7 +31,7 @@ def cmd_body(args):
     from loosefit.motion.io import load_motion
 
     body = _body(args)
-    motion = load_motion(args.motion, body) if args.motion else body.rest_motion(1)
+    motion = load_motion(args.motion, body, joint_map=args.joint_map) if args.motion else body.rest_motion(1)
     posed = body.pose(motion)
     out = Path(args.out)
     if out.suffix == ".obj":
@@ -49,16 +49,30 @@ def cmd_motion_generate(args):
     from loosefit.motion.procedural import generate
 
     body = _body(args)
-    motion = generate(args.kind, args.seconds, args.seed, body, fps=args.fps)
+    start = args.start or 0.0
+    motion = generate(args.kind, start + args.seconds, args.seed, body, fps=args.fps)
+    if start:
+        motion = motion.cut(start, args.seconds)
     motion.save(args.out)
     print(f"wrote {args.out}: {motion.name}, {motion.num_frames} frames at {motion.fps:g} fps")
+
+
+def cmd_motion_map(args):
+    from loosefit.motion.map_writer import write_joint_map
+
+    joint_map, notes = write_joint_map(args.file, _body(args), args.out)
+    print(f"wrote {args.out}: {len(joint_map.joints)} joints mapped, {len(joint_map.ignore)} ignored; "
+          f"check it, then pass it with --joint-map {args.out}")
+    for note in notes:
+        print(f"note: {note}")
 
 
 def cmd_motion_import(args):
     from loosefit.motion.io import load_motion
 
     body = _body(args)
-    motion = load_motion(args.file, body, joint_map=args.joint_map)
+    motion = load_motion(args.file, body, joint_map=args.joint_map, source_fps=args.fps, start=args.start,
+                         seconds=args.seconds)
     motion.save(args.out)
     print(f"wrote {args.out}: {motion.num_frames} frames at {motion.fps:g} fps on rig {motion.rig}")
 
@@ -193,7 +207,7 @@ def cmd_animate(args):
     from loosefit.motion.io import load_motion
 
     body = _body(args)
-    motions = [load_motion(path, body) for path in args.motion]
+    motions = [load_motion(path, body, joint_map=args.joint_map) for path in args.motion]
     if is_static_run(args.run):
         from loosefit.garment import Garment
 
@@ -216,7 +230,8 @@ def cmd_animate(args):
         results = [handle_motion_collisions(v, faces, body, m, mode, net) for v, m in zip(results, motions)]
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
     for motion, verts, out in zip(motions, results, outs):
-        posed = body.pose(motion) if args.with_body else None
+        # A mesh-sequence .npz always carries the body, so `loosefit render` shows what the garment is on.
+        posed = body.pose(motion) if args.with_body or out.suffix.lower() == ".npz" else None
         export_animation(out, verts, faces, fps=motion.fps,
                          body_verts=None if posed is None else posed.verts, body_faces=None if posed is None else body.faces)
         print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method})")
@@ -231,10 +246,58 @@ def cmd_report(args):
     print(f"wrote {index} (and report.md, metrics.json, figures/)")
 
 
+def cmd_export_rig(args):
+    from loosefit.export_rig import export_rig
+    from loosefit.motion.io import load_motion
+
+    body = _body(args)
+    motion = load_motion(args.motion, body, joint_map=args.joint_map)
+    summary = export_rig(args.run, motion, args.out, body=None if args.no_body else body, influences=args.influences,
+                         checkpoint=args.checkpoint, threads=args.threads)
+    print(f"wrote {args.out}: {summary['bytes']} bytes, {summary['frames']} frames at {summary['fps']:g} fps, "
+          f"{args.influences} influences per vertex")
+    for name in ("garment", "body"):
+        if name in summary:
+            m = summary[name]
+            print(f"  {name}: {m['vertices']} vertices, {m['joints']} joints; {m['vertices_truncated']} vertices had more "
+                  f"influences: moved {m['rms_mm']:.2f} mm RMS, {m['max_mm']:.2f} mm at most")
+
+
 def cmd_demo(args):
     from loosefit.demo import run_demo
 
     run_demo(Path(args.out))
+
+
+JOINT_MAP_FORMAT = """\
+A joint map is a YAML file saying which joint of a BVH skeleton drives which joint of the body's rig
+(cmu_mb for the Anny body: Hips, LHipJoint, LeftUpLeg, LeftLeg, LeftFoot, LeftToeBase, LowerBack,
+Spine, Spine1, Neck, Neck1, Head, LeftShoulder, LeftArm, LeftForeArm, LeftHand, LThumb,
+LeftFingerBase, LeftHandFinger1 and their Right* / R* twins). Built-in maps: cmu, mixamo, cc
+(Character Creator), chosen automatically when the names fit; pass any other with --joint-map.
+
+  name: my-skeleton            # optional, default: the file name
+  target_rig: cmu_mb           # optional: the rig whose joints are the keys of joints
+  joints:                      # required: rig joint: source joint, or a list of alternatives
+    Hips: pelvis
+    LeftUpLeg: [l_hip, LeftHip]
+  ignore: [prop_*, "*_twist"]  # source joints with no rig joint (fnmatch patterns)
+  optional: [LeftToeBase]      # rig joints whose source joint may be missing from a file
+  calibration: rest            # rest | motion (default: rest when the file's rest pose stands)
+  up: y                        # the file's up axis (x, -y, z ...), default: detected
+  front: z                     # the file's front axis, default: detected
+
+Source names match with or without a namespace prefix (mixamorig:Hips matches Hips). Every source
+joint must be mapped or ignored; the hips, both legs (hip, knee, ankle) and one spine joint must be
+mapped. `loosefit motion map FILE.bvh --out MAP.yaml` writes a starting map to check."""
+
+
+def joint_map_option(sp) -> None:
+    """The ``--joint-map`` option of every verb that reads a BVH file."""
+    sp.add_argument("--joint-map", default=None, metavar="MAP.yaml",
+                    help="joint map for a BVH skeleton without a built-in map (cmu, mixamo, cc): a YAML file or a "
+                         "built-in name; `loosefit motion map --help` shows the format, `loosefit motion map "
+                         "FILE.bvh --out MAP.yaml` writes a starting one")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -253,6 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("body", help="pose the body along a motion and write it")
     body_options(sp, resolution=True)
     sp.add_argument("--motion", default=None, help="motion .npz / .bvh (default: the rest pose)")
+    joint_map_option(sp)
     sp.add_argument("--frame", type=int, default=0, help="frame written to an .obj")
     sp.add_argument("--out", required=True, help="body.obj (one frame) or body.npz (mesh sequence)")
     sp.set_defaults(func=cmd_body)
@@ -260,15 +324,31 @@ def build_parser() -> argparse.ArgumentParser:
     motion = sub.add_parser("motion", help="generate or import motions").add_subparsers(dest="motion_command", required=True)
     sp = motion.add_parser("generate", help="a procedural motion by kind and seed")
     sp.add_argument("--kind", required=True, help="walk, run, turn, spin, jump, kick, squat, bow, arm_raise, wave, sway, mix")
-    sp.add_argument("--seconds", type=float, default=8.0)
+    sp.add_argument("--seconds", type=float, default=8.0, help="length of the motion written")
+    sp.add_argument("--start", type=float, default=None, help="skip the first START seconds of the generated motion")
     sp.add_argument("--seed", type=int, default=0)
     sp.add_argument("--fps", type=float, default=30.0)
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_motion_generate)
-    sp = motion.add_parser("import", help="import a BVH or AMASS file onto the body rig")
+    sp = motion.add_parser(
+        "map", help="write a starting joint map for a BVH skeleton (YAML, to check and pass with --joint-map)",
+        description="Write a starting joint map for a BVH file's skeleton, found from its shape (hips, legs, "
+                    "spine, arms; left and right) and joint names, for you to check.\n\n" + JOINT_MAP_FORMAT,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    sp.add_argument("file", help="the BVH file")
+    body_options(sp)
+    sp.add_argument("--out", required=True, help="MAP.yaml")
+    sp.set_defaults(func=cmd_motion_map)
+    sp = motion.add_parser("import", help="import a BVH or AMASS file onto the body rig",
+                           description="Import a BVH or AMASS (SMPL-H .npz) motion onto the body's rig.\n\n"
+                                       + JOINT_MAP_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
     sp.add_argument("file")
-    sp.add_argument("--joint-map", default=None, help="YAML joint map for skeletons without a built-in map")
+    joint_map_option(sp)
+    sp.add_argument("--fps", type=float, default=None, help="the file's frame rate, for AMASS / SMPL-H files that "
+                    "store none (mocap_framerate); the motion is written at 30 fps")
+    sp.add_argument("--start", type=float, default=None, help="keep the motion from START seconds on")
+    sp.add_argument("--seconds", type=float, default=None, help="keep SECONDS seconds (default: to the end)")
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_motion_import)
@@ -315,7 +395,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--params", default=None, help="simulation parameters YAML")
     sp.add_argument("--set", action="append", help="simulation parameter override, e.g. bending=1e-4 (repeatable)")
     sp.add_argument("--shape", default=None, help="Anny shape, e.g. height=0.8")
-    sp.add_argument("--joint-map", default=None, help="joint map for a BVH motion")
+    joint_map_option(sp)
     sp.add_argument("--workers", type=int, default=1, help="parallel Blender workers (Ray) for a plan")
     sp.add_argument("--address", default=None, help="an existing Ray cluster's address")
     sp.set_defaults(func=cmd_simulate)
@@ -345,18 +425,32 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("animate", help="animate a trained garment on new motions")
     sp.add_argument("run", help="run folder written by loosefit train")
     sp.add_argument("--motion", required=True, action="append", help="motion .npz / .bvh / AMASS .npz (repeatable)")
+    joint_map_option(sp)
     sp.add_argument("--garment", default=None, help="fitgar and swingar runs: the garment .obj to animate (any vertex "
                     "count), in the rest pose of --shape")
     body_options(sp)
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
-    sp.add_argument("--with-body", action="store_true", help="export the posed body too")
+    sp.add_argument("--with-body", action="store_true", help="export the posed body too (always in an .npz)")
     sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
     sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the model runs")
     sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
                     "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
     sp.set_defaults(func=cmd_animate)
+
+    sp = sub.add_parser("export-rig", help="a virtualbones / jointnet garment as an engine-ready skinned rig "
+                        "(its virtual bones animated along a motion) with the skinned body: .glb or .usdc")
+    sp.add_argument("run", help="run folder written by loosefit train (virtualbones or jointnet)")
+    sp.add_argument("--motion", required=True, help="motion .npz / .bvh / AMASS .npz")
+    sp.add_argument("--joint-map", default=None, help="joint map for a BVH motion")
+    body_options(sp)
+    sp.add_argument("--out", required=True, help="dress.glb (skinned glTF) or dress.usdc / .usda (UsdSkel)")
+    sp.add_argument("--influences", type=int, choices=[4, 8], default=4, help="skinning weights kept per vertex")
+    sp.add_argument("--no-body", action="store_true", help="write the garment only")
+    sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
+    sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    sp.set_defaults(func=cmd_export_rig)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
     sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")

@@ -13,9 +13,12 @@ from loosefit.geometry.rotations import (
     matrix_to_euler,
     matrix_to_quaternion,
     matrix_to_sixd,
+    nearest_rotation,
     quaternion_to_axis_angle,
     quaternion_to_matrix,
     rigid,
+    rotation_angle,
+    rotation_between,
     sixd_to_matrix,
 )
 
@@ -98,3 +101,42 @@ def test_float32_batches_and_rigid():
     assert T.shape == (4, 5, 4, 4) and torch.equal(T[..., 3, :], torch.tensor([0.0, 0, 0, 1]).expand(4, 5, 4))
     with pytest.raises(ValueError, match="permutation"):
         euler_to_matrix(torch.zeros(3), "xxy")
+
+
+def test_rotation_between_takes_a_to_b_with_the_smallest_angle():
+    """The angle equals the angle between the vectors and the axis is perpendicular to both, also
+    for parallel and opposite pairs (a half turn whose axis is perpendicular to a)."""
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(50, 3))
+    b = rng.normal(size=(50, 3))
+    a[0], b[0] = [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]
+    a[1], b[1] = [0.0, 0.6, 0.8], [0.0, -0.6, -0.8]
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    R = rotation_between(a, b).numpy()
+    assert np.abs(np.einsum("nab,nb->na", R, a) - b).max() < 1e-12
+    assert np.abs(np.linalg.det(R) - 1).max() < 1e-12
+    expected = np.arccos(np.clip((a * b).sum(1), -1, 1))
+    assert np.abs(rotation_angle(R).numpy() - expected).max() < 1e-6
+    axis = Rotation.from_matrix(R[2:]).as_rotvec()
+    assert np.abs((axis * a[2:]).sum(1)).max() < 1e-9 and np.abs((axis * b[2:]).sum(1)).max() < 1e-9
+
+
+def test_nearest_rotation_is_the_chordal_mean_and_excludes_reflections():
+    """Of a rotation it is the rotation itself; of the sum of two rotations about one axis it is the
+    rotation halfway; of a reflection's negative (det -1) a proper rotation."""
+    R = Rotation.from_rotvec(sample_rotations().numpy()).as_matrix()
+    assert np.abs(nearest_rotation(R).numpy() - R).max() < 1e-12
+    z = np.array([0.0, 0.0, 1.0])
+    pair = Rotation.from_rotvec([0.2 * z, 1.0 * z]).as_matrix().sum(0)
+    assert np.abs(nearest_rotation(pair).numpy() - Rotation.from_rotvec(0.6 * z).as_matrix()).max() < 1e-12
+    Q = nearest_rotation(-np.eye(3) + 0.01).numpy()
+    assert abs(np.linalg.det(Q) - 1) < 1e-12 and np.abs(Q @ Q.T - np.eye(3)).max() < 1e-12
+
+
+def test_rotation_angle_matches_axis_angle_norm():
+    aa = sample_rotations()
+    angles = rotation_angle(axis_angle_to_matrix(aa)).numpy()
+    norm = np.linalg.norm(aa.numpy(), axis=1) % (2 * np.pi)
+    expected = np.minimum(norm, 2 * np.pi - norm)  # an angle beyond pi is the opposite turn
+    assert np.abs(angles - expected).max() < 1e-7  # arccos loses digits near 0 and pi

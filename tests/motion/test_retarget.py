@@ -14,7 +14,10 @@ from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix
 from loosefit.motion.bvh import import_bvh, read_bvh, retarget_bvh, skeleton_to_bvh, write_bvh
 from loosefit.motion.motion import Motion
-from loosefit.motion.retarget import TargetRig, detect_axes, load_joint_map, resample, resolve_joint_map
+from loosefit.motion.axes import detect_axes
+from loosefit.motion.joint_map import load_joint_map, resolve_joint_map
+from loosefit.motion.resample import resample
+from loosefit.motion.rig import TargetRig
 
 MOCAP = Path(__file__).parents[3] / "shared/mocap/cmu-cc"
 # Joints some skeletons lack (Mixamo: hip sockets, second neck bone; fingers are ignored): the test

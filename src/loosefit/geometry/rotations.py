@@ -9,6 +9,10 @@ float32 or float64. Conventions:
 - Euler angles ``(..., 3)`` in radians for an ``order`` such as ``"xyz"``: *intrinsic* rotations,
   ``R = R_order[0](a0) @ R_order[1](a1) @ R_order[2](a2)`` (BVH channel order).
 - 6D ``(..., 6)``: the first two columns of the matrix (Zhou et al. 2019), concatenated.
+
+Besides conversions: the smallest rotation between two directions (:func:`rotation_between`), the
+rotation nearest a 3x3 matrix (:func:`nearest_rotation`) and the angle of a rotation
+(:func:`rotation_angle`). NumPy arrays are accepted wherever tensors are.
 """
 
 from __future__ import annotations
@@ -177,6 +181,39 @@ def sixd_to_matrix(d6) -> torch.Tensor:
     b2 = a2 / a2.norm(dim=-1, keepdim=True).clamp_min(_EPS)
     b3 = torch.cross(b1, b2, dim=-1)
     return torch.stack([b1, b2, b3], -1)
+
+
+def rotation_between(a, b) -> torch.Tensor:
+    """The smallest rotation taking unit vectors ``a`` to ``b`` (both ``(..., 3)``, broadcast) -> ``(..., 3, 3)``.
+
+    For opposite vectors (a half turn about any axis perpendicular to ``a``) the axis is ``a``
+    crossed with the coordinate axis ``a`` is least aligned with.
+    """
+    a, b = torch.broadcast_tensors(_as_tensor(a), _as_tensor(b))
+    axis = torch.cross(a, b, dim=-1)
+    s = axis.norm(dim=-1)
+    c = (a * b).sum(-1)
+    helper = torch.eye(3, dtype=a.dtype, device=a.device)[a.abs().argmin(-1)]
+    axis = torch.where((s < 1e-9)[..., None], torch.cross(a, helper, dim=-1), axis)
+    axis = axis / axis.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    return axis_angle_to_matrix(axis * torch.atan2(s, c)[..., None])
+
+
+def nearest_rotation(M) -> torch.Tensor:
+    """The rotation nearest ``M (..., 3, 3)`` in the Frobenius norm (by SVD, reflections excluded):
+    e.g. the chordal mean of rotations from their sum."""
+    M = _as_tensor(M)
+    U, _, Vt = torch.linalg.svd(M)
+    D = torch.ones(M.shape[:-1], dtype=M.dtype, device=M.device)
+    D[..., -1] = torch.sign(torch.linalg.det(U @ Vt))
+    return (U * D[..., None, :]) @ Vt
+
+
+def rotation_angle(R) -> torch.Tensor:
+    """Rotation angles ``(...)`` in radians, in ``[0, pi]``, of rotations ``R (..., 3, 3)``."""
+    R = _as_tensor(R)
+    trace = R.diagonal(dim1=-2, dim2=-1).sum(-1)
+    return torch.arccos(((trace - 1) / 2).clamp(-1.0, 1.0))
 
 
 def rigid(R: torch.Tensor, t: torch.Tensor) -> torch.Tensor:

@@ -6,6 +6,14 @@ at rest), ``trans (T, 3)``, ``mocap_framerate``, and optionally ``betas`` and ``
 pose is a T-pose, Y up, facing +Z; AMASS worlds are Z up, so the root rotation also turns the body
 upright. SMPL adds ``trans`` to the *unrotated* rest pelvis: the pelvis is at ``trans + J_pelvis``.
 
+Files from other sources differ: poses stored as ``(T, 52, 3)``, no frame rate (give it as
+``source_fps``), a Y-up world (detected from the head-over-pelvis direction), or a ``trans`` that
+is only an offset with no floor in mind (the pelvis near the origin, the feet a metre below it).
+The floor is where the source's feet touch it: when the lowest foot joint (ankles, toes) at
+contact is not within :data:`FLOOR_TOLERANCE` of its standing height above the file's ``z = 0``,
+the body is lowered or raised so it is, and the imported motion's feet are checked against the floor
+(:func:`~loosefit.motion.retarget.check_feet_on_floor`).
+
 Without the SMPL model files the rest skeleton comes from :data:`SMPLH_REST`, approximate SMPL-H
 joint positions (legs straight down, arms horizontal along +-X), the same for every body shape:
 ``betas`` are read but do not change the skeleton, so imported bone lengths are approximate while
@@ -23,15 +31,11 @@ import torch
 from loosefit.errors import InputError
 from loosefit.geometry.lbs import forward_kinematics
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from loosefit.geometry.vectors import unit
 from loosefit.motion.motion import DEFAULT_FPS, Motion
-from loosefit.motion.retarget import (
-    SourceAnimation,
-    TargetRig,
-    builtin_joint_maps,
-    resolve_joint_map,
-    retarget,
-    to_motion,
-)
+from loosefit.motion.joint_map import builtin_joint_maps, resolve_joint_map
+from loosefit.motion.retarget import SourceAnimation, check_feet_on_floor, retarget, to_motion
+from loosefit.motion.rig import TargetRig
 from loosefit.paths import atomic_path
 
 _BODY = (
@@ -88,6 +92,10 @@ SMPLH_NAMES, SMPLH_PARENTS, SMPLH_REST = _smplh_skeleton()
 _Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 # Where the hand joints start in a pose vector, by its width (SMPL-H, SMPL-X; None: no finger data).
 _HAND_START = {156: 66, 165: 75, 72: None, 66: None}
+#: How far (metres) the source's foot joints at contact may be from the file's floor ``z = 0`` before
+#: the floor is taken from the feet instead (foot joints sit a few centimetres above the soles).
+FLOOR_TOLERANCE = 0.1
+_FEET = [SMPLH_NAMES.index(n) for n in ("left_ankle", "left_foot", "right_ankle", "right_foot")]
 
 
 def smplh_rig() -> TargetRig:
@@ -95,20 +103,26 @@ def smplh_rig() -> TargetRig:
     return TargetRig("smplh", list(SMPLH_NAMES), SMPLH_PARENTS, SMPLH_REST.astype(np.float64))
 
 
-def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS) -> Motion:
-    """Read an AMASS ``.npz`` and retarget it onto ``body``'s rig.
+def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS, source_fps: float | None = None) -> Motion:
+    """Read an AMASS ``.npz`` and retarget it onto ``body``'s rig, standing on the floor ``z = 0``.
 
     Args:
-        path: ``.npz`` with ``poses (T, 156)`` (or SMPL-X 165 / SMPL 72 / 66 wide), ``trans (T, 3)``
-            and ``mocap_framerate`` (or ``mocap_frame_rate``).
+        path: ``.npz`` with ``poses (T, 156)`` or ``(T, 52, 3)`` (or SMPL-X 165 / SMPL 72 / 66 wide),
+            ``trans (T, 3)`` and ``mocap_framerate`` (or ``mocap_frame_rate``).
         body: a :class:`~loosefit.body.BodyModel`.
         fps: output frame rate (slerp resampling).
+        source_fps: the file's frame rate, for files that store none; when the file has one, the
+            two must agree.
 
     Returns:
         A :class:`Motion` on ``body.rig`` named after the file.
+
+    Raises:
+        InputError: naming the file: missing or malformed arrays, no frame rate and no
+            ``source_fps`` (or one that disagrees with the file's), feet that do not meet the floor.
     """
     path = Path(path)
-    poses, trans, rate = _read(path)
+    poses, trans, rate = _read(path, source_fps)
     T = poses.shape[0]
     rot = np.zeros((T, len(SMPLH_NAMES), 3))
     rot[:, :22] = poses[:, :66].reshape(T, 22, 3)
@@ -119,45 +133,77 @@ def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS) -> Motion:
     rest = torch.from_numpy(SMPLH_REST)
     with torch.no_grad():
         world = forward_kinematics(local, torch.from_numpy(trans) + rest[0], rest, SMPLH_PARENTS).numpy()
+    A = _world_axes(world[..., :3, 3])
+    positions = world[..., :3, 3] @ A.T
+    target = TargetRig.from_body(body)
+    feet = [target.joint_names.index(n) for n in target.roles.feet]
+    positions[..., 2] -= source_floor(positions, float(np.min(target.rest[feet] @ np.asarray(target.roles.up))))
     source = SourceAnimation(
         joint_names=list(SMPLH_NAMES),
         parents=SMPLH_PARENTS,
-        positions=world[..., :3, 3],
-        rotations=world[..., :3, :3],
+        positions=positions,
+        rotations=A @ world[..., :3, :3],
         fps=rate,
         rest_positions=SMPLH_REST @ _Y_UP_TO_Z_UP.T,
         rest_rotations=np.broadcast_to(_Y_UP_TO_Z_UP, (len(SMPLH_NAMES), 3, 3)),
     )
-    target = TargetRig.from_body(body)
     resolved = resolve_joint_map(list(SMPLH_NAMES), SMPLH_PARENTS, target, builtin_joint_maps()["smplh"], path)
     local_t, root = retarget(source, target, resolved, calibration="rest", path=path)
+    check_feet_on_floor(local_t, root, target, path)
     return to_motion(local_t, root, rate, target, path.stem, fps)
 
 
-def _read(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
-    """``poses (T, W)`` float64, ``trans (T, 3)`` float64 and the frame rate of an AMASS file."""
+def _world_axes(positions: np.ndarray) -> np.ndarray:
+    """``A (3, 3)`` taking the file's world to Z up: the identity for AMASS (Z up), the +90 degree turn
+    about X when the head stands over the pelvis along +Y (SMPL's own frame); ``positions (T, 52, 3)``."""
+    rise = unit(positions[:, SMPLH_NAMES.index("head")] - positions[:, 0]).mean(0)
+    return _Y_UP_TO_Z_UP if rise[1] > max(rise[2], 0.5) else np.eye(3)
+
+
+def source_floor(positions: np.ndarray, standing: float) -> float:
+    """The floor height (metres) of SMPL-H world positions ``(T, 52, 3)``, Z up: ``0`` (the file's own
+    floor) when the lowest foot joint at contact (5th percentile over frames) is within
+    :data:`FLOOR_TOLERANCE` of ``standing`` (the height of the body's lowest foot joint when it stands
+    on the floor), else the height that puts it there."""
+    contact = float(np.percentile(positions[:, _FEET, 2].min(1), 5))
+    return 0.0 if abs(contact - standing) <= FLOOR_TOLERANCE else contact - standing
+
+
+def _read(path: Path, source_fps: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """``poses (T, W)`` float64, ``trans (T, 3)`` float64 and the frame rate of an AMASS file
+    (``source_fps`` when the file has none)."""
     try:
         with np.load(path, allow_pickle=False) as z:
             files = set(z.files)
             rate_key = next((k for k in ("mocap_framerate", "mocap_frame_rate") if k in files), None)
-            missing = sorted({"poses", "trans"} - files) + ([] if rate_key else ["mocap_framerate"])
+            missing = sorted({"poses", "trans"} - files)
             if missing:
                 raise InputError(f"not an AMASS motion, missing arrays {missing}", path)
             poses = np.asarray(z["poses"], np.float64)
             trans = np.asarray(z["trans"], np.float64)
-            rate = float(z[rate_key])
+            rate = float(z[rate_key]) if rate_key else None
     except InputError:
         raise
     except (OSError, ValueError) as e:
         raise InputError(f"cannot read AMASS file: {e}", path) from None
+    if rate is None:
+        if source_fps is None:
+            raise InputError("the file stores no frame rate (no mocap_framerate array): give the source's "
+                             "frame rate, e.g. `loosefit motion import FILE --fps 30`", path)
+        rate = float(source_fps)
+    elif source_fps is not None and abs(rate - source_fps) > 1e-6 * rate:
+        raise InputError(f"the file's frame rate is {rate:g} fps, --fps says {source_fps:g}", path)
+    if poses.ndim == 3 and poses.shape[2] == 3 and poses.shape[1] * 3 in _HAND_START:
+        poses = poses.reshape(poses.shape[0], -1)  # (T, 52, 3) -> (T, 156)
     if poses.ndim != 2 or poses.shape[1] not in _HAND_START or poses.shape[0] < 1:
-        raise InputError(f"poses must have shape (T, 156) (SMPL-H; 165, 72 or 66 also read), got {poses.shape}", path)
+        raise InputError(f"poses must have shape (T, 156) or (T, 52, 3) (SMPL-H; 165, 72 or 66 wide also "
+                         f"read), got {poses.shape}", path)
     if trans.shape != (poses.shape[0], 3):
         raise InputError(f"trans must have shape ({poses.shape[0]}, 3), got {trans.shape}", path)
     if not (np.isfinite(poses).all() and np.isfinite(trans).all()):
         raise InputError("poses or trans contain NaN or infinite values", path)
     if not rate > 0:
-        raise InputError(f"mocap_framerate must be positive, got {rate}", path)
+        raise InputError(f"the frame rate must be positive, got {rate}", path)
     return poses, trans, rate
 
 

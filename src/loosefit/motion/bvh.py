@@ -25,15 +25,10 @@ import torch
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
 from loosefit.motion.motion import DEFAULT_FPS, Motion
-from loosefit.motion.retarget import (
-    JointMap,
-    SourceAnimation,
-    TargetRig,
-    detect_axes,
-    resolve_joint_map,
-    retarget,
-    to_motion,
-)
+from loosefit.motion.axes import detect_axes
+from loosefit.motion.joint_map import JointMap, resolve_joint_map
+from loosefit.motion.retarget import SourceAnimation, retarget, to_motion
+from loosefit.motion.rig import TargetRig
 from loosefit.paths import atomic_path
 
 #: Channel names a BVH joint may list.
@@ -200,10 +195,10 @@ def retarget_bvh(
     Args:
         bvh: the parsed file (any skeleton, Y or Z up, any unit, any frame rate).
         body: a :class:`~loosefit.body.BodyModel` (its rig, joint names and rest joints).
-        joint_map: a :class:`~loosefit.motion.retarget.JointMap`, a built-in map name (``"cmu"``,
+        joint_map: a :class:`~loosefit.motion.joint_map.JointMap`, a built-in map name (``"cmu"``,
             ``"mixamo"``, ``"cc"``), a YAML map file, or ``None`` to pick the built-in map that fits.
         up, front: the file's up and front axes (``"y"``, ``"-z"``...); default: the map's, else
-            detected (:func:`~loosefit.motion.retarget.detect_axes`).
+            detected (:func:`~loosefit.motion.axes.detect_axes`).
         fps: output frame rate; the motion is resampled (slerp rotations, lerp translation).
         name: the motion's name.
     """

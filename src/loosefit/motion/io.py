@@ -9,18 +9,34 @@ import numpy as np
 
 from loosefit.errors import InputError
 from loosefit.motion.amass import import_amass
-from loosefit.motion.bvh import import_bvh
+from loosefit.motion.bvh import read_bvh, retarget_bvh
 from loosefit.motion.motion import DEFAULT_FPS, Motion
-from loosefit.motion.retarget import JointMap
+from loosefit.motion.joint_map import JointMap
 
 
-def load_motion(path: str | Path, body, joint_map: JointMap | str | Path | None = None, fps: float = DEFAULT_FPS) -> Motion:
+def load_motion(path: str | Path, body, joint_map: JointMap | str | Path | None = None, fps: float = DEFAULT_FPS,
+                source_fps: float | None = None, start: float | None = None, seconds: float | None = None) -> Motion:
+    """Read a motion file onto ``body``'s rig (:func:`read_motion`) and keep the part from ``start``
+    lasting ``seconds`` (:meth:`Motion.cut`; default: all of it); errors name the file."""
+    motion = read_motion(path, body, joint_map, fps, source_fps)
+    try:
+        return motion.cut(start, seconds)
+    except InputError as e:
+        raise InputError(e.problem, Path(path)) from None
+
+
+def read_motion(path: str | Path, body, joint_map: JointMap | str | Path | None = None, fps: float = DEFAULT_FPS,
+                source_fps: float | None = None) -> Motion:
     """Read a motion file and return it on ``body``'s rig.
 
     Dispatch on the content: a ``.bvh`` file is imported with :func:`~loosefit.motion.bvh.import_bvh`
     (``joint_map`` applies); an ``.npz`` with ``rotations`` is a loosefit :class:`Motion` (checked
     against the body's rig, kept at its own frame rate); an ``.npz`` with ``poses`` is AMASS
     (:func:`~loosefit.motion.amass.import_amass`). Imported motions are resampled to ``fps``.
+
+    Args:
+        source_fps: the file's frame rate, needed for AMASS files that store none; for files that
+            store one, it must agree with it.
 
     Raises:
         InputError: naming the file, when it is none of these or is malformed.
@@ -29,7 +45,9 @@ def load_motion(path: str | Path, body, joint_map: JointMap | str | Path | None 
     if not path.is_file():
         raise InputError("motion file not found", path)
     if path.suffix.lower() == ".bvh":
-        return import_bvh(path, body, joint_map, fps=fps)
+        bvh = read_bvh(path)
+        _check_rate(bvh.fps, source_fps, path)
+        return retarget_bvh(bvh, body, joint_map, fps=fps, name=path.stem)
     if joint_map is not None:
         raise InputError("a joint map applies to BVH files only", path)
     try:
@@ -42,11 +60,18 @@ def load_motion(path: str | Path, body, joint_map: JointMap | str | Path | None 
         keys = set(archive.files)
     if "rotations" in keys:
         motion = Motion.load(path)
+        _check_rate(motion.fps, source_fps, path)
         try:
             body.check_motion(motion)
         except InputError as e:
             raise InputError(e.problem, path) from None
         return motion
     if "poses" in keys:
-        return import_amass(path, body, fps=fps)
+        return import_amass(path, body, fps=fps, source_fps=source_fps)
     raise InputError(f"unknown .npz motion: expected 'rotations' (loosefit) or 'poses' (AMASS), found {sorted(keys)}", path)
+
+
+def _check_rate(rate: float, source_fps: float | None, path: Path) -> None:
+    """A frame rate given for a file that stores its own must agree with it."""
+    if source_fps is not None and abs(rate - source_fps) > 1e-3 * rate:
+        raise InputError(f"the file's frame rate is {rate:g} fps, --fps says {source_fps:g}", path)

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from loosefit.geometry.vectors import unit
 from loosefit.motion.limits import JointLimits, joint_limits
 
 #: Leg joints per side (index 0 = left, 1 = right) in chain order: hip socket, thigh, shank, foot, toes.
@@ -62,12 +63,8 @@ def pelvis_rotation(yaw, pitch, roll) -> np.ndarray:
     return rot_z(yaw) @ rot_x(pitch) @ rot_y(roll)
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True).clip(1e-12)
-
-
 def _orthogonal(v: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    return _unit(v - (v * axis).sum(-1, keepdims=True) * axis)
+    return unit(v - (v * axis).sum(-1, keepdims=True) * axis)
 
 
 def _to_axis_angle(R: np.ndarray) -> np.ndarray:
@@ -230,10 +227,10 @@ def _aim(leg: np.ndarray, target: np.ndarray, hinge: np.ndarray) -> np.ndarray:
     """Hip rotations ``(T, 3, 3)`` turning the rest leg direction ``leg (T, 3)`` onto ``target (T, 3)``
     and then twisting about it so that the knee's hinge (the x axis at rest) lines up with ``hinge (T, 3)``.
     Where ``hinge`` nearly runs along the leg the twist fades out (no flips)."""
-    a, b = _unit(leg), _unit(target)
+    a, b = unit(leg), unit(target)
     axis = np.cross(a, b)
     sin, cos = np.linalg.norm(axis, axis=-1), (a * b).sum(-1)
-    swing = _matrix(_unit(axis) * np.arctan2(sin, cos)[:, None])
+    swing = _matrix(unit(axis) * np.arctan2(sin, cos)[:, None])
     x_rest = _orthogonal(np.broadcast_to(np.array([1.0, 0.0, 0.0]), a.shape), a)
     x_now = np.einsum("tab,tb->ta", swing, x_rest)
     h = hinge - (hinge * b).sum(-1, keepdims=True) * b
@@ -266,7 +263,7 @@ def solve(perf: Performance, skel: Skeleton) -> tuple[np.ndarray, np.ndarray]:
         d = np.einsum("tba,tb->ta", W_socket, perf.ankle[:, side] - hip_world)  # in the socket's frame
         theta = skel.knee_angle(side, np.linalg.norm(d, axis=-1))
         t_vec, s_vec = skel.knee[side] - skel.hip[side], skel.ankle[side] - skel.knee[side]
-        leg = _unit(t_vec + np.einsum("tab,b->ta", rot_x(theta), s_vec))
+        leg = unit(t_vec + np.einsum("tab,b->ta", rot_x(theta), s_vec))
         hinge_world = np.stack([np.cos(perf.foot_yaw[:, side]), np.sin(perf.foot_yaw[:, side]), np.zeros(T)], -1)
         R_hip = _aim(leg, d, np.einsum("tba,tb->ta", W_socket, hinge_world))
         R_knee = rot_x(theta)

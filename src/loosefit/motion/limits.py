@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.geometry.vectors import unit
 from loosefit.motion.motion import Motion
 
 _DEG = np.pi / 180.0
@@ -105,23 +106,19 @@ def side_of(name: str) -> tuple[str, str]:
     return "", name
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
-
-
 def _frame(x: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Right-handed frame (columns ``x, y, z``) with ``z`` along ``z`` and ``x`` as close to ``x`` as possible."""
-    z = _unit(z)
-    x = _unit(x - (x @ z) * z)
+    z = unit(z)
+    x = unit(x - (x @ z) * z)
     return np.stack([x, np.cross(z, x), z], 1)
 
 
 def _arm_frames(names: list[str], rest: np.ndarray) -> dict[str, np.ndarray]:
     """Anatomical frames of the left arm chain, built from the rest joint positions."""
     pos = {n: rest[names.index(n)].astype(np.float64) for n in names}
-    upper = _unit(pos["LeftForeArm"] - pos["LeftArm"])
-    fore = _unit(pos["LeftHand"] - pos["LeftForeArm"])
-    hand = _unit(pos["LeftFingerBase"] - pos["LeftHand"])
+    upper = unit(pos["LeftForeArm"] - pos["LeftArm"])
+    fore = unit(pos["LeftHand"] - pos["LeftForeArm"])
+    hand = unit(pos["LeftFingerBase"] - pos["LeftHand"])
     # Shoulder: positive swing about x carries the arm forward (-y).
     shoulder = _frame(np.cross(upper, [0.0, -1.0, 0.0]), upper)
     # Elbow: positive swing about x folds the forearm onto the upper arm.

@@ -71,6 +71,34 @@ class Motion:
         """Frames ``[start, stop)`` as a new Motion."""
         return Motion(self.rotations[start:stop], self.translation[start:stop], self.fps, self.rig, self.joint_names, self.name)
 
+    def cut(self, start: float | None = None, seconds: float | None = None) -> "Motion":
+        """The part from ``start`` seconds (default 0) lasting ``seconds`` (default: to the end): frames
+        ``round(start * fps)`` to ``round((start + seconds) * fps)``, at least one.
+
+        Raises:
+            InputError: a negative ``start`` or non-positive ``seconds``, or a part that reaches past the
+                end of the motion (the message gives its duration).
+        """
+        if start is None and seconds is None:
+            return self
+        start = 0.0 if start is None else float(start)
+        if not (np.isfinite(start) and start >= 0):
+            raise InputError(f"start must be a non-negative number of seconds, got {start}")
+        first = int(round(start * self.fps))
+        if first >= self.num_frames:
+            raise InputError(f"start {start:g} s is past the end of the motion ({self.duration:g} s, "
+                             f"{self.num_frames} frames at {self.fps:g} fps)")
+        if seconds is None:
+            return self.slice(first)
+        seconds = float(seconds)
+        if not (np.isfinite(seconds) and seconds > 0):
+            raise InputError(f"seconds must be a positive number, got {seconds}")
+        stop = max(int(round((start + seconds) * self.fps)), first + 1)
+        if stop > self.num_frames:
+            raise InputError(f"{start:g} s + {seconds:g} s reaches past the end of the motion ({self.duration:g} s, "
+                             f"{self.num_frames} frames at {self.fps:g} fps)")
+        return self.slice(first, stop)
+
     def save(self, path: str | Path) -> None:
         """Write an ``.npz`` (rotations, translation, fps, rig, joint_names, name), atomically."""
         with atomic_path(path, suffix=".npz") as tmp:

@@ -2,7 +2,7 @@
 
 The source is any skeleton animated in world space (BVH forward kinematics, SMPL-H from AMASS, a
 loosefit body); the target is a rig in loosefit's convention (world-aligned joint frames at rest,
-``W_j = W_parent @ R_j``). A :class:`JointMap` pairs target joints with source joints by name.
+``W_j = W_parent @ R_j``). A :class:`~loosefit.motion.joint_map.JointMap` pairs target joints with source joints by name.
 
 For every mapped target joint, in tree order, the world rotation ``W_j`` is chosen so that the
 target's bone towards each mapped child points where the source's bone between the same joints
@@ -22,101 +22,34 @@ measured from the feet (see :func:`retarget`).
 
 from __future__ import annotations
 
-import fnmatch
-import functools
-from dataclasses import dataclass, field
-from importlib import resources
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
 
 from loosefit.errors import InputError
-from loosefit.geometry.lbs import topological_order
+from loosefit.geometry.lbs import forward_kinematics, topological_order
 from loosefit.geometry.rotations import (
-    axis_angle_to_quaternion,
+    axis_angle_to_matrix,
     matrix_to_quaternion,
+    nearest_rotation,
     quaternion_to_axis_angle,
+    rotation_angle,
+    rotation_between,
 )
+from loosefit.geometry.vectors import unit
+from loosefit.motion.joint_map import ResolvedMap
 from loosefit.motion.motion import Motion
+from loosefit.motion.resample import resample_quaternions
+from loosefit.motion.rig import Roles, TargetRig
 
 # Weighted-frame calibration: frames whose bone is within about this angle of the rest direction count.
 _CALIBRATION_SIGMA = np.radians(15.0)
 # A bone shorter than this fraction of the leg length has no usable direction.
 _SHORT_BONE = 1e-3
-
-
-# --------------------------------------------------------------------------------------- rig roles
-
-
-@dataclass(frozen=True)
-class Roles:
-    """Which joints of a rig play the parts retargeting needs.
-
-    Attributes:
-        root: the root joint (pelvis).
-        legs: ``((hip, knee, ankle) left, (hip, knee, ankle) right)``.
-        feet: joints that touch the floor when standing (ankles, toes).
-        spine: the chain from the root towards the head, root excluded.
-        arms: ``(left, right)`` shoulder (upper-arm) joints, for the body's left-right axis.
-        up: the rig's up axis in its rest frame.
-    """
-
-    root: str
-    legs: tuple[tuple[str, str, str], tuple[str, str, str]]
-    feet: tuple[str, ...]
-    spine: tuple[str, ...]
-    arms: tuple[str, str]
-    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
-
-
-#: Roles per rig name: ``cmu_mb`` (Anny, CMU names) and ``smplh`` (SMPL-H, see :mod:`loosefit.motion.amass`).
-RIG_ROLES = {
-    "cmu_mb": Roles(
-        root="Hips",
-        legs=(("LeftUpLeg", "LeftLeg", "LeftFoot"), ("RightUpLeg", "RightLeg", "RightFoot")),
-        feet=("LeftFoot", "LeftToeBase", "RightFoot", "RightToeBase"),
-        spine=("LowerBack", "Spine", "Spine1", "Neck", "Neck1", "Head"),
-        arms=("LeftArm", "RightArm"),
-    ),
-    "smplh": Roles(
-        root="pelvis",
-        legs=(("left_hip", "left_knee", "left_ankle"), ("right_hip", "right_knee", "right_ankle")),
-        feet=("left_ankle", "left_foot", "right_ankle", "right_foot"),
-        spine=("spine1", "spine2", "spine3", "neck", "head"),
-        arms=("left_shoulder", "right_shoulder"),
-        up=(0.0, 1.0, 0.0),
-    ),
-}
-
-
-@dataclass
-class TargetRig:
-    """The rig motions are retargeted onto.
-
-    Attributes:
-        name: rig name (a key of :data:`RIG_ROLES`).
-        joint_names: ``J`` joint names.
-        parents: ``(J,)`` parent indices, -1 for the root.
-        rest: ``(J, 3)`` rest joint positions, metres, in the rig's rest frame (world-aligned joints).
-    """
-
-    name: str
-    joint_names: list[str]
-    parents: np.ndarray
-    rest: np.ndarray
-
-    @classmethod
-    def from_body(cls, body) -> "TargetRig":
-        """The rig of a :class:`~loosefit.body.BodyModel` in its own shape."""
-        return cls(body.rig, list(body.joint_names), np.asarray(body.parents), body.rest_joints().astype(np.float64))
-
-    @property
-    def roles(self) -> Roles:
-        if self.name not in RIG_ROLES:
-            raise InputError(f"no retargeting roles for rig {self.name!r} (known: {sorted(RIG_ROLES)})")
-        return RIG_ROLES[self.name]
+#: How far (metres) a retargeted motion's lowest foot joint at contact may be from its standing height.
+FEET_TOLERANCE = 0.12
 
 
 @dataclass
@@ -147,334 +80,6 @@ class SourceAnimation:
         return self.positions.shape[0]
 
 
-# --------------------------------------------------------------------------------------- joint maps
-
-
-@dataclass(frozen=True)
-class JointMap:
-    """Which source joint drives which target joint.
-
-    YAML form (every key but ``joints`` optional)::
-
-        name: my-skeleton
-        target_rig: cmu_mb          # rig whose joint names are the keys of ``joints``
-        joints:                     # target joint: source joint (or a list of alternatives)
-          Hips: pelvis
-          LeftUpLeg: [l_hip, LeftHip]
-        ignore: [prop_*, "*_twist"] # source joints with no target (fnmatch patterns)
-        optional: [LeftToeBase]     # target joints whose source may be absent from a file
-        calibration: rest           # rest | motion (default: rest if the rest pose stands)
-        up: y                       # source up axis (+x, -y, z ...), default: detected
-        front: z                    # source front axis, default: detected
-
-    Source names match with or without a namespace prefix (``mixamorig:Hips`` matches ``Hips``).
-    Every source joint must be mapped or ignored, and every non-optional mapped source joint must be
-    in the file; otherwise import fails with an error listing them.
-    """
-
-    name: str
-    joints: dict[str, tuple[str, ...]]
-    ignore: tuple[str, ...] = ()
-    optional: tuple[str, ...] = ()
-    target_rig: str = "cmu_mb"
-    calibration: str | None = None
-    up: str | None = None
-    front: str | None = None
-    path: Path | None = field(default=None, compare=False)
-
-    @classmethod
-    def from_dict(cls, data, path: Path | None = None) -> "JointMap":
-        """Build and validate a map from its YAML content; errors name ``path``."""
-        if not isinstance(data, dict):
-            raise InputError("joint map must be a mapping with a 'joints' key", path)
-        unknown = sorted(set(data) - {"name", "target_rig", "joints", "ignore", "optional", "calibration", "up", "front"})
-        if unknown:
-            raise InputError(f"joint map has unknown keys {unknown}", path)
-        joints = data.get("joints")
-        if not isinstance(joints, dict) or not joints:
-            raise InputError("joint map needs a non-empty 'joints' mapping (target joint: source joint)", path)
-        parsed = {}
-        for target, source in joints.items():
-            alts = [source] if isinstance(source, str) else source
-            if not (isinstance(alts, list) and alts and all(isinstance(a, str) and a for a in alts)):
-                raise InputError(f"joint map entry {target!r} must name a source joint or a list of them", path)
-            parsed[str(target)] = tuple(alts)
-        lists = {}
-        for key in ("ignore", "optional"):
-            value = data.get(key) or []
-            if not (isinstance(value, list) and all(isinstance(v, str) for v in value)):
-                raise InputError(f"joint map {key!r} must be a list of names", path)
-            lists[key] = tuple(value)
-        calibration = data.get("calibration")
-        if calibration not in (None, "rest", "motion"):
-            raise InputError(f"joint map calibration must be 'rest' or 'motion', got {calibration!r}", path)
-        for key in ("up", "front"):
-            if data.get(key) is not None:
-                parse_axis(data[key], path)
-        return cls(
-            name=str(data.get("name", path.stem if path else "custom")),
-            joints=parsed,
-            ignore=lists["ignore"],
-            optional=lists["optional"],
-            target_rig=str(data.get("target_rig", "cmu_mb")),
-            calibration=calibration,
-            up=data.get("up"),
-            front=data.get("front"),
-            path=path,
-        )
-
-    def inverted(self, name: str, target_rig: str) -> "JointMap":
-        """The map read the other way (source joints become targets, first alternatives only);
-        joints it leaves out are ignored."""
-        return JointMap(name, {alts[0]: (t,) for t, alts in self.joints.items()}, ignore=("*",),
-                        target_rig=target_rig, calibration="rest")
-
-
-def load_joint_map(path: str | Path) -> JointMap:
-    """Read a YAML joint map (format in :class:`JointMap`)."""
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
-        raise InputError(f"cannot read joint map: {e}", path) from None
-    return JointMap.from_dict(data, path)
-
-
-@functools.lru_cache(maxsize=1)
-def builtin_joint_maps() -> dict[str, JointMap]:
-    """The maps shipped in ``loosefit/motion/joint_maps/``: ``cmu``, ``mixamo``, ``cc`` (Character
-    Creator), ``smplh`` (AMASS)."""
-    folder = resources.files("loosefit.motion") / "joint_maps"
-    maps = {}
-    for item in sorted(folder.iterdir(), key=lambda p: p.name):
-        if item.name.endswith(".yaml"):
-            with resources.as_file(item) as path:
-                maps[path.stem] = load_joint_map(path)
-    return maps
-
-
-def _short_name(name: str) -> str:
-    """A joint name without namespace prefix: ``mixamorig:Hips`` -> ``Hips``."""
-    return name.replace("|", ":").rsplit(":", 1)[-1]
-
-
-@dataclass
-class ResolvedMap:
-    """A joint map applied to one source skeleton: ``source_of[target joint index] = source index``."""
-
-    joint_map: JointMap
-    source_of: dict[int, int]
-
-
-def resolve_joint_map(
-    source_names: list[str],
-    source_parents: np.ndarray,
-    target: TargetRig,
-    joint_map: JointMap | str | Path | None = None,
-    path: Path | None = None,
-    skip: np.ndarray | None = None,
-) -> ResolvedMap:
-    """Pair target joints with source joints.
-
-    Args:
-        source_names: the source skeleton's joint names.
-        source_parents: ``(J,)`` the source skeleton's parent indices.
-        target: the rig to retarget onto.
-        joint_map: a :class:`JointMap`, the name of a built-in map (``"cmu"``, ``"mixamo"``, ``"cc"``),
-            a YAML file, or ``None`` to pick the built-in map that fits the names best.
-        path: the source file, named in errors.
-        skip: ``(J,)`` bool, source entries that need no mapping (BVH End Sites).
-
-    Raises:
-        InputError: listing source joints neither mapped nor ignored, mapped source joints missing
-            from the file, target joints the rig lacks, joints that retargeting needs and the map
-            leaves out, or pairs whose parent-child order differs between the skeletons.
-    """
-    skip = np.zeros(len(source_names), bool) if skip is None else skip
-    hint = ""
-    if joint_map is None:
-        candidates = [m for m in builtin_joint_maps().values() if m.target_rig == target.name]
-        if not candidates:
-            raise InputError(f"no built-in joint map targets rig {target.name!r}; pass a joint map", path)
-        joint_map = max(candidates, key=lambda m: _coverage(m, source_names))
-        hint = " (the closest built-in map; for another skeleton pass a YAML joint map)"
-    elif isinstance(joint_map, str) and joint_map in builtin_joint_maps():
-        joint_map = builtin_joint_maps()[joint_map]
-    elif not isinstance(joint_map, JointMap):
-        joint_map = load_joint_map(joint_map)
-    if joint_map.target_rig != target.name:
-        raise InputError(
-            f"joint map {joint_map.name!r} targets rig {joint_map.target_rig!r}, the body uses {target.name!r}", path)
-    where = _name_index(source_names)
-    bad_targets = sorted(set(joint_map.joints) - set(target.joint_names))
-    if bad_targets:
-        raise InputError(
-            f"joint map {joint_map.name!r} names joints that rig {target.name!r} lacks: {bad_targets}", joint_map.path)
-    source_of, missing = {}, []
-    for tname, alts in joint_map.joints.items():
-        found = next((where[a] for a in alts if a in where), None)
-        if found is None:
-            if tname not in joint_map.optional:
-                missing.append(f"{tname} <- {' | '.join(alts)}")
-            continue
-        source_of[target.joint_names.index(tname)] = found
-    used = set(source_of.values())
-    unknown = [
-        n for i, n in enumerate(source_names)
-        if i not in used and not skip[i]
-        and not any(fnmatch.fnmatchcase(n, p) or fnmatch.fnmatchcase(_short_name(n), p) for p in joint_map.ignore)
-    ]
-    problems = []
-    if missing:
-        problems.append(f"missing source joints (target <- source): {missing}")
-    if unknown:
-        problems.append(f"unknown source joints, neither mapped nor ignored: {unknown}")
-    if problems:
-        raise InputError(f"joint map {joint_map.name!r}{hint} does not fit: " + "; ".join(problems), path)
-    doubled = sorted({source_names[s] for s in source_of.values() if list(source_of.values()).count(s) > 1})
-    if doubled:
-        raise InputError(f"joint map {joint_map.name!r} drives several target joints from {doubled}", path)
-    roles = target.roles
-    needed = [roles.root, *roles.legs[0], *roles.legs[1]]
-    lacking = [n for n in needed if target.joint_names.index(n) not in source_of]
-    if not any(target.joint_names.index(n) in source_of for n in roles.spine):
-        lacking.append(f"one of {list(roles.spine)}")
-    if lacking:
-        raise InputError(f"joint map {joint_map.name!r} leaves out joints retargeting needs: {lacking}", path)
-    _check_hierarchy(source_of, target, source_names, np.asarray(source_parents), path)
-    return ResolvedMap(joint_map, source_of)
-
-
-def _coverage(joint_map: JointMap, source_names: list[str]) -> float:
-    where = _name_index(source_names)
-    required = [alts for t, alts in joint_map.joints.items() if t not in joint_map.optional]
-    return sum(any(a in where for a in alts) for alts in required) / max(len(required), 1)
-
-
-def _name_index(names: list[str]) -> dict[str, int]:
-    """Source names and their short forms -> index (full names win over short ones)."""
-    where = {}
-    for i, n in enumerate(names):
-        where.setdefault(_short_name(n), i)
-    for i, n in enumerate(names):
-        where[n] = i
-    return where
-
-
-def _check_hierarchy(source_of: dict[int, int], target: TargetRig, source_names, source_parents, path) -> None:
-    """Every mapped target joint's nearest mapped ancestor must map to an ancestor of its source."""
-    for j, s in source_of.items():
-        a = target.parents[j]
-        while a >= 0 and a not in source_of:
-            a = target.parents[a]
-        if a < 0:
-            continue
-        p = source_parents[s]
-        while p >= 0 and p != source_of[a]:
-            p = source_parents[p]
-        if p < 0:
-            raise InputError(
-                f"joint map pairs {target.joint_names[j]!r} with {source_names[s]!r}, which is not below "
-                f"{source_names[source_of[a]]!r} (paired with {target.joint_names[a]!r}) in the source skeleton", path)
-
-
-# --------------------------------------------------------------------------------------- axes
-
-
-def parse_axis(text, path: Path | None = None) -> np.ndarray:
-    """``"y"``, ``"+y"``, ``"-z"``... -> unit vector ``(3,)``."""
-    t = str(text).strip().lower()
-    sign = -1.0 if t.startswith("-") else 1.0
-    t = t.lstrip("+-")
-    if t not in ("x", "y", "z"):
-        raise InputError(f"axis must be one of x, y, z with an optional sign, got {text!r}", path)
-    v = np.zeros(3)
-    v["xyz".index(t)] = sign
-    return v
-
-
-def _snap(v: np.ndarray, exclude: np.ndarray | None = None) -> np.ndarray:
-    """The signed coordinate axis nearest to ``v``, optionally not along ``exclude``."""
-    score = np.abs(v).copy()
-    if exclude is not None:
-        score[np.abs(exclude) > 0.5] = -1.0
-    i = int(np.argmax(score))
-    out = np.zeros(3)
-    out[i] = np.sign(v[i]) or 1.0
-    return out
-
-
-def detect_axes(
-    positions: np.ndarray,
-    resolved: ResolvedMap,
-    target: TargetRig,
-    up: str | None = None,
-    front: str | None = None,
-    path: Path | None = None,
-) -> np.ndarray:
-    """The rotation ``A (3, 3)`` taking source world axes to loosefit's (Z up, character facing -Y).
-
-    Up is the axis nearest the mean hip-to-head direction over all frames; front is the axis
-    nearest the character's facing in the first frame (from the hips, and the shoulders when
-    mapped), so the motion starts facing -Y to within 45 degrees and keeps the source's axis
-    layout. ``up`` / ``front`` (``"y"``, ``"-z"``...) override the detection.
-
-    Args:
-        positions: ``(T, J, 3)`` source world joint positions in the file's axes.
-    """
-    roles = target.roles
-    src = {target.joint_names[j]: s for j, s in resolved.source_of.items()}
-    hips = positions[:, src[roles.legs[0][0]]] - positions[:, src[roles.legs[1][0]]]
-    centre = 0.5 * (positions[:, src[roles.legs[0][0]]] + positions[:, src[roles.legs[1][0]]])
-    top = [src[n] for n in roles.spine if n in src][-1]
-    if up is None:
-        rise = _unit(positions[:, top] - centre).mean(0)
-        up_v = _snap(rise)
-    else:
-        up_v = parse_axis(up, path)
-    if front is None:
-        left = _unit(hips[0])
-        if all(n in src for n in roles.arms):
-            left = left + _unit(positions[0, src[roles.arms[0]]] - positions[0, src[roles.arms[1]]])
-        left = left - (left @ up_v) * up_v
-        if np.linalg.norm(left) < 1e-6:
-            raise InputError("cannot tell the source's facing direction: left-right axis is along up; "
-                             "set 'front' in the joint map", path)
-        left_v = _snap(left, exclude=up_v)
-    else:
-        front_v = parse_axis(front, path)
-        if abs(front_v @ up_v) > 0.5:
-            raise InputError(f"front axis {front!r} is along the up axis", path)
-        left_v = np.cross(up_v, front_v)
-    return np.stack([left_v, np.cross(up_v, left_v), up_v])
-
-
-# --------------------------------------------------------------------------------------- rotations
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-
-
-def _axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rodrigues: unit ``axis (..., 3)``, ``angle (...)`` -> ``(..., 3, 3)``."""
-    x, y, z = np.moveaxis(axis, -1, 0)
-    zero = np.zeros_like(x)
-    K = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], -1).reshape(axis.shape[:-1] + (3, 3))
-    s, c = np.sin(angle)[..., None, None], np.cos(angle)[..., None, None]
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The smallest rotation taking unit vectors ``a`` to ``b`` (both ``(..., 3)``) -> ``(..., 3, 3)``."""
-    axis = np.cross(a, b)
-    s = np.linalg.norm(axis, axis=-1)
-    c = (a * b).sum(-1)
-    # Opposite vectors: any axis perpendicular to a works; take the one from the least aligned coordinate.
-    helper = np.eye(3)[np.argmin(np.abs(a), axis=-1)]
-    axis = np.where((s < 1e-9)[..., None], np.cross(a, helper), axis)
-    return _axis_rotation(_unit(axis), np.arctan2(s, c))
-
 
 def _twist_fit(W: np.ndarray, axis: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Rotate ``W (F, 3, 3)`` about unit ``axis (F, 3)`` so that directions ``v (F, m, 3)`` best meet
@@ -483,23 +88,7 @@ def _twist_fit(W: np.ndarray, axis: np.ndarray, v: np.ndarray, u: np.ndarray) ->
     vp = v - (v * a).sum(-1, keepdims=True) * a
     up = u - (u * a).sum(-1, keepdims=True) * a
     angle = np.arctan2((np.cross(vp, up) * a).sum((-1, -2)), (vp * up).sum((-1, -2)))
-    return _axis_rotation(axis, angle) @ W
-
-
-def _project_rotation(M: np.ndarray) -> np.ndarray:
-    """The rotation nearest ``M (..., 3, 3)`` in the Frobenius norm (chordal mean of summed rotations)."""
-    U, _, Vt = np.linalg.svd(M)
-    D = np.ones(M.shape[:-1])
-    D[..., -1] = np.sign(np.linalg.det(U @ Vt))
-    return (U * D[..., None, :]) @ Vt
-
-
-def _angle(R: np.ndarray) -> np.ndarray:
-    """Rotation angles ``(...)`` in radians of ``R (..., 3, 3)``."""
-    return np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0))
-
-
-# --------------------------------------------------------------------------------------- retargeting
+    return axis_angle_to_matrix(axis * angle[..., None]).numpy() @ W
 
 
 class _Solver:
@@ -560,15 +149,15 @@ class _Solver:
     def directions(self, positions: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray]:
         """Unit bone directions of joint ``j``'s pairs: target rest ``(n, 3)``, source ``(F, n, 3)``."""
         kids = self.pairs[j]
-        d = _unit(self.target.rest[kids] - self.target.rest[j])
-        u = _unit(positions[:, self.src[kids]] - positions[:, self.src[j], None])
+        d = unit(self.target.rest[kids] - self.target.rest[j])
+        u = unit(positions[:, self.src[kids]] - positions[:, self.src[j], None])
         return d, u
 
     def _match(self, j: int, cand: np.ndarray, d: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Turn ``cand (F, 3, 3)`` so the main bone points exactly along the source's and the
         others best fit about it."""
         k = self.primary[j]
-        W = _rotation_between(cand @ d[k], u[:, k]) @ cand
+        W = rotation_between(cand @ d[k], u[:, k]).numpy() @ cand
         if len(d) > 1:
             others = np.arange(len(d)) != k
             W = _twist_fit(W, u[:, k], np.einsum("fab,nb->fna", W, d[others]), u[:, others])
@@ -623,7 +212,7 @@ class _Solver:
                 _, u = self.directions(positions, j)
                 predicted = np.einsum("tab,nb->tna", O, root_local)
                 k = self.primary[j]
-                R = _rotation_between(predicted[:, k], u[:, k])
+                R = rotation_between(predicted[:, k], u[:, k]).numpy()
                 if len(u[0]) > 1:
                     others = np.arange(len(u[0])) != k
                     R = _twist_fit(R, u[:, k], np.einsum("tab,tnb->tna", R, predicted[:, others]), u[:, others])
@@ -645,10 +234,10 @@ def standing(positions: np.ndarray, src_of_name, roles: Roles, max_angle: float 
     of straight down and the spine rises within ``max_angle`` of straight up."""
     cos = np.cos(np.radians(max_angle))
     for hip, _, ankle in roles.legs:
-        if _unit(positions[src_of_name(hip)] - positions[src_of_name(ankle)])[2] < cos:
+        if unit(positions[src_of_name(hip)] - positions[src_of_name(ankle)])[2] < cos:
             return False
     top = [n for n in roles.spine if src_of_name(n) >= 0][-1]
-    return _unit(positions[src_of_name(top)] - positions[src_of_name(roles.root)])[2] >= cos
+    return unit(positions[src_of_name(top)] - positions[src_of_name(roles.root)])[2] >= cos
 
 
 def retarget(
@@ -700,6 +289,35 @@ def retarget(
     return local, _root_positions(solver, source, ref_pos[0] if calibration == "rest" else None)
 
 
+def check_feet_on_floor(local: np.ndarray, root: np.ndarray, target: TargetRig, path: Path | None = None,
+                        tolerance: float = FEET_TOLERANCE) -> float:
+    """Check that a retargeted motion stands on the floor; return its foot height error, metres.
+
+    The lowest foot joint (:attr:`Roles.feet`) of each frame, at contact (5th percentile over the
+    frames, so jumps and steps do not count), must be within ``tolerance`` of its height when the rig
+    stands in its rest pose on the floor.
+
+    Args:
+        local: ``(T, J, 3, 3)`` local rotations of ``target``'s joints.
+        root: ``(T, 3)`` root joint positions, metres.
+
+    Raises:
+        InputError: naming ``path``, with how far the feet are above or below the floor.
+    """
+    up = np.asarray(target.roles.up, np.float64)
+    feet = [target.joint_names.index(n) for n in target.roles.feet]
+    with torch.no_grad():
+        world = forward_kinematics(torch.from_numpy(local), torch.from_numpy(np.asarray(root, np.float64)),
+                                   torch.from_numpy(target.rest), target.parents)
+    contact = float(np.percentile((world[:, feet, :3, 3].numpy() @ up).min(1), 5))
+    error = contact - float((target.rest[feet] @ up).min())
+    if abs(error) > tolerance:
+        where = "above" if error > 0 else "below"
+        raise InputError(f"the imported body's feet are {abs(error):.2f} m {where} the floor where they touch it "
+                         f"(more than {tolerance:g} m): the file's root translation does not fit its skeleton", path)
+    return error
+
+
 def _calibrate(solver: _Solver, ref_pos: np.ndarray, ref_rot: np.ndarray) -> tuple[dict, np.ndarray]:
     """Calibration rotations ``C[j] (3, 3)`` (source orientation -> target orientation) and the
     root's bone directions in the source root's frame ``(n, 3)``, from reference frames
@@ -711,21 +329,22 @@ def _calibrate(solver: _Solver, ref_pos: np.ndarray, ref_rot: np.ndarray) -> tup
     """
     target = solver.target
     up_t = np.asarray(solver.roles.up, np.float64)
-    W_ref = solver.calibrate(ref_pos, _rotation_between(up_t, np.array([0.0, 0.0, 1.0])))
+    W_ref = solver.calibrate(ref_pos, rotation_between(up_t, np.array([0.0, 0.0, 1.0])).numpy())
     mapped = np.flatnonzero(solver.src >= 0)
     parents = target.parents
     swing = np.stack([
-        _angle(np.swapaxes(W_ref[:, parents[j]], -1, -2) @ W_ref[:, j]) if parents[j] >= 0 else np.zeros(len(ref_pos))
+        rotation_angle(np.swapaxes(W_ref[:, parents[j]], -1, -2) @ W_ref[:, j]).numpy()
+        if parents[j] >= 0 else np.zeros(len(ref_pos))
         for j in mapped
     ], 1)  # (F, n mapped)
     C, root_local = {}, np.zeros((0, 3))
     for col, j in enumerate(mapped):
         theta = swing.mean(1) if parents[j] < 0 else swing[:, col]
         w = np.exp(-(theta**2 - theta.min() ** 2) / _CALIBRATION_SIGMA**2)
-        C[j] = _project_rotation(np.einsum("f,fba,fbc->ac", w, ref_rot[:, solver.src[j]], W_ref[:, j]))
+        C[j] = nearest_rotation(np.einsum("f,fba,fbc->ac", w, ref_rot[:, solver.src[j]], W_ref[:, j])).numpy()
         if parents[j] < 0 and j in solver.pairs:
             _, u = solver.directions(ref_pos, j)
-            root_local = _unit(np.einsum("f,fba,fnb->na", w, ref_rot[:, solver.src[j]], u))
+            root_local = unit(np.einsum("f,fba,fnb->na", w, ref_rot[:, solver.src[j]], u))
     return C, root_local
 
 
@@ -752,49 +371,11 @@ def _root_positions(solver: _Solver, source: SourceAnimation, rest: np.ndarray |
     return root
 
 
-# --------------------------------------------------------------------------------------- time
-
-
-def resample(motion: Motion, fps: float) -> Motion:
-    """``motion`` at another frame rate: rotations by quaternion slerp, translation linearly.
-
-    Output frame ``k`` is at time ``k / fps``; frames cover the source's time span ``[0, (T - 1) / fps_in]``.
-    """
-    if abs(motion.fps - fps) < 1e-9 * fps:
-        return motion
-    q = axis_angle_to_quaternion(torch.from_numpy(motion.rotations.astype(np.float64))).numpy()
-    q, translation = _resample(q, motion.translation.astype(np.float64), motion.fps, fps)
-    rotations = quaternion_to_axis_angle(torch.from_numpy(q)).numpy()
-    return Motion(rotations, translation, fps, motion.rig, motion.joint_names, motion.name)
-
-
-def _resample(q: np.ndarray, translation: np.ndarray, fps_in: float, fps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Quaternions ``(T, J, 4)`` and translations ``(T, 3)`` at ``fps_in`` -> the same at ``fps``."""
-    T = q.shape[0]
-    count = int(np.floor((T - 1) / fps_in * fps + 1e-6)) + 1
-    at = np.arange(count) * (fps_in / fps)
-    i0 = np.minimum(np.floor(at + 1e-6).astype(np.int64), T - 1)
-    i1 = np.minimum(i0 + 1, T - 1)
-    a = np.clip(at - i0, 0.0, 1.0)[:, None, None]
-    q0, q1 = q[i0], q[i1]
-    # Take the shorter arc: q and -q are the same rotation.
-    dot = (q0 * q1).sum(-1, keepdims=True)
-    q1 = np.where(dot < 0, -q1, q1)
-    omega = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))
-    sin = np.sin(omega)
-    tiny = sin < 1e-6
-    safe = np.where(tiny, 1.0, sin)
-    w0 = np.where(tiny, 1 - a, np.sin((1 - a) * omega) / safe)
-    w1 = np.where(tiny, a, np.sin(a * omega) / safe)
-    a = a[:, 0]
-    return w0 * q0 + w1 * q1, (1 - a) * translation[i0] + a * translation[i1]
-
-
 def to_motion(local: np.ndarray, root: np.ndarray, fps: float, target: TargetRig, name: str, out_fps: float) -> Motion:
     """A :class:`Motion` from retargeted local rotations ``(T, J, 3, 3)`` and root positions ``(T, 3)``
     at ``fps``, resampled to ``out_fps``."""
     q = matrix_to_quaternion(torch.from_numpy(local)).numpy()
     if abs(fps - out_fps) >= 1e-9 * out_fps:
-        q, root = _resample(q, root, fps, out_fps)
+        q, root = resample_quaternions(q, root, fps, out_fps)
     rotations = quaternion_to_axis_angle(torch.from_numpy(q)).numpy()
     return Motion(rotations, root, out_fps, target.name, target.joint_names, name)

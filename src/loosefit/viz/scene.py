@@ -106,14 +106,15 @@ class MeshTrack:
         return self.verts.shape[0]
 
     def frame_verts(self, t: int) -> np.ndarray:
-        """``(V, 3)`` vertices at frame ``t`` (a static track gives its only frame)."""
-        return self.verts[t if self.verts.shape[0] > 1 else 0]
+        """``(V, 3)`` vertices at frame ``t``; past its last frame a track holds it (a static track
+        gives its only frame)."""
+        return self.verts[min(t, self.verts.shape[0] - 1)]
 
     def frame_scalars(self, t: int) -> np.ndarray | None:
-        """``(V,)`` scalars at frame ``t``, or None for a solid colour track."""
+        """``(V,)`` scalars at frame ``t`` (held past the last frame), or None for a solid colour track."""
         if self.scalars is None:
             return None
-        return self.scalars[t if self.scalars.shape[0] > 1 else 0]
+        return self.scalars[min(t, self.scalars.shape[0] - 1)]
 
 
 def _check_faces(faces, num_verts: int, what: str) -> np.ndarray:
@@ -132,24 +133,22 @@ Panel = Sequence[MeshTrack]
 
 
 def check_panels(panels: Sequence[Panel]) -> int:
-    """Validate a list of panels; return the common frame count ``T``.
+    """Validate a list of panels; return the frame count ``T`` of the longest track.
 
-    Every track has either ``T`` frames or a single (static) frame.
+    Shorter tracks (sequences of different lengths side by side, a static mesh) hold their last frame
+    until the end.
     """
     if not isinstance(panels, (list, tuple)) or not panels:
         raise InputError("panels must be a non-empty list of panels (each a list of MeshTrack)")
-    counts = set()
+    count = 1
     for i, panel in enumerate(panels):
         if isinstance(panel, MeshTrack) or not isinstance(panel, (list, tuple)) or not panel:
             raise InputError(f"panel {i} must be a non-empty list of MeshTrack (wrap a single track as [track])")
         for track in panel:
             if not isinstance(track, MeshTrack):
                 raise InputError(f"panel {i} holds a {type(track).__name__}, expected MeshTrack")
-            if track.num_frames > 1:
-                counts.add(track.num_frames)
-    if len(counts) > 1:
-        raise InputError(f"tracks have different frame counts {sorted(counts)}; each must have T frames or 1")
-    return counts.pop() if counts else 1
+            count = max(count, track.num_frames)
+    return count
 
 
 @dataclass(frozen=True)
