@@ -3,7 +3,7 @@ PYTHON ?= python3.11
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test clean
+.PHONY: demo test clean package-check
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) (Python 3.11)"; exit 1; }
@@ -17,6 +17,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q tests
+
+# CI step of packaging: build the wheel, install it into a fresh venv, check the extras (about 10 s).
+package-check: $(STAMP)
+	$(VENV)/bin/python scripts/check_wheel.py
 
 clean:
 	rm -rf $(VENV) demo_out

@@ -112,9 +112,15 @@ def sequence_body(store: DatasetStore, name: str, rig: str) -> AnnyBody:
     return AnnyBody(AnnyShape.from_array(store.body(store.sequence(name).body)), rig=rig)
 
 
+#: Where models train and animate (``--device``): cpu, cuda or auto.
+DEVICE = "cpu"
+
+
 def train_run(method: str, data: Path, garment: str, run: Path, overrides: list[str], sim_params: dict | None = None) -> dict:
-    """Train (or resume, or find finished) one run folder; a short summary of the training."""
+    """Train (or resume, or find finished) one run folder on :data:`DEVICE`; a short summary of the training."""
     start = time.perf_counter()
+    if "train" in {f.name for f in dataclasses.fields(run_config_class(method))}:
+        overrides = [*overrides, f"train.device={DEVICE}"]  # the device may change on resume
     result = train_model(method, data, garment, run, config=CONFIGS / f"{method}.yaml", overrides=overrides,
                          resume=True, val_split=None, sim_params=sim_params)
     summary = {"run": str(run), "overrides": overrides, "call_s": time.perf_counter() - start}
@@ -186,7 +192,7 @@ def garment_benchmark(data: Path, store: DatasetStore, garment: str, runs: Path,
         run = runs / garment / method
         print(f"== {garment}: train {method} -> {run}", flush=True)
         out["training"][method] = train_run(method, data, garment, run, sets[method])
-        animators[method] = Animator(run, checkpoint="last")
+        animators[method] = Animator(run, checkpoint="last", device=DEVICE)
     names = held_out_sequences(store, garment)
     faces = store.garment(garment).faces
     pairs = {m: [] for m in (*ORDER, "virtualbones-lf")}
@@ -319,7 +325,10 @@ def main() -> None:
     parser.add_argument("--perturb-joint", default="LeftArm", help="the joint perturbed in the robustness test")
     parser.add_argument("--perturb-degrees", default="30,45", help="range of the perturbation angle, degrees")
     parser.add_argument("--name", default="accuracy", help="results name: benchmarks/results/<name>.json")
+    parser.add_argument("--device", choices=("cpu", "cuda", "auto"), default="cpu", help="where models train and animate")
     args = parser.parse_args()
+    global DEVICE
+    DEVICE = args.device
     if args.data is None and args.simparams is None:
         parser.error("give --data, --simparams or both")
     sets = parse_sets(args.set, args.preset)

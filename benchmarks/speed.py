@@ -138,7 +138,7 @@ def batch_timing(animator: Animator, motions: list, repeats: int) -> dict:
 
 
 def time_variants(data: GarmentSequences, stream_motion, batch_motions, threads: list[int], warmup: int,
-                  repeats: int, sim_ms: float) -> dict:
+                  repeats: int, sim_ms: float, device: str = "cpu") -> dict:
     """Every variant at every thread count; the best thread count per mode and the speed-ups."""
     rows = {}
     for name, (method, overrides) in VARIANTS.items():
@@ -148,7 +148,7 @@ def time_variants(data: GarmentSequences, stream_motion, batch_motions, threads:
         row = {"method": method, "overrides": overrides, "parameters": parameter_count(model),
                "stream": {}, "batch": {}}
         for n in threads:
-            animator = Animator.from_model(model, threads=n)
+            animator = Animator.from_model(model, threads=n, device=device)
             row["stream"][n] = stream_timing(animator, stream_motion, warmup)
             row["batch"][n] = batch_timing(animator, batch_motions, repeats)
             print(f"  {name:20s} {n} thread(s): stream {row['stream'][n]['fps']:7.1f} fps "
@@ -184,6 +184,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smoke run: fewer frames, the bench dress only")
     parser.add_argument("--threads", default="1,2", help="torch thread counts to measure")
+    parser.add_argument("--device", choices=("cpu", "cuda", "auto"), default="cpu", help="where the models run")
     parser.add_argument("--vertices", type=int, default=12000, help="size of the large dress (0: skip it)")
     parser.add_argument("--stream-frames", type=int, default=100, help="timed streaming frames")
     parser.add_argument("--warmup", type=int, default=10, help="untimed streaming frames first")
@@ -206,8 +207,8 @@ def main() -> None:
     results: dict = {
         "load_average_at_start": os.getloadavg(),
         "note": "models built from data with untrained weights: the time per frame does not depend on the weight "
-                "values; CPU only; streaming includes motion features and the world transform of each frame",
-        "settings": {"threads": threads, "stream_frames": args.stream_frames, "warmup": args.warmup,
+                "values; device in settings; streaming includes motion features and the world transform of each frame",
+        "settings": {"device": args.device, "threads": threads, "stream_frames": args.stream_frames, "warmup": args.warmup,
                      "batch": f"{args.batch} motions x {args.batch_frames} frames, median of {args.repeats}",
                      "sim_seconds": args.sim_seconds, "bones": args.bones, "variants": {k: {"method": m, "overrides": o} for k, (m, o) in VARIANTS.items()}},
         "garments": [],
@@ -220,7 +221,7 @@ def main() -> None:
             load = os.getloadavg()
             sim, data = simulate_and_prepare(body, garment, args.sim_seconds, args.bones, Path(tmp))
             methods = time_variants(data, stream_motion, batch_motions, threads, args.warmup, args.repeats,
-                                    sim["ms_per_frame"])
+                                    sim["ms_per_frame"], args.device)
             results["garments"].append({"label": label, "vertices": len(garment.verts), "faces": len(garment.faces),
                                         "edge_length": edge, "simulator": sim, "methods": methods,
                                         "load_average": [load, os.getloadavg()]})

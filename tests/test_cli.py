@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import trimesh
+import torch
 
 from loosefit.cli import main
 from loosefit.io.mesh_sequence import MeshSequence
@@ -63,6 +64,23 @@ def test_evaluate_writes_tables(tmp_path, capsys):
 def test_bad_input_exits_2_naming_the_problem(tmp_path, capsys, argv, message):
     assert main([a.format(tmp=tmp_path) for a in argv]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error on a machine without CUDA")
+def test_cuda_without_cuda_and_bad_nproc_are_clear_errors(tiny_store, tmp_path, capsys):
+    common = ["--data", str(tiny_store), "--garment", "skirt+average", "--set", "train.progress=false"]
+    assert main(["train", "--method", "jointnet", "--out", str(tmp_path / "jn"), "--device", "cuda", *common]) == 2
+    assert "device 'cuda' was asked for but CUDA is not available" in capsys.readouterr().err
+    assert not (tmp_path / "jn" / "checkpoints" / "last.pt").exists()
+    assert main(["train", "--method", "jointnet", "--out", str(tmp_path / "jn2"), "--nproc", "0", *common]) == 2
+    assert "--nproc must be >= 1" in capsys.readouterr().err
+    assert main(["train", "--method", "body-lbs", "--out", str(tmp_path / "lbs"), *common[:4]]) == 0
+    motion = tmp_path / "walk.npz"
+    assert main(["motion", "generate", "--kind", "walk", "--seconds", "0.2", "--out", str(motion)]) == 0
+    capsys.readouterr()
+    assert main(["animate", str(tmp_path / "lbs"), "--motion", str(motion), "--out", str(tmp_path / "a.npz"),
+                 "--device", "cuda"]) == 2
+    assert "CUDA is not available" in capsys.readouterr().err
 
 
 def test_motion_map_import_with_it_and_cut(tmp_path, body, capsys):

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from loosefit.config import load_config
+from loosefit.device import resolve_device
 from loosefit.errors import InputError
 from loosefit.models.motion_features import FeatureStream, heading_frames, motion_features, to_world
 from loosefit.models.registry import model_class, run_config_class
@@ -81,6 +82,7 @@ class Animator:
             ``"last"`` when absent) or a checkpoint path. ``"last"`` is the default because validation runs on
             the held-out motions: picking the epoch by them would flatter any accuracy measured on them.
         threads: torch CPU threads used while animating (1 is fastest for the graph layers here).
+        device: ``"cpu"``, ``"cuda"`` or ``"auto"`` (:func:`loosefit.device.resolve_device`).
         garment: for a multi-garment method (SwinGar): the garment to animate, a
             :class:`~loosefit.garment.Garment`, a garment file (``.obj`` with its sidecar) or any ``.obj``
             in the body's rest pose; any vertex count, never seen in training if need be.
@@ -88,7 +90,7 @@ class Animator:
     """
 
     def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1, garment=None,
-                 body=None):
+                 body=None, device: str = "cpu"):
         self.meta, model, cfg = load_run(run_dir, checkpoint)
         cls = type(model)
         if getattr(cls, "static", False):
@@ -98,25 +100,26 @@ class Animator:
             model = _bind_garment(model, cfg.model, garment, body)
         elif garment is not None:
             raise InputError(f"{self.meta['method']} is trained for one garment; it cannot animate another")
-        self._use(model, threads)
+        self._use(model, threads, device)
 
     @classmethod
-    def from_model(cls, model, threads: int | None = 1) -> "Animator":
+    def from_model(cls, model, threads: int | None = 1, device: str = "cpu") -> "Animator":
         """An animator around an in-memory :class:`~loosefit.models.base.GarmentModel` (just built or
         trained), without a run folder; ``meta`` then holds only its method and sizes."""
         animator = cls.__new__(cls)
         animator.meta = {"method": model.method, "sizes": model.sizes()}
-        animator._use(model, threads)
+        animator._use(model, threads, device)
         return animator
 
     #: Frames per forward pass in :meth:`animate_batch` (32 measured fastest of 16-600 at 12k vertices).
     chunk_frames: int = 32
 
-    def _use(self, model, threads: int | None) -> None:
+    def _use(self, model, threads: int | None, device: str = "cpu") -> None:
+        self.device = resolve_device(device)
+        self.faces = model.faces.cpu().numpy()
         model.eval()
-        self.model = model
+        self.model = model.to(self.device)
         self.threads = threads
-        self.faces = model.faces.numpy()
 
     @property
     def method(self) -> str:
@@ -150,7 +153,7 @@ class Animator:
         def padded(key):
             return torch.from_numpy(np.stack([np.concatenate([f[key], np.repeat(f[key][-1:], T - len(f[key]), 0)]) for f in feats]))
 
-        root, joints = padded("root"), padded("joints")
+        root, joints = padded("root").to(self.device), padded("joints").to(self.device)
         chunks, state = [], None
         with _threads(self.threads), torch.no_grad():
             for start in range(0, T, self.chunk_frames):
@@ -164,7 +167,7 @@ class Animator:
                         raise InputError(f"{self.method} has no vertex output {output!r} (it has {vertex_outputs})")
                 chunks.append(outputs[output])
                 state = outputs["state"]
-        canonical = torch.cat(chunks, 1).numpy()
+        canonical = torch.cat(chunks, 1).cpu().numpy()
         out = []
         for m, c in zip(motions, canonical):
             rot, origin = heading_frames(m)
@@ -190,9 +193,11 @@ class AnimationStream:
             raise InputError(f"a frame needs rotations of shape ({self.animator.num_joints}, 3), got {rotations.shape}")
         root, joints, (rot, origin) = self.features.step(rotations, translation)
         with _threads(self.animator.threads), torch.no_grad():
-            out = self.animator.model(torch.from_numpy(root)[None, None], torch.from_numpy(joints)[None, None], self.state)
+            device = self.animator.device
+            out = self.animator.model(torch.from_numpy(root)[None, None].to(device),
+                                      torch.from_numpy(joints)[None, None].to(device), self.state)
         self.state = out["state"]
-        return to_world(out["verts"][0].numpy(), rot[None], origin[None])[0]
+        return to_world(out["verts"][0].cpu().numpy(), rot[None], origin[None])[0]
 
 
 def _bind_garment(model, config, garment, body):

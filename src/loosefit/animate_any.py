@@ -15,11 +15,13 @@ import numpy as np
 import torch
 
 from loosefit.animate import load_run
+from loosefit.device import resolve_device
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import collate_frames, frame_items
 from loosefit.models.fitgar_inputs import GarmentBodyPair
 from loosefit.models.motion_features import to_world
 from loosefit.models.registry import model_class
+from loosefit.train.protocol import to_device
 from loosefit.motion.motion import Motion
 from loosefit.train.pipeline import MODEL_META
 
@@ -46,29 +48,32 @@ class AnyGarmentAnimator:
         checkpoint: ``"last"``, ``"best"`` (falls back to ``"last"``) or a checkpoint path.
         threads: torch CPU threads while animating.
         frames_per_pass: frames batched into one forward pass (frames never interact).
+        device: ``"cpu"``, ``"cuda"`` or ``"auto"`` (:func:`loosefit.device.resolve_device`).
     """
 
     def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1,
-                 frames_per_pass: int = 16):
+                 frames_per_pass: int = 16, device: str = "cpu"):
         self.meta, model, _ = load_run(run_dir, checkpoint)
         if not getattr(type(model), "static", False):
             raise InputError(f"{self.meta['method']} animates along a motion: use loosefit.animate.Animator", run_dir)
-        self._use(model, threads, frames_per_pass)
+        self._use(model, threads, frames_per_pass, device)
 
     @classmethod
-    def from_model(cls, model, threads: int | None = 1, frames_per_pass: int = 16) -> "AnyGarmentAnimator":
+    def from_model(cls, model, threads: int | None = 1, frames_per_pass: int = 16,
+                   device: str = "cpu") -> "AnyGarmentAnimator":
         """An animator around an in-memory model, without a run folder."""
         animator = cls.__new__(cls)
         animator.meta = {"method": model.method, "sizes": model.sizes()}
-        animator._use(model, threads, frames_per_pass)
+        animator._use(model, threads, frames_per_pass, device)
         return animator
 
-    def _use(self, model, threads, frames_per_pass: int) -> None:
+    def _use(self, model, threads, frames_per_pass: int, device: str = "cpu") -> None:
         if frames_per_pass < 1:
             raise InputError(f"frames_per_pass must be >= 1, got {frames_per_pass}")
+        self.device = resolve_device(device)
         model.eval()
-        self.model, self.threads, self.frames_per_pass = model, threads, frames_per_pass
         self.fit_model = model.fit_attribute_model()
+        self.model, self.threads, self.frames_per_pass = model.to(self.device), threads, frames_per_pass
 
     @property
     def method(self) -> str:
@@ -103,12 +108,12 @@ class AnyGarmentAnimator:
                 torch.set_num_threads(self.threads)
             with torch.no_grad():
                 for start in range(0, len(items), self.frames_per_pass):
-                    out = self.model(collate_frames(items[start:start + self.frames_per_pass]))
+                    out = self.model(to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device))
                     for name in outputs:
                         chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
         finally:
             torch.set_num_threads(saved)
-        return {name: to_world(torch.cat(c).numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
+        return {name: to_world(torch.cat(c).cpu().numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
 def is_static_run(run_dir: str | Path) -> bool:
     """Whether the run folder holds a static any-garment method, FitGar (False when it is no run folder)."""

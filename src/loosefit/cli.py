@@ -178,6 +178,8 @@ def cmd_train(args):
     from loosefit.train.pipeline import train_model
 
     if args.method == "collision":
+        if args.nproc != 1 or args.device not in (None, "cpu"):
+            raise InputError("the body SDF (--method collision) trains in one CPU process: drop --nproc / --device")
         from loosefit.config import load_config
         from loosefit.models.collision import SDFRunConfig, train_sdf_run
 
@@ -185,8 +187,17 @@ def cmd_train(args):
         print(json.dumps(summary, indent=2, default=str))
         return
 
-    result = train_model(args.method, args.data, args.garment, args.out, config=args.config,
-                         overrides=args.set or (), resume=args.resume)
+    from loosefit.train.distributed import is_main, launch
+
+    from loosefit.models.registry import run_config_class
+
+    overrides = list(args.set or ())
+    if args.device and hasattr(run_config_class(args.method)(), "train"):  # body-lbs has nothing to train
+        overrides.append(f"train.device={args.device}")
+    result = launch(train_model, args.nproc, args.method, args.data, args.garment, args.out, config=args.config,
+                    overrides=overrides, resume=args.resume)
+    if not is_main():  # under torchrun every process runs this command: rank 0 reports
+        return
     if result is None:
         print(f"{args.method} has no trainable parameters: wrote its fixed weights to {args.out}")
     else:
@@ -206,13 +217,13 @@ def cmd_animate(args):
 
         if not args.garment:
             raise InputError("this run animates any garment: give --garment (in the rest pose of --shape)", args.run)
-        animator = AnyGarmentAnimator(args.run, checkpoint=args.checkpoint, threads=args.threads)
+        animator = AnyGarmentAnimator(args.run, checkpoint=args.checkpoint, threads=args.threads, device=args.device)
         garment = Garment.load(args.garment)
         pair = animator.pair(garment.verts, garment.faces, body)
         results, faces = [animator.animate(pair, m) for m in motions], garment.faces
     else:
         animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads, garment=args.garment,
-                            body=body if args.garment else None)
+                            body=body if args.garment else None, device=args.device)
         results, faces = animator.animate_batch(motions), animator.faces
     if args.collision:
         from loosefit.models.collision import SDF_FILE, handle_motion_collisions, load_body_sdf
@@ -228,6 +239,15 @@ def cmd_animate(args):
         export_animation(out, verts, faces, fps=motion.fps,
                          body_verts=None if posed is None else posed.verts, body_faces=None if posed is None else body.faces)
         print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method})")
+
+
+def cmd_report(args):
+    from loosefit.report import build_report
+    from loosefit.report.build import DEFAULT_RESULTS
+
+    index = build_report(args.data, args.run, args.out, sequences=args.sequence, split=args.split,
+                         results_dir=args.results or DEFAULT_RESULTS, device=args.device, images=not args.no_images)
+    print(f"wrote {index} (and report.md, metrics.json, figures/)")
 
 
 def cmd_export_rig(args):
@@ -400,6 +420,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--config", default=None, help="method config YAML (configs/models/<method>.yaml)")
     sp.add_argument("--set", action="append", help="config override, e.g. train.epochs=5 (repeatable)")
     sp.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default=None,
+                    help="where to train (default: the config's train.device); an error when CUDA is asked but absent")
+    sp.add_argument("--nproc", type=int, default=1, help="training processes on this machine (DistributedDataParallel: "
+                    "gloo on CPU, one GPU each with NCCL on CUDA); train.batch_size is the global batch")
     sp.set_defaults(func=cmd_train)
 
     sp = sub.add_parser("animate", help="animate a trained garment on new motions")
@@ -414,6 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--with-body", action="store_true", help="export the posed body too (always in an .npz)")
     sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
     sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the model runs")
     sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
                     "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
     sp.set_defaults(func=cmd_animate)
@@ -443,6 +468,18 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--sted-c", type=float, default=None, help="STED temporal weight")
     sp.add_argument("--tolerance", type=float, default=None, help="collision tolerance, metres (default 1 mm)")
     sp.set_defaults(func=cmd_evaluate)
+
+    sp = sub.add_parser("report", help="compare trained runs on a dataset: HTML + Markdown report with metrics, "
+                        "error maps, error over time, speed and paper claims")
+    sp.add_argument("data", help="a dataset store DATA.zarr (ground truth)")
+    sp.add_argument("run", nargs="+", help="run folders written by loosefit train")
+    sp.add_argument("--out", required=True, help="report folder (index.html, report.md, metrics.json, figures/)")
+    sp.add_argument("--sequence", action="append", default=None, help="dataset sequence to report on (repeatable)")
+    sp.add_argument("--split", default="test", help="split reported when no --sequence is given")
+    sp.add_argument("--results", default=None, help="benchmark results folder (default: the checkout's benchmarks/results)")
+    sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the models run")
+    sp.add_argument("--no-images", action="store_true", help="leave out the rendered error maps")
+    sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser("demo", help="the main job on the embedded default data")
     sp.add_argument("--out", default="demo_out")

@@ -3,8 +3,10 @@
 simulate ``configs/datasets/demo.yaml`` (a skirt on short procedural motions) -> prepare (virtual bones)
 -> train VirtualBones and JointNet briefly -> animate the held-out motion with both and the body-LBS
 baseline -> metrics table -> ``demo_out/``: a side-by-side MP4 (ground truth | VirtualBones | JointNet,
-coloured by error), a PNG of one frame, the metrics as CSV / JSON, and the JointNet animation as
-``.usdc`` and ``.glb``. Every stage resumes: running the demo again reuses what is already there.
+coloured by error), a PNG of one frame, the metrics as CSV / JSON, the JointNet animation as
+``.usdc`` and ``.glb``, every prediction as a mesh-sequence ``.npz`` (``predictions/``), and last the
+comparison report (``report/index.html``, ``loosefit report``) with the ``loosefit view`` command that
+plays the simulation beside the predictions. Every stage resumes: running the demo again reuses what is already there.
 """
 
 from __future__ import annotations
@@ -113,8 +115,18 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     save_png(out / "demo.png", render_frames(panels, size=(480, 540), frames=[middle], titles=titles)[0])
     export_animation(out / "jointnet.usdc", predictions["jointnet"], garment.faces, motion.fps, posed.verts, body.faces)
     export_animation(out / "jointnet.glb", predictions["jointnet"], garment.faces, motion.fps)
-    print(f"   wrote {out}/demo.mp4, demo.png, metrics.csv, metrics.json, jointnet.usdc, jointnet.glb")
+    for method, verts in predictions.items():
+        export_animation(out / "predictions" / f"{method}.npz", verts, garment.faces, motion.fps)
+    print(f"   wrote {out}/demo.mp4, demo.png, metrics.csv, metrics.json, jointnet.usdc, jointnet.glb, predictions/")
+
+    t = _step("report: every method on the held-out sequences")
+    from loosefit.report import build_report
+
+    index = build_report(data, [out / "runs" / m for m in DEMO_TRAINING], out / "report")
+    view = " ".join(["loosefit view", f"{data}:{seq.name}"] + [str(out / "predictions" / f"{m}.npz") for m in predictions])
     print(f"\ndemo finished in {time.perf_counter() - started:.0f} s")
+    print(f"report: {index}")
+    print(f"look at it in the browser: {view}")
     return {row["name"]: row for row in result.rows}
 
 

@@ -34,7 +34,9 @@ _FPS_METADATA = re.compile(rb"FramesPerTimeUnit=([0-9]+(?:\.[0-9]*)?)")
 
 def write_alembic(path: str | Path, seq: MeshSequence) -> None:
     """Write ``seq`` (garment, and body if ``seq.extra`` has ``body_verts``/``body_faces``) to an ``.abc`` file."""
-    import bpy
+    from loosefit.extras import require
+
+    bpy = require("bpy", "Alembic export (through Blender)")
 
     meshes = [("garment", seq.verts, seq.faces)]
     if "body_verts" in seq.extra:

@@ -4,10 +4,14 @@ a text table, and CSV / JSON files (written atomically).
 Metrics per sequence (see each module for the formula): ``rmse_mm``, ``mean_vertex_error_mm``,
 ``hausdorff_mm`` (:mod:`~loosefit.metrics.errors`); ``sted_spatial``, ``sted_temporal``, ``sted``
 (:mod:`~loosefit.metrics.sted`); ``e_dist_cm``, ``e_norm_deg`` (:mod:`~loosefit.metrics.surface`);
-``collision_pct`` when a posed body is known (:mod:`~loosefit.metrics.collision`).
+``collision_pct`` when a posed body is known (:mod:`~loosefit.metrics.collision`);
+``laplacian_consistency``: SwinGar's Laplacian consistency deviation ``|diag(L_pred) - diag(L_gt)|``
+(:func:`~loosefit.metrics.surface.laplacian_consistency`, half-cotangent weights, dimensionless) of the
+prediction against the simulation, over every vertex and frame: how far the prediction's local surface
+structure is from the simulated one.
 
 Overall values pool every frame of every sequence, so long sequences weigh more: RMSE is the root
-of the pooled mean square; mean errors, STED_s and collision are weighted by frames x vertices,
+of the pooled mean square; mean errors, STED_s, Laplacian consistency and collision are weighted by frames x vertices,
 STED_t by frame pairs x vertices, Hausdorff by frames, E_norm by frames x faces; the overall STED
 combines the overall STED_s and STED_t. A sequence of one frame has no temporal STED (``None``).
 
@@ -31,7 +35,7 @@ from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.metrics import sted as sted_mod
 from loosefit.metrics.collision import DEFAULT_TOLERANCE, collision_ratio
 from loosefit.metrics.errors import check_pair, hausdorff_per_frame, vertex_errors
-from loosefit.metrics.surface import face_normal_deviation_deg
+from loosefit.metrics.surface import face_normal_deviation_deg, mean_laplacian_consistency
 from loosefit.paths import atomic_path
 
 #: Reported columns in order: key, table header, format.
@@ -47,6 +51,7 @@ COLUMNS = (
     ("e_dist_cm", "E_dist cm", "{:.3f}"),
     ("e_norm_deg", "E_norm deg", "{:.2f}"),
     ("collision_pct", "collision %", "{:.3f}"),
+    ("laplacian_consistency", "Lap. cons.", "{:.4f}"),
 )
 
 
@@ -134,6 +139,7 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         spatial = float(sted_mod.sted_spatial_per_frame(pred, gt, pair.faces, s.sted_rings).mean())
         temporal = sted_mod.sted_temporal(pred, gt, s.sted_dt) if T >= 2 else None
         normals = face_normal_deviation_deg(pred, gt, pair.faces)
+        laplacian = mean_laplacian_consistency(gt, pred, pair.faces)
         collision = None
         if pair.body_verts is not None:
             collision = collision_ratio(pred, pair.body_verts, pair.body_faces, s.collision_tolerance)
@@ -152,6 +158,7 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         "e_dist_cm": float(100 * err.mean()),
         "e_norm_deg": None if np.isnan(normals).all() else float(np.nanmean(normals)),
         "collision_pct": collision,
+        "laplacian_consistency": laplacian,
         "faces": int(len(pair.faces)),
     }
 
@@ -188,6 +195,7 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
         "e_dist_cm": _weighted(rows, "e_dist_cm", tv),
         "e_norm_deg": _weighted(rows, "e_norm_deg", lambda r: r["frames"] * r["faces"]),
         "collision_pct": _weighted(rows, "collision_pct", tv),
+        "laplacian_consistency": _weighted(rows, "laplacian_consistency", tv),
     }
 
 

@@ -103,6 +103,11 @@ class GarmentModel(nn.Module):
     def training_loss(self, batch: dict, stage: str):
         raise NotImplementedError
 
+    def loss_weight(self, batch: dict) -> float:
+        """What the batch weighs in a training loss: its counted frames (the losses are means over them).
+        Distributed training weighs each process's loss by it, so that N processes take the same steps as one."""
+        return float(self.mask(batch).sum())
+
     @staticmethod
     def mask(batch: dict) -> torch.Tensor:
         """``(B, T)`` frames that count in losses and metrics (burn-in frames excluded)."""

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from loosefit.extras import require
 from loosefit.geometry.laplacian import edges
 from loosefit.geometry.normals import face_areas
 from loosefit.io.alembic import mesh_object
@@ -99,7 +100,7 @@ def run_cloth(
     if workdir is None:
         with tempfile.TemporaryDirectory(prefix="loosefit-sim-") as tmp:
             return run_cloth(faces, pinned, garment_frames, collider_frames, collider_faces, params, fps, tmp)
-    import bpy
+    bpy = require("bpy", "Blender cloth simulation")
 
     workdir = Path(workdir)
     num_frames, num_verts = garment_frames.shape[:2]

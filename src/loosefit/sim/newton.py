@@ -140,7 +140,7 @@ def check_installed() -> None:
     if missing:
         raise InputError(
             f"simulation backend 'newton' needs the packages {missing}, which cannot be imported; "
-            "install them with `pip install newton==1.8.0` (it brings warp-lang), or use backend=blender"
+            "install them with `pip install 'loosefit[sim]'` (newton brings warp-lang), or use backend=blender"
         )
 
 
@@ -174,13 +174,13 @@ def run_cloth(
     try:
         import warp as wp
     except ImportError as e:
-        raise InputError(f"simulation backend 'newton' cannot import warp ({e}); `pip install newton==1.8.0`") from None
+        raise InputError(f"simulation backend 'newton' cannot import warp ({e}); pip install 'loosefit[sim]'") from None
 
     wp.config.quiet = True
     try:
         import newton
     except ImportError as e:
-        raise InputError(f"simulation backend 'newton' cannot import newton ({e}); `pip install newton==1.8.0`") from None
+        raise InputError(f"simulation backend 'newton' cannot import newton ({e}); pip install 'loosefit[sim]'") from None
 
     faces = np.asarray(faces, np.int64)
     collider_faces = np.asarray(collider_faces, np.int64)

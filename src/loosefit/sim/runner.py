@@ -26,7 +26,8 @@ from loosefit.errors import InputError
 from loosefit.sim.params import SimParams
 from loosefit.sim.plan import Plan, SequenceJob, load_plan
 from loosefit.sim.quality import QualityGate
-from loosefit.sim.sequence import SimResult, save_result, simulate_sequence
+from loosefit.extras import require
+from loosefit.sim.sequence import SimResult, backend_run_cloth, save_result, simulate_sequence
 
 CRASHED = "crashed:"
 #: Object store of a local Ray: results (a few tens of MB each) pass through it.
@@ -65,6 +66,7 @@ def simulate_file(
     from loosefit.garment import Garment, import_garment
     from loosefit.motion.io import load_motion
 
+    backend_run_cloth((params or SimParams()).backend)  # the simulator is installed ([sim] extra)
     body = plan_body(tuple(AnnyShape.parse(shape).to_array().tolist()))
     garment_path = Path(garment_path)
     if Garment.sidecar_path(garment_path).is_file():
@@ -168,6 +170,10 @@ def run_plan(
         raise InputError(f"workers must be a positive integer, got {workers!r}")
     start = time.perf_counter()
     plan = load_plan(plan_path)
+    for params in plan.sim_params.values():  # a missing simulator is an error, not a crashed sequence each
+        backend_run_cloth(params.backend)
+    if workers > 1 or address is not None:
+        require("ray", "parallel simulation (--workers / --address)")
     out = Path(out)
     store = DatasetStore.open(out, mode="a") if out.exists() else DatasetStore.create(out)
     todo = [job for job in plan.jobs if not _done(store, job)]

@@ -13,6 +13,7 @@ import numpy as np
 
 from loosefit.body.base import BodyModel
 from loosefit.errors import InputError
+from loosefit.extras import require
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.motion.motion import Motion
 from loosefit.sim.attach import garment_weights, skin_garment
@@ -46,8 +47,10 @@ class SimResult:
 def backend_run_cloth(backend: str):
     """The ``run_cloth`` function of a backend (``"blender"`` or ``"newton"``); each imports its simulator lazily."""
     if backend == "newton":
+        require("newton", "simulation backend 'newton'")
         from loosefit.sim.newton import run_cloth
     elif backend == "blender":
+        require("bpy", "simulation backend 'blender' (Blender cloth)")
         from loosefit.sim.blender import run_cloth
     else:
         raise InputError(f"unknown simulation backend {backend!r}; known: {list(BACKENDS)}")

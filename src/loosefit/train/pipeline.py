@@ -21,6 +21,7 @@ from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.paths import atomic_path
+from loosefit.train import distributed
 from loosefit.train.run import RunDir, save_checkpoint
 from loosefit.train.seeding import rng_state, seed_everything
 from loosefit.train.trainer import TrainResult, train
@@ -145,6 +146,8 @@ def _write_run(run: RunDir, meta: dict, cfg, resume: bool) -> None:
     """Write the run folder's ``model.json`` and ``method.yaml``; on resume, first check that the data is the same."""
     if resume and run.has_checkpoint() and (run.path / MODEL_META).exists():
         _check_same_data(run.path / MODEL_META, meta)
+    if not distributed.is_main():  # several training processes: rank 0 writes the run folder
+        return
     run.path.mkdir(parents=True, exist_ok=True)
     with atomic_path(run.path / MODEL_META) as tmp:
         tmp.write_text(json.dumps(meta, indent=2))
@@ -174,6 +177,8 @@ def _check_same_data(path: Path, meta: dict) -> None:
 
 def _save_fixed(model, run: RunDir) -> None:
     """A method without trainable parameters (the body-LBS baseline) still gets a loadable checkpoint."""
+    if not distributed.is_main():
+        return
     state = {"model": model.state_dict(), "optimizer": None, "scheduler": None, "stages": ["fixed"], "stage_index": 0,
              "epoch": 0, "global_step": 0, "best_metric": None, "rng": rng_state(),
              "config": {}, "history": [], "elapsed_s": 0.0, "complete": True}

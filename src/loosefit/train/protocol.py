@@ -11,6 +11,10 @@ and any of these optional ones:
   ``torch.utils.data.default_collate``.
 - ``batch_size(batch) -> int``: how many samples a batch holds, used to weight per-batch averages;
   default :func:`batch_size` below.
+- ``loss_weight(batch) -> float``: the normaliser of the loss's mean (e.g. the number of counted
+  frames of a masked mean); in distributed training each process's loss is weighted by its share
+  of the global sum, so that the step equals one process's on the whole global batch. Without it
+  every process weighs the same (exact for a mean over equally many samples per process).
 
 Batches are whatever the collate function returns; the trainer moves every tensor in them (inside
 dicts, lists, tuples, or objects with a ``.to(device)`` method) to the training device before calling

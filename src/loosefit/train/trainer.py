@@ -8,6 +8,10 @@ random generator is saved in each checkpoint. Resuming from ``checkpoints/last.p
 the same weights, bit for bit, as a run that was never interrupted (on the same device and thread
 count).
 
+Several processes (DistributedDataParallel, :mod:`loosefit.train.distributed`): when the job has more
+than one process, :func:`train` joins the process group, wraps the model in DDP, shards each epoch's
+shuffle across the ranks (``batch_size`` is the global batch) and lets only rank 0 validate and write.
+
 Seed the generators (:func:`loosefit.train.seeding.seed_everything` with ``config.seed``) before
 constructing the model, so that its initial weights are reproducible too.
 """
@@ -31,6 +35,7 @@ from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
 from loosefit.config import config_to_dict, save_config
+from loosefit.train import distributed
 from loosefit.errors import InputError, LoosefitError
 from loosefit.paths import atomic_path
 from loosefit.train.metrics_log import MetricsLog
@@ -187,11 +192,7 @@ class TrainingError(LoosefitError):
 
 
 def _device(name: str) -> torch.device:
-    if name == "cuda" and not torch.cuda.is_available():
-        raise InputError("device 'cuda' was asked for but CUDA is not available (use 'cpu' or 'auto')")
-    if name == "auto":
-        name = "cuda" if torch.cuda.is_available() else "cpu"
-    return torch.device(name)
+    return distributed.resolve_device(name)
 
 
 def _optimizer(params: list[torch.nn.Parameter], config: TrainConfig, stage: StageConfig) -> torch.optim.Optimizer:
@@ -239,6 +240,41 @@ def _clone_to_cpu(state: Any) -> Any:
     return copy.deepcopy(state)
 
 
+class _NoLog:
+    """The metrics log of a rank other than 0: writes nothing."""
+
+    def add_row(self, row) -> None:
+        pass
+
+    def scalars(self, *args, **kwargs) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class _LossModule(torch.nn.Module):
+    """``model.training_loss`` as a ``forward``, so that DistributedDataParallel sees the step."""
+
+    def __init__(self, model: torch.nn.Module):
+        super().__init__()
+        self.model = model
+
+    def forward(self, batch, stage: str):
+        return self.model.training_loss(batch, stage)
+
+
+def _merge_averagers(parts: list[tuple[dict, dict]]) -> dict[str, float]:
+    """Every rank's (sums, counts) merged into per-key means."""
+    sums: dict[str, float] = defaultdict(float)
+    counts: dict[str, int] = defaultdict(int)
+    for part_sums, part_counts in parts:
+        for key in part_sums:
+            sums[key] += part_sums[key]
+            counts[key] += part_counts[key]
+    return {key: sums[key] / counts[key] for key in sums}
+
+
 def _write_summary(run: RunDir, result: TrainResult) -> None:
     with atomic_path(run.summary) as tmp:
         tmp.write_text(json.dumps(result.summary(), indent=2) + "\n")
@@ -266,6 +302,19 @@ class _Trainer:
         self.last_val: dict[str, float] = {}
         self.pending: Optional[dict[str, Any]] = None  # last completed epoch, not yet on disk
         self.log: Optional[MetricsLog] = None
+        self.main = distributed.is_main()
+        self.distributed = distributed.is_distributed()
+        self.step_fn = model.training_loss
+
+    def wrap(self) -> None:
+        """In a distributed job, train through DistributedDataParallel (after the model is on its device):
+        it broadcasts rank 0's weights and averages the gradients of every step."""
+        if distributed.is_distributed():
+            from torch.nn.parallel import DistributedDataParallel
+
+            # stages train part of the parameters: the others take no gradient in that stage
+            ids = [self.device.index] if self.device.type == "cuda" else None
+            self.step_fn = DistributedDataParallel(_LossModule(self.model), device_ids=ids, find_unused_parameters=True)
 
     # -- checkpoints -------------------------------------------------------------------------
     def _state(self, stage_index, epoch, optimizer, scheduler, complete) -> dict[str, Any]:
@@ -325,10 +374,16 @@ class _Trainer:
 
     # -- epochs ------------------------------------------------------------------------------
     def _loader(self, dataset: Dataset, size: int, shuffle: bool, generator: torch.Generator) -> DataLoader:
+        sampler = None
+        if shuffle and distributed.is_distributed():
+            # this rank's share of the single-process shuffle, drawn from the same generator
+            sampler, shuffle = distributed.ShardedSampler(dataset, generator), False
+            size = distributed.local_batch_size(size)
         return DataLoader(
             dataset,
             batch_size=size,
             shuffle=shuffle,
+            sampler=sampler,
             generator=generator,
             collate_fn=self.collate,
             num_workers=self.config.num_workers,
@@ -343,20 +398,24 @@ class _Trainer:
         averager = _Averager()
         self.model.train()
         bar = tqdm(
-            loader, desc=f"{stage} {epoch}/{settings.epochs}", disable=not self.config.progress, dynamic_ncols=True
+            loader, desc=f"{stage} {epoch}/{settings.epochs}", disable=not (self.config.progress and self.main),
+            dynamic_ncols=True,
         )
         for batch in bar:
             batch = to_device(batch, self.device)
             n = batch_size(self.model, batch)
             # zero every gradient, not only this stage's, so frozen parameters hold none
             self.model.zero_grad(set_to_none=True)
-            loss, terms = self.model.training_loss(batch, stage)
-            if not torch.isfinite(loss.detach()):
+            loss, terms = self.step_fn(batch, stage)
+            scale = 1.0
+            if self.distributed and hasattr(self.model, "loss_weight"):
+                scale = distributed.weight_share(self.model.loss_weight(batch), self.device)
+            if not distributed.all_finite(loss):
                 raise TrainingError(
                     f"stage {stage!r} epoch {epoch} step {self.global_step + 1}: the loss is {loss.item()}; "
                     "lower the learning rate or set grad_clip"
                 )
-            loss.backward()
+            (loss * scale if scale != 1.0 else loss).backward()
             if settings.grad_clip is not None:
                 torch.nn.utils.clip_grad_norm_(params, settings.grad_clip)
             optimizer.step()
@@ -368,6 +427,8 @@ class _Trainer:
                 self.log.scalars(values, self.global_step, prefix=f"{stage}/step/")
                 self.log.scalars({"lr": optimizer.param_groups[0]["lr"]}, self.global_step, prefix=f"{stage}/")
         bar.close()
+        if distributed.is_distributed():  # the epoch's averages over every rank's samples
+            return _merge_averagers(distributed.gather((dict(averager.sums), dict(averager.counts))))
         return averager.means()
 
     @torch.no_grad()
@@ -427,7 +488,7 @@ class _Trainer:
         train_metrics = self.train_epoch(stage_index, epoch, params, optimizer, settings)
         last_epoch = epoch == settings.epochs
         val_metrics = {}
-        if self.val_set is not None and (epoch % self.config.validate_every == 0 or last_epoch):
+        if self.val_set is not None and self.main and (epoch % self.config.validate_every == 0 or last_epoch):
             val_metrics = self.validate(stage, settings)
         monitored = self._monitored(train_metrics, val_metrics)
         if scheduler is not None:
@@ -444,7 +505,7 @@ class _Trainer:
         self.last_train = train_metrics
         if val_metrics:
             self.last_val = val_metrics
-        if self.config.progress:
+        if self.config.progress and self.main:
             shown = [f"{k} {v:.4g}" for k, v in train_metrics.items()]
             shown += [f"val {k} {v:.4g}" for k, v in val_metrics.items()]
             tqdm.write(f"{stage} epoch {epoch}/{settings.epochs}: {', '.join(shown)}")
@@ -453,6 +514,8 @@ class _Trainer:
         if improved:
             self.best = monitored
         complete = last_epoch and all(self.config.stage(s).epochs == 0 for s in self.stages[stage_index + 1 :])
+        if not self.main:
+            return
         state = self._state(stage_index, epoch, optimizer, scheduler, complete)
         if improved:
             save_checkpoint(self.run.best_checkpoint, state)
@@ -532,33 +595,43 @@ def train(
     torch.set_num_threads(config.threads)
     trainer = _Trainer(model, train_set, val_set, config, run, device)
     model.to(device)
+    joined = distributed.setup(device)  # several processes: join their group (gloo / nccl)
+    finished = False
     try:
+        trainer.wrap()
         if state is None:
             seed_everything(config.seed)
             position = (0, 0, None, None)
         else:
             position = trainer.restore(state, run.last_checkpoint)
-        run.create()
-        save_config(run.config, config)
-        # TensorBoard hides events the interrupted run wrote after its checkpoint's step
-        purge = trainer.global_step + 1 if state is not None else None
-        trainer.log = MetricsLog(
-            run.metrics_csv, trainer.history, run.tensorboard if config.tensorboard else None, purge_step=purge
-        )
+        if trainer.main:
+            run.create()
+            save_config(run.config, config)
+            # TensorBoard hides events the interrupted run wrote after its checkpoint's step
+            purge = trainer.global_step + 1 if state is not None else None
+            trainer.log = MetricsLog(
+                run.metrics_csv, trainer.history, run.tensorboard if config.tensorboard else None, purge_step=purge
+            )
+        else:
+            trainer.log = _NoLog()
         if state is not None:
             set_rng_state(state["rng"])
         try:
             trainer.run_stages(*position)
         except BaseException:
             # keep the last completed epoch (Ctrl-C, NaN, a crash in the model) before re-raising
-            if trainer.pending is not None:
+            if trainer.pending is not None and trainer.main:
                 save_checkpoint(run.last_checkpoint, trainer.pending)
                 log.warning("training stopped: %s holds the last completed epoch", run.last_checkpoint)
             raise
         result = trainer.result()
-        _write_summary(run, result)
+        if trainer.main:
+            _write_summary(run, result)
+        finished = True
         return result
     finally:
         if trainer.log is not None:
             trainer.log.close()
         torch.set_num_threads(threads_before)
+        if joined:
+            distributed.teardown(wait=finished)

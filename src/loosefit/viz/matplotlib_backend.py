@@ -28,7 +28,9 @@ class MatplotlibRenderer:
     :class:`loosefit.viz.pyvista_backend.PyVistaRenderer`)."""
 
     def __init__(self, panels: Sequence[Panel], size: tuple[int, int], titles: Sequence[str], background):
-        import matplotlib
+        from loosefit.extras import require
+
+        matplotlib = require("matplotlib", "rendering with matplotlib")
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
 

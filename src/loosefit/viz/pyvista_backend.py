@@ -34,8 +34,9 @@ class PyVistaRenderer:
     """
 
     def __init__(self, panels: Sequence[Panel], size: tuple[int, int], titles: Sequence[str], background):
-        import pyvista as pv
+        from loosefit.extras import require
 
+        pv = require("pyvista", "offscreen rendering")
         width, height = size
         self.shape = (height, width * len(panels), 3)
         self.plotter = pv.Plotter(

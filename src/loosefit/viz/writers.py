@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.extras import require
 from loosefit.paths import atomic_path
 
 #: imageio-ffmpeg quality in [1, 10]; 7 gives x264 CRF 15 (visually lossless for renders).
@@ -29,7 +30,7 @@ def _check_image(image: np.ndarray, path) -> np.ndarray:
 
 def save_png(path, image: np.ndarray) -> Path:
     """Write ``image (H, W, 3|4) uint8`` to ``path`` (``.png``), atomically; returns the path."""
-    import imageio.v3 as iio
+    iio = require("imageio.v3", "writing PNG images")
 
     path = Path(path)
     if path.suffix.lower() != ".png":
@@ -88,7 +89,7 @@ class FrameWriter:
         self.count += 1
 
     def _write_mp4(self, frame: np.ndarray) -> None:
-        import imageio_ffmpeg
+        imageio_ffmpeg = require("imageio_ffmpeg", "writing MP4 video")
 
         # H.264 with 4:2:0 chroma needs even dimensions.
         frame = np.pad(frame, ((0, frame.shape[0] % 2), (0, frame.shape[1] % 2), (0, 0)), mode="edge")
@@ -111,7 +112,7 @@ class FrameWriter:
         self._encoder.send(np.ascontiguousarray(frame))
 
     def _write_gif(self, frame: np.ndarray) -> None:
-        import imageio.v2 as iio2
+        iio2 = require("imageio.v2", "writing GIF animations")
 
         if self._encoder is None:
             self._size = frame.shape[:2]

@@ -1,0 +1,135 @@
+"""``loosefit report DATA.zarr RUN... --out report/``: one comparison of every method on a dataset.
+
+Writes into ``out``:
+
+- ``index.html`` and its Markdown twin ``report.md`` (Jinja2 templates, package data under
+  ``loosefit/report/templates``);
+- ``metrics.json``: every number of the tables (per method: per-sequence rows and the pooled row of
+  :func:`loosefit.metrics.report.evaluate`, every metric; the claims and speed rows);
+- ``figures/error-<sequence>.png``: per-frame RMSE of every method over time (matplotlib);
+- ``figures/errormap-<sequence>.png``: the frame of largest mean error, the simulation beside every
+  method coloured by per-vertex error on one colour scale (offscreen render, :mod:`loosefit.viz`).
+
+The speed table and the paper-claims table read ``benchmarks/results`` (:mod:`loosefit.report.claims`);
+from a source checkout that is the repository's folder, otherwise give ``results_dir``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from loosefit.errors import InputError
+from loosefit.metrics.report import COLUMNS, SequencePair, evaluate
+from loosefit.paths import atomic_path
+from loosefit.report.claims import claims_table, speed_table
+from loosefit.report.figures import error_map_png, error_over_time_png, rmse_per_frame_mm
+from loosefit.report.predictions import load_methods, load_sequences
+
+#: ``benchmarks/results`` of the source checkout this package runs from (None when installed elsewhere).
+_REPO_RESULTS = Path(__file__).resolve().parents[3] / "benchmarks" / "results"
+DEFAULT_RESULTS = _REPO_RESULTS if _REPO_RESULTS.is_dir() else None
+
+#: Metric columns of the report (the keys of :data:`loosefit.metrics.report.COLUMNS` but the sizes).
+METRIC_COLUMNS = tuple(c for c in COLUMNS if c[0] not in ("frames", "vertices"))
+
+
+def _fmt(value, fmt: str) -> str:
+    return "-" if value is None else fmt.format(value)
+
+
+def _metric_cells(row: dict) -> list[str]:
+    return [_fmt(row.get(k), f) for k, _, f in METRIC_COLUMNS]
+
+
+def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequences: list[str] | None = None,
+                 split: str | None = "test", results_dir: str | Path | None = DEFAULT_RESULTS, device: str = "cpu",
+                 images: bool = True) -> Path:
+    """Animate the held-out ``sequences`` (default: the ``split``) of ``data`` with every run, evaluate
+    them, draw the figures and write the report into ``out``; returns ``out/index.html``.
+
+    Raises:
+        InputError: a missing store or run, a run for a garment none of the sequences wears, an unknown
+            sequence, a damaged results file; each names the file.
+    """
+    from loosefit.extras import require
+
+    require("jinja2", "loosefit report")
+    require("matplotlib", "loosefit report's plots")
+    from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
+
+    data, out = Path(data), Path(out)
+    if not (data / ".zgroup").is_file():
+        raise InputError("not a loosefit dataset store (no .zgroup)", data)
+    for run in runs:
+        if not Path(run).is_dir():
+            raise InputError("run folder not found", run)
+    if results_dir is not None and not Path(results_dir).is_dir():
+        raise InputError("benchmark results folder not found", results_dir)
+    seqs = load_sequences(data, sequences, split)
+    methods = load_methods(runs, seqs, device)
+    figures = out / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
+
+    evaluations = []
+    for m in methods:
+        pairs = [SequencePair(s.name, m.predictions[s.name], s.gt, s.faces, s.body_verts, s.body_faces)
+                 for s in seqs if s.name in m.predictions]
+        ev = evaluate(pairs, progress=False)
+        evaluations.append({"method": m.label, "run": str(m.run), "rows": ev.rows, "pooled": ev.overall})
+
+    plots = []
+    for s in seqs:
+        preds = {m.label: m.predictions[s.name] for m in methods if s.name in m.predictions}
+        if not preds:
+            continue
+        series = {label: rmse_per_frame_mm(p, s.gt) for label, p in preds.items()}
+        entry = {"sequence": s.name, "garment": s.garment, "frames": len(s.gt),
+                 "plot": f"figures/error-{s.name}.png", "map": None, "map_frame": None, "map_top_mm": None}
+        error_over_time_png(out / entry["plot"], f"{s.name}: RMSE per frame", series, s.fps)
+        if images:
+            frame = int(np.argmax(np.mean(list(series.values()), axis=0)))
+            _, top = error_map_png(out / f"figures/errormap-{s.name}.png", s.gt, s.faces, s.body_verts, s.body_faces,
+                                   preds, frame)
+            entry.update(map=f"figures/errormap-{s.name}.png", map_frame=frame, map_top_mm=top)
+        plots.append(entry)
+
+    claims, speed = claims_table(results_dir), speed_table(results_dir)
+    context = {
+        "title": f"loosefit report: {data.name}",
+        "data": str(data.resolve()),
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "results_dir": None if results_dir is None else str(results_dir),
+        "which": "the named sequences" if sequences is not None else f"the {split} split",
+        "headers": [h for _, h, _ in METRIC_COLUMNS],
+        "methods": [{"label": e["method"], "run": e["run"],
+                     "rows": [{"name": r["name"], "frames": r["frames"], "cells": _metric_cells(r)} for r in e["rows"]],
+                     "pooled": {"frames": e["pooled"]["frames"], "cells": _metric_cells(e["pooled"])}}
+                    for e in evaluations],
+        "sequences": [{"name": s.name, "garment": s.garment, "frames": len(s.gt), "vertices": s.gt.shape[1]}
+                      for s in seqs],
+        "plots": plots,
+        "speed": [{**r, "cells": [r["garment"], str(r["vertices"]), r["method"], _fmt(r["parameters"], "{:,}"),
+                                  _fmt(r["simulator_ms"], "{:.0f}"), _fmt(r["stream_fps"], "{:.1f}"),
+                                  _fmt(r["batch_fps"], "{:.1f}"), _fmt(r["stream_speedup"], "{:.1f}x"),
+                                  _fmt(r["batch_speedup"], "{:.1f}x")]} for r in speed],
+        "claims": [{**r, "ours_text": _fmt(r["ours"], "{:.3f}"), "limit_text": _fmt(r["limit"], "{:g}"),
+                    "verdict": "not run" if r["pass"] is None else ("pass" if r["pass"] else "FAIL")} for r in claims],
+        "view_command": f"loosefit view {data}:{seqs[0].name}" if seqs else "",
+    }
+    env = Environment(loader=PackageLoader("loosefit.report", "templates"), undefined=StrictUndefined,
+                      autoescape=select_autoescape(enabled_extensions=("html.j2",), default_for_string=False),
+                      trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    doc = {"data": context["data"], "methods": evaluations, "sequences": context["sequences"], "plots": plots,
+           "speed": speed, "claims": claims}
+    with atomic_path(out / "metrics.json") as tmp:
+        tmp.write_text(json.dumps(doc, indent=2) + "\n")
+    with atomic_path(out / "report.md") as tmp:
+        tmp.write_text(env.get_template("report.md.j2").render(**context))
+    index = out / "index.html"
+    with atomic_path(index) as tmp:
+        tmp.write_text(env.get_template("index.html.j2").render(**context))
+    return index

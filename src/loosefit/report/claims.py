@@ -1,0 +1,144 @@
+"""The paper-claims table and the speed table, read from the benchmark results
+(``benchmarks/results/*.json``, written by the scripts in ``benchmarks/``).
+
+Each :data:`CLAIMS` entry is one claim of the four papers that loosefit measures: the paper, what it
+claims with its own number where it reports one, the benchmark target (a ratio or a rate with the
+limit loosefit tests), and the command that reproduces our number. A benchmark result file holds
+``results.targets``: ``{"target", "garment", "measured", "limit", "pass"}`` entries; a claim matches
+the entries whose ``target`` starts with its ``target`` text (a ``*`` in it stands for any text). A claim whose result file is missing is
+listed as not measured, with the command that measures it.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from loosefit.errors import InputError
+
+ACCURACY_LARGE = (".venv/bin/python benchmarks/simulation.py --sizes \"\" --plan configs/datasets/bench-large.yaml "
+                  "--workers 2 --out DATA.zarr && .venv/bin/python benchmarks/accuracy.py --data DATA.zarr --runs RUNS "
+                  "--garments {garment} --name {name}")
+ENSEMBLE = (".venv/bin/python benchmarks/simulation.py --sizes \"\" --plan configs/datasets/simparams.yaml --workers 2 "
+            "--out SP.zarr && .venv/bin/python benchmarks/accuracy.py --simparams SP.zarr --runs RUNS "
+            "--set virtualbones:ensemble.pivots=7 --name accuracy-ensemble")
+SPEED = ".venv/bin/python benchmarks/speed.py --threads 1,2"
+SWINGAR = ".venv/bin/python benchmarks/swingar_small.py"
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One measured claim: ``files`` are result names (``benchmarks/results/<name>.json``), ``target``
+    the prefix of their target entries; ``command`` may hold ``{name}`` and ``{garment}``."""
+
+    paper: str
+    claim: str
+    paper_number: str
+    files: tuple[str, ...]
+    target: str
+    command: str
+
+
+CLAIMS: tuple[Claim, ...] = (
+    Claim("VirtualBones", "the bone-driven network is far more accurate than skinning the garment to the body",
+          "-- (no LBS row; our target: RMSE <= 0.7 x body-LBS)", ("accuracy-large-skirt", "accuracy-large-dress"),
+          "VirtualBones RMSE / body-LBS RMSE", ACCURACY_LARGE),
+    Claim("VirtualBones", "the high-frequency module lowers the error of the low-frequency mesh (Sec. 5, Fig. 6)",
+          "lower RMSE with the high-frequency module", ("accuracy-large-skirt", "accuracy-large-dress"),
+          "VirtualBones RMSE / its low-frequency RMSE", ACCURACY_LARGE),
+    Claim("VirtualBones", "the high-frequency module lowers the Hausdorff distance (Sec. 5)",
+          "lower Hausdorff with the high-frequency module", ("accuracy-large-skirt", "accuracy-large-dress"),
+          "VirtualBones Hausdorff / its low-frequency Hausdorff", ACCURACY_LARGE),
+    Claim("VirtualBones", "the RBF ensemble of pivot networks handles unseen simulation parameters (Sec. 4.4)",
+          "RBF weights beat inverse-distance blending", ("accuracy-ensemble",),
+          "RBF ensemble RMSE / linear baseline RMSE", ENSEMBLE),
+    Claim("VirtualBones", "interactive rates against a simulator at 1.5 fps (Sec. 5)",
+          "simulation 1.5 fps; ours interactive (target: >= 50x the simulator)", ("speed",),
+          "virtualbones* at least 50x", SPEED),
+    Claim("VirtualBones", "real-time streaming (target: above 60 fps)", "interactive rates", ("speed",),
+          "virtualbones* streams", SPEED),
+    Claim("JointNet", "lower RMSE than VirtualBones on loose dresses (Tab. 1)",
+          "2.3-4.1 mm lower RMSE (target: JointNet / VirtualBones <= 0.95)",
+          ("accuracy-large-skirt", "accuracy-large-dress"), "JointNet RMSE / VirtualBones RMSE", ACCURACY_LARGE),
+    Claim("JointNet", "robust to perturbing an irrelevant joint (Tab. 3)",
+          "0.5-1.2 mm vs VirtualBones 3.8-7.0 mm (ratio 0.07-0.31; target <= 0.5)",
+          ("accuracy-large-skirt", "accuracy-large-dress"), "JointNet / VirtualBones change below the knees",
+          ACCURACY_LARGE),
+    Claim("JointNet", "real-time animation (target: >= 50x the simulator)", "--", ("speed",),
+          "jointnet* at least 50x", SPEED),
+    Claim("SwinGar", "deforms unseen garments without retraining (Sec. V, Fig. 7)",
+          "-- (qualitative; target: unseen-garment RMSE below body-LBS)", ("swingar-small",),
+          "SwinGar unseen garment RMSE / body-LBS RMSE", SWINGAR),
+    Claim("FitGar", "one network animates any garment on any body shape (Sec. 5)",
+          "-- (target: held-out garment RMSE below body-LBS)", ("accuracy-graph",),
+          "FitGar RMSE / body-LBS RMSE", ".venv/bin/python benchmarks/accuracy_graph.py"),
+)
+
+
+def _targets(doc: dict, name: str) -> list[dict]:
+    """The target entries of a result; SwinGar's small benchmark records RMSEs, turned into one here."""
+    results = doc.get("results", {})
+    if name == "swingar-small" and "unseen_garment_mean_rmse_mm" in results:
+        rmse = results["unseen_garment_mean_rmse_mm"]
+        ratio = rmse["gat-ln-alpha-2"] / rmse["body-lbs"]
+        return [{"target": "SwinGar unseen garment RMSE / body-LBS RMSE", "garment": "held-out skirt",
+                 "measured": ratio, "limit": 1.0, "pass": ratio < 1.0}]
+    return list(results.get("targets", [])) if isinstance(results, dict) else []
+
+
+def load_result(results_dir: Path, name: str) -> dict | None:
+    """``results_dir/<name>.json`` as a dict, or None when absent."""
+    path = Path(results_dir) / f"{name}.json"
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except ValueError as e:
+        raise InputError(f"benchmark result is not valid JSON: {e}", path) from None
+
+
+def claims_table(results_dir: str | Path | None) -> list[dict]:
+    """One row per claim and garment: ``paper``, ``claim``, ``paper_number``, ``garment``, ``ours``
+    (the measured value), ``limit``, ``pass`` (None when not measured), ``source`` (result file) and
+    ``command``."""
+    rows = []
+    for claim in CLAIMS:
+        found = False
+        for name in claim.files:
+            doc = None if results_dir is None else load_result(Path(results_dir), name)
+            if doc is None:
+                continue
+            for t in _targets(doc, name):
+                if not fnmatch.fnmatchcase(t["target"], claim.target + "*"):
+                    continue
+                found = True
+                garment = t.get("garment", "")
+                rows.append({"paper": claim.paper, "claim": claim.claim, "paper_number": claim.paper_number,
+                             "target": t["target"], "garment": garment, "ours": float(t["measured"]),
+                             "limit": t.get("limit"), "pass": bool(t["pass"]), "source": f"{name}.json",
+                             "command": claim.command.format(name=name, garment=garment)})
+        if not found:
+            rows.append({"paper": claim.paper, "claim": claim.claim, "paper_number": claim.paper_number,
+                         "target": claim.target, "garment": "", "ours": None, "limit": None, "pass": None,
+                         "source": " / ".join(f"{n}.json" for n in claim.files) + " (not run)",
+                         "command": claim.command.format(name=claim.files[0], garment="GARMENT")})
+    return rows
+
+
+def speed_table(results_dir: str | Path | None) -> list[dict]:
+    """Rows of ``speed.json`` (``benchmarks/speed.py``): per garment and method, streaming and batched
+    frames per second at the best thread count and the speed-ups over the simulator; [] when absent."""
+    doc = None if results_dir is None else load_result(Path(results_dir), "speed")
+    if doc is None:
+        return []
+    rows = []
+    for g in doc["results"].get("garments", []):
+        sim_ms = g["simulator"]["ms_per_frame"]
+        for name, m in g["methods"].items():
+            rows.append({"garment": g["label"], "vertices": g["vertices"], "method": name,
+                         "parameters": m.get("parameters"), "simulator_ms": sim_ms,
+                         "stream_fps": m.get("stream_fps"), "batch_fps": m.get("batch_fps"),
+                         "stream_speedup": m.get("stream_speedup_vs_sim"), "batch_speedup": m.get("batch_speedup_vs_sim")})
+    return rows

@@ -1,0 +1,125 @@
+"""``loosefit report`` on a tiny simulated dataset with two real runs (body-LBS and a small JointNet):
+the tables hold the numbers computed directly from the animations, the figures are real images, the
+claims and speed tables carry the benchmark results, and bad input gets clear errors."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import igl
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from loosefit.animate import Animator
+from loosefit.cli import main
+from loosefit.data import DatasetStore
+from loosefit.errors import InputError
+from loosefit.report import build_report
+from loosefit.train.pipeline import train_model
+
+REPO = Path(__file__).resolve().parents[2]
+SMALL_JOINTNET = ["model.gru_hidden=16", "model.features=16", "model.bone_mlp=[32]", "model.psd_mlp=[16]",
+                  "model.psd_shapes=4", "train.stages.stage1.epochs=2", "train.stages.stage2.epochs=1",
+                  "train.progress=false", "train.tensorboard=false", "data.window=20", "data.stride=10", "data.burn_in=4"]
+
+
+@pytest.fixture(scope="module")
+def report(tiny_store, tmp_path_factory):
+    root = tmp_path_factory.mktemp("report")
+    train_model("body-lbs", tiny_store, "skirt+average", root / "lbs")
+    train_model("jointnet", tiny_store, "skirt+average", root / "jn", overrides=SMALL_JOINTNET)
+    results = root / "results"
+    results.mkdir()
+    for name in ("speed", "accuracy-large-skirt"):  # real benchmark results of the repository
+        shutil.copy(REPO / "benchmarks" / "results" / f"{name}.json", results)
+    out = root / "out"
+    assert main(["report", str(tiny_store), str(root / "lbs"), str(root / "jn"), "--out", str(out),
+                 "--results", str(results)]) == 0
+    return root, out
+
+
+def _direct_metrics(store_path, run, name):
+    """RMSE, mean error (mm) and Laplacian consistency from the animation, with numpy and libigl."""
+    store = DatasetStore.open(store_path)
+    seq = store.sequence(name)
+    motion = store.motion(seq.motion)
+    pred, gt = Animator(run).animate(motion).astype(np.float64), np.asarray(seq.verts[:], np.float64)
+    faces = np.asarray(store.garment(seq.garment).faces)
+    d = np.linalg.norm(pred - gt, axis=-1)
+    lap = np.mean([np.abs(igl.cotmatrix(p, faces).diagonal() - igl.cotmatrix(g, faces).diagonal())
+                   for p, g in zip(pred, gt)])
+    return {"rmse_mm": 1000 * np.sqrt(np.mean(d**2)), "mean_vertex_error_mm": 1000 * d.mean(),
+            "e_dist_cm": 100 * d.mean(), "laplacian_consistency": lap}
+
+
+def test_tables_hold_the_directly_computed_metrics(report, tiny_store):
+    root, out = report
+    doc = json.loads((out / "metrics.json").read_text())
+    html, md = (out / "index.html").read_text(), (out / "report.md").read_text()
+    assert [m["method"] for m in doc["methods"]] == ["body-lbs", "jointnet"]
+    names = DatasetStore.open(tiny_store).sequence_names(split="test")
+    for entry, run in zip(doc["methods"], (root / "lbs", root / "jn")):
+        assert [r["name"] for r in entry["rows"]] == names
+        for row in entry["rows"]:
+            direct = _direct_metrics(tiny_store, run, row["name"])
+            for key, value in direct.items():
+                assert row[key] == pytest.approx(value, rel=1e-4), key
+            for key in ("hausdorff_mm", "sted", "e_norm_deg", "collision_pct"):  # all seven metrics present
+                assert row[key] is not None and np.isfinite(row[key])
+        # one test sequence: the pooled row is that sequence's
+        assert entry["pooled"]["rmse_mm"] == pytest.approx(entry["rows"][0]["rmse_mm"], rel=1e-9)
+        shown = f"{entry['pooled']['rmse_mm']:.2f}"
+        assert re.search(rf"<td>{entry['method']}</td><td>pooled</td>.*?{re.escape(shown)}", html)
+        assert f"| **{entry['method']}** | **pooled** |" in md and f"**{shown}**" in md
+    # the two methods differ: the table does not repeat one number
+    assert doc["methods"][0]["pooled"]["rmse_mm"] != pytest.approx(doc["methods"][1]["pooled"]["rmse_mm"], rel=1e-3)
+
+
+def test_figures_are_real_images(report, tiny_store):
+    _, out = report
+    for plot in json.loads((out / "metrics.json").read_text())["plots"]:
+        curve = iio.imread(out / plot["plot"])
+        assert curve.shape[:2] == (320, 700) and curve.std() > 10
+        emap = iio.imread(out / plot["map"])
+        assert emap.shape[:2] == (400, 3 * 320)  # simulation, body-LBS, JointNet
+        # the error panels are coloured (inferno), the simulation panel is not: colour spread per pixel
+        spread = emap[..., :3].max(-1).astype(int) - emap[..., :3].min(-1)
+        assert spread[:, 320:].mean() > spread[:, :320].mean()
+        assert f'src="{plot["map"]}"' in (out / "index.html").read_text()
+
+
+def test_claims_and_speed_tables_carry_the_benchmark_results(report):
+    _, out = report
+    doc = json.loads((out / "metrics.json").read_text())
+    accuracy = json.loads((REPO / "benchmarks/results/accuracy-large-skirt.json").read_text())["results"]["targets"]
+    jn = next(t for t in accuracy if t["target"].startswith("JointNet RMSE / VirtualBones RMSE"))
+    row = next(c for c in doc["claims"] if c["target"] == jn["target"])
+    assert row["paper"] == "JointNet" and row["ours"] == jn["measured"] and row["pass"] is jn["pass"]
+    assert "benchmarks/accuracy.py" in row["command"] and "--garments skirt+average" in row["command"]
+    fitgar = next(c for c in doc["claims"] if c["paper"] == "FitGar")
+    assert fitgar["pass"] is None and "not run" in fitgar["source"]
+    speed = json.loads((REPO / "benchmarks/results/speed.json").read_text())["results"]["garments"][0]
+    lbs = next(r for r in doc["speed"] if r["garment"] == speed["label"] and r["method"] == "body-lbs")
+    assert lbs["stream_fps"] == speed["methods"]["body-lbs"]["stream_fps"]
+    assert f"{lbs['stream_fps']:.1f}" in (out / "index.html").read_text()
+    md = (out / "report.md").read_text()
+    assert f"| {jn['measured']:.3f} | {jn['limit']:g} | {'pass' if jn['pass'] else 'FAIL'} |" in md
+
+
+def test_bad_input_names_the_problem(report, tiny_store, tmp_path, capsys):
+    root, out = report
+    other = tmp_path / "other"
+    shutil.copytree(root / "lbs", other)
+    meta = json.loads((other / "model.json").read_text())
+    (other / "model.json").write_text(json.dumps({**meta, "garment": "dress+average"}))
+    with pytest.raises(InputError, match=r"other.*garment 'dress\+average'"):
+        build_report(tiny_store, [other], tmp_path / "r", results_dir=None)
+    assert main(["report", str(tiny_store), str(tmp_path / "missing"), "--out", str(tmp_path / "r")]) == 2
+    assert "missing: run folder not found" in capsys.readouterr().err
+    with pytest.raises(InputError, match="no sequence"):
+        build_report(tiny_store, [root / "lbs"], tmp_path / "r", sequences=["nope"], results_dir=None)
+    assert (out / "index.html").is_file()  # an earlier report is untouched
