@@ -162,14 +162,19 @@ def measure(
         2 mm), ``penetration_max`` (worst frame), ``penetration_depth`` (deepest vertex, m),
         ``max_strain`` (largest edge strain), ``strain_p99`` (largest per-frame 99th percentile),
         ``pinned_distance`` (m, largest distance of a pinned vertex from its nearest body vertex),
-        ``pinned_drift`` (m, largest change of that distance from the rest pose; 0 when nothing is pinned).
+        ``pinned_drift`` (m, largest change from the rest pose of a pinned vertex's distance to its anchor,
+        the body vertex nearest to it at rest; 0 when nothing is pinned).
     """
     if not np.isfinite(frames).all():
         return {"nan": True, "max_speed": float("inf"), "penetration": 1.0, "penetration_max": 1.0,
                 "penetration_depth": float("inf"), "max_strain": float("inf"), "strain_p99": float("inf"),
                 "pinned_distance": float("inf"), "pinned_drift": float("inf")}
     inside, deepest, gap = body_contact(frames, pinned, body_frames, body_faces)
-    rest_gap, _ = cKDTree(body_rest).query(rest[pinned])
+    # Drift is measured to each pinned vertex's anchor, its nearest body vertex at rest, followed
+    # through the motion: the distance to whatever body vertex is nearest in a pose falls when a
+    # kick raises the thigh to the waistband (27 mm on the demo kick) without the pin moving at all.
+    rest_gap, anchor = cKDTree(body_rest).query(rest[pinned])
+    anchored = np.linalg.norm(frames[:, pinned] - body_frames[:, anchor], axis=-1)
     strain = edge_strain(frames, rest, faces)
     return {
         "nan": False,
@@ -180,5 +185,5 @@ def measure(
         "max_strain": float(strain.max()),
         "strain_p99": float(np.percentile(strain, 99, axis=1).max()),
         "pinned_distance": float(gap.max()) if gap.size else 0.0,
-        "pinned_drift": float(np.abs(gap - rest_gap).max()) if gap.size else 0.0,
+        "pinned_drift": float(np.abs(anchored - rest_gap).max()) if gap.size else 0.0,
     }
