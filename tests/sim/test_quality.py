@@ -68,6 +68,15 @@ def test_measure_and_gate(proxy_body, shell):
     assert stats["pinned_drift"] == pytest.approx(0.005, abs=1e-5)
     assert QualityGate().check(stats) == ("ok", "")
     assert "pinned vertices moved 0.005 m" in QualityGate(max_pinned_drift=0.004).check(stats)[1]
+    # Another part of the body coming up to a pin (a thigh raised to the waistband) is not drift: the
+    # pin keeps its distance to its anchor, vertex 7, while the nearest body vertex is now much closer.
+    approached = frames.copy()
+    glued[1, 0] = approached[1, 7] + [0.0, 0.0, 0.001]
+    approached[1, 8] = glued[1, 0] + [0.0, 0.0, 0.0003]
+    pin = np.arange(glued.shape[1]) == 0
+    assert body_contact(glued, pin, approached, proxy_body.faces)[2][:, 0] == pytest.approx([0.001, 0.0003], abs=1e-6)
+    stats = measure(glued, glued[0], faces, pin, approached, proxy_body.faces, approached[0], fps=30.0)
+    assert stats["pinned_drift"] == pytest.approx(0.0, abs=1e-6)
     fast = outside.copy()
     fast[1] += [2.0, 0.0, 0.0]  # 2 m in one frame: 60 m/s
     status, reason = QualityGate().check(measure(fast, fast[0], faces, pinned, frames, proxy_body.faces, frames[0], fps=30.0))

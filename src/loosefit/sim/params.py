@@ -40,10 +40,13 @@ class SimParams:
         bending: bending rigidity, N*m (silk ~1e-6, cotton ~1e-5, denim ~1e-4).
         stretch_damping: damping of stretch, compression and shear velocities, 1/s (a relative
             velocity along a spring decays at this rate).
-        bending_damping: damping of folding velocities, 1/s.
+        bending_damping: damping of folding velocities, 1/s. 20 takes the energy out of fold flutter
+            without slowing the swing, which is what air drag alone would do.
         air_drag: linear air drag per unit area, N*s/m^3. Air's quadratic drag on cloth moving at
-            about 1 m/s, linearised, is about 1 (air density 1.2 kg/m^3, drag coefficient about 1). It is
-            also what makes the swing repeatable: at 0.05 the start-state spread was 37 mm, at 1.0 16 mm.
+            about 1 m/s, linearised, is about 0.6 (air density 1.2 kg/m^3, drag coefficient about 1). Drag
+            makes the swing repeatable (4 s walk, start-state spread: 37 mm at 0.05, 16 mm at 1.0) but at
+            1.0 a 0.15 kg/m^2 skirt loses its velocity in 0.15 s and wraps round the legs on a spin
+            instead of flaring; 0.3 with bending damping 20 keeps the bell (``benchmarks/README.md``).
         quality: solver steps per frame (the fewest, with ``adaptive_quality``); Newton: substeps.
         adaptive_quality: raise the steps per frame so that the body near the garment moves at most
             two collision distances per step with Blender, 0.75 with Newton (whose contact lets a
@@ -72,8 +75,8 @@ class SimParams:
     shear: float = 100.0
     bending: float = 1e-5
     stretch_damping: float = 200.0
-    bending_damping: float = 5.0
-    air_drag: float = 1.0
+    bending_damping: float = 20.0
+    air_drag: float = 0.3
     quality: int = 5
     adaptive_quality: bool = True
     collision_quality: int = 2
