@@ -59,7 +59,7 @@ from pygltflib import (
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_quaternion
 from loosefit.io.gltf import to_y_up
-from loosefit.io.skinned_mesh import SkinnedMesh
+from loosefit.io.skinned_mesh import SkinnedMesh, common_timing
 from loosefit.paths import atomic_path
 
 #: glTF's axis change as a matrix: ``to_y_up(p) == Y_UP @ p``.
@@ -108,13 +108,8 @@ def write_skinned_glb(path: str | Path, meshes: list[SkinnedMesh]) -> None:
 
     All meshes must share the frame count and rate; each has at most 8 influences per vertex.
     """
-    if not meshes:
-        raise InputError("no mesh to write", path)
-    frames, fps = meshes[0].num_frames, meshes[0].fps
+    frames, fps = common_timing(meshes, path)
     for mesh in meshes:
-        if mesh.num_frames != frames or mesh.fps != fps:
-            raise InputError(f"mesh {mesh.name!r} has {mesh.num_frames} frames at {mesh.fps:g} fps, "
-                             f"{meshes[0].name!r} {frames} at {fps:g}", path)
         if mesh.influences > 8:
             raise InputError(f"mesh {mesh.name!r} has {mesh.influences} influences per vertex; glTF engines "
                              "take 4 or 8: limit them first (SkinnedMesh.limited)", path)

@@ -189,3 +189,15 @@ class SkinnedMesh:
         p = self.rest_verts.astype(np.float64)[:, None, None]  # (V, 1, 1, 3)
         skinned = blend[..., 0] * p[..., 0] + blend[..., 1] * p[..., 1] + blend[..., 2] * p[..., 2] + blend[..., 3]
         return skinned.transpose(1, 0, 2)
+
+
+def common_timing(meshes: list["SkinnedMesh"], path) -> tuple[int, float]:
+    """``(frames, fps)`` shared by all ``meshes``; an :class:`InputError` naming ``path`` when they differ or none is given."""
+    if not meshes:
+        raise InputError("no mesh to write", path)
+    frames, fps = meshes[0].num_frames, meshes[0].fps
+    for mesh in meshes:
+        if mesh.num_frames != frames or mesh.fps != fps:
+            raise InputError(f"mesh {mesh.name!r} has {mesh.num_frames} frames at {mesh.fps:g} fps, "
+                             f"{meshes[0].name!r} {frames} at {fps:g}", path)
+    return frames, fps

@@ -28,7 +28,7 @@ import torch
 
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_quaternion
-from loosefit.io.skinned_mesh import SkinnedMesh
+from loosefit.io.skinned_mesh import SkinnedMesh, common_timing
 from loosefit.paths import atomic_path
 
 ROOT = "/loosefit"
@@ -70,13 +70,7 @@ def write_skinned_usd(path: str | Path, meshes: list[SkinnedMesh]) -> None:
     """
     from pxr import Usd, UsdGeom, UsdSkel, Vt
 
-    if not meshes:
-        raise InputError("no mesh to write", path)
-    frames, fps = meshes[0].num_frames, meshes[0].fps
-    for mesh in meshes:
-        if mesh.num_frames != frames or mesh.fps != fps:
-            raise InputError(f"mesh {mesh.name!r} has {mesh.num_frames} frames at {mesh.fps:g} fps, "
-                             f"{meshes[0].name!r} {frames} at {fps:g}", path)
+    frames, fps = common_timing(meshes, path)
     stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
