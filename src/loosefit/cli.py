@@ -211,6 +211,14 @@ def cmd_animate(args):
         print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method})")
 
 
+def cmd_view(args):
+    from loosefit.viz.viewer import view
+
+    result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions)
+    if args.export is not None:
+        print(f"wrote {result}: open it in a browser (from disk or any web server)")
+
+
 def cmd_demo(args):
     from loosefit.demo import run_demo
 
@@ -345,6 +353,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--sted-c", type=float, default=None, help="STED temporal weight")
     sp.add_argument("--tolerance", type=float, default=None, help="collision tolerance, metres (default 1 mm)")
     sp.set_defaults(func=cmd_evaluate)
+
+    sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser")
+    sp.add_argument("input", nargs="+", help="SEQ.npz (mesh sequence), DATA.zarr:SEQUENCE or RUN:MOTION; the first "
+                    "is the simulation, the others predictions compared with it")
+    sp.add_argument("--port", type=int, default=8000, help="port of the local server (127.0.0.1)")
+    sp.add_argument("--export", default=None, metavar="DIR", help="write the page as static files to DIR instead "
+                    "of serving it (opens from disk)")
+    sp.add_argument("--no-collisions", action="store_true", help="skip the per-frame collision ratio")
+    sp.set_defaults(func=cmd_view)
 
     sp = sub.add_parser("demo", help="the main job on the embedded default data")
     sp.add_argument("--out", default="demo_out")
