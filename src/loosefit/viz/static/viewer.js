@@ -138,7 +138,12 @@
     camera = new THREE.PerspectiveCamera(30, 1, radius / 100, radius * 100);
     camera.up.set(0, 0, 1);
     const dir = new THREE.Vector3(0.45, -1.0, 0.3).normalize();
-    const dist = radius / Math.sin((30 / 2) * Math.PI / 180) * 1.05;
+    // Far enough for the bounding sphere to fit both the vertical and the horizontal field of view of a panel.
+    const canvas = renderer.domElement;
+    const aspect = canvas.clientWidth / panels.length / Math.max(1, canvas.clientHeight);
+    const half = (30 / 2) * Math.PI / 180;
+    const halfFov = Math.min(half, Math.atan(Math.tan(half) * aspect));
+    const dist = radius / Math.sin(halfFov) * 1.02;
     camera.position.copy(center).addScaledVector(dir, dist);
     controls = new THREE.OrbitControls(camera, renderer.domElement);
     controls.target.copy(center);
