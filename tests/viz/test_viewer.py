@@ -24,7 +24,7 @@ from loosefit.cli import main
 from loosefit.errors import InputError
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.viz.viewer import ViewerServer, export_scene, pack_scene
-from loosefit.viz.viewer_scene import COLORMAP, build_scene
+from loosefit.viz.viewer_scene import COLORMAP, ViewerScene, build_scene, collision_frame_indices
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -316,3 +316,17 @@ def test_export_opens_from_disk(browser, known, tmp_path, capsys, shots):
     finally:
         page.close()
     shutil.rmtree(out)
+
+
+def test_collision_ratio_at_evenly_spaced_frames(known):
+    assert collision_frame_indices(6, 0).tolist() == [0, 1, 2, 3, 4, 5]
+    assert collision_frame_indices(300, 100)[[0, -1]].tolist() == [0, 299]
+    assert len(collision_frame_indices(300, 100)) == 100
+    sim, pred = build_scene(known.inputs, collision_frames=3).panels
+    frames = collision_frame_indices(T, 3)
+    assert frames.tolist() == [0, 2, 5]
+    for panel, expected in ((sim, known.sim_collision), (pred, known.pred_collision)):
+        np.testing.assert_allclose(panel.metrics["collision_pct"][frames], expected[frames])
+        assert np.isnan(np.delete(panel.metrics["collision_pct"], frames)).all()
+    manifest, _ = pack_scene(ViewerScene([pred], 30.0, T, (0.0, 1.0), np.zeros((256, 3), np.uint8)))
+    assert manifest["panels"][0]["metrics"]["collision_pct"][1] is None  # JSON null: a gap in the plot

@@ -32,7 +32,7 @@ import numpy as np
 
 from loosefit.errors import InputError
 from loosefit.paths import atomic_path
-from loosefit.viz.viewer_scene import ViewerScene, build_scene
+from loosefit.viz.viewer_scene import DEFAULT_COLLISION_FRAMES, ViewerScene, build_scene
 
 STATIC_DIR = Path(__file__).with_name("static")
 #: Raw bytes per ``data/chunk-NNN.js`` of an export.
@@ -78,7 +78,7 @@ def pack_scene(scene: ViewerScene) -> tuple[dict, bytes]:
                 "faces": add(t.faces, "uint32"),
                 "errors": None if t.errors is None else add(t.errors, "float32"),
             })
-        metrics = {k: [float(x) for x in v] for k, v in panel.metrics.items()}
+        metrics = {k: [None if not np.isfinite(x) else float(x) for x in v] for k, v in panel.metrics.items()}
         panels.append({"title": panel.title, "source": panel.source, "tracks": tracks, "metrics": metrics})
     manifest = {
         "format": "loosefit-view/1",
@@ -226,11 +226,11 @@ def export_scene(scene: ViewerScene, out_dir: str | Path) -> Path:
 
 
 def view(inputs: list[str], port: int = 8000, export: str | Path | None = None, body=None,
-         collisions: bool = True, serve: bool = True):
+         collisions: bool = True, collision_frames: int = DEFAULT_COLLISION_FRAMES, serve: bool = True):
     """``loosefit view INPUT... [--port P] [--export DIR]``: export the page to ``DIR``, or serve it on
     ``http://127.0.0.1:P/`` until interrupted. Returns the index path (export) or the server (``serve=False``:
     started in the background; close it when done)."""
-    scene = build_scene(list(inputs), body=body, collisions=collisions)
+    scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames)
     if export is not None:
         return export_scene(scene, export)
     server = ViewerServer(scene, port=port)

@@ -22,7 +22,9 @@
     });
   }
 
+  // Base64 to bytes: the browser's own decoder where it has one, else atob.
   function base64Bytes(text) {
+    if (typeof Uint8Array.fromBase64 === 'function') return Uint8Array.fromBase64(text);
     const bin = atob(text);
     const out = new Uint8Array(bin.length);
     for (let i = 0; i < bin.length; i++) out[i] = bin.charCodeAt(i);
@@ -39,6 +41,7 @@
     const names = [];
     for (let i = 0; i < M.data.chunks; i++) names.push('data/chunk-' + String(i).padStart(3, '0') + '.js');
     await Promise.all(names.map(loadScript));
+    viewer.timing.chunkScriptsMs = performance.now();
     const bytes = new Uint8Array(M.byteLength);
     let offset = 0;
     for (let i = 0; i < M.data.chunks; i++) {
@@ -221,6 +224,7 @@
         if (!values) continue;
         scales.add(scale);
         series.push({ label: p.title + ' ' + label, scale, stroke: PALETTE[i % PALETTE.length], width: 1.5, dash,
+          spanGaps: true,
           value: (u, v) => (v === null || v === undefined ? '-' : v.toFixed(2)) });
         data.push(x.map((k) => (k < values.length ? values[k] : null)));
       }
@@ -287,15 +291,19 @@
     const t0 = performance.now();
     const buffer = await loadData();
     viewer.timing.dataMs = performance.now() - t0;
+    viewer.timing.startMs = t0;
+    const mark = (name) => { viewer.timing[name] = performance.now(); };
     renderer = new THREE.WebGLRenderer({ canvas: $('gl'), antialias: true, preserveDrawingBuffer: true });
     renderer.setPixelRatio(window.devicePixelRatio || 1);
     renderer.setScissorTest(true);
+    mark('rendererMs');
     panels = buildPanels(buffer);
     fitCamera();
     titles();
     drawLegend();
     wireControls();
     plot = buildPlot();
+    mark('builtMs');
     setFrame(0);
     viewer.timing.readyMs = performance.now();
     viewer.ready = true;
