@@ -70,10 +70,10 @@ def skirt(vertices: int, frames: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def body(frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """A closed capsule with about the Anny body's vertex count, standing inside the skirt."""
+    """A closed capsule with about the Anny body's vertex count, standing in the skirt (its waistband a little inside)."""
     import trimesh
 
-    capsule = trimesh.creation.capsule(height=1.2, radius=0.14, count=[98, 140])
+    capsule = trimesh.creation.capsule(height=1.2, radius=0.19, count=[98, 140])
     v = np.asarray(capsule.vertices) + [0.0, 0.0, 0.9]
     return np.repeat(v[None], frames, 0).astype(np.float32), np.asarray(capsule.faces)
 

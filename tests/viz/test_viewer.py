@@ -10,6 +10,7 @@ band of the sphere's surface, checked).
 
 from __future__ import annotations
 
+import os
 import shutil
 import socket
 from pathlib import Path
@@ -107,7 +108,11 @@ def browser():
 
 @pytest.fixture(scope="module")
 def shots(tmp_path_factory):
-    """Where the screenshots go (look at them: pytest's temporary folder, viewer-screenshots*)."""
+    """Where the screenshots go to be looked at: $LOOSEFIT_SCREENSHOTS, else pytest's temporary folder."""
+    where = os.environ.get("LOOSEFIT_SCREENSHOTS")
+    if where:
+        Path(where).mkdir(parents=True, exist_ok=True)
+        return Path(where)
     return tmp_path_factory.mktemp("viewer-screenshots")
 
 
@@ -184,8 +189,10 @@ def test_port_in_use_is_a_clear_error(scene, known, capsys):
         port = s.getsockname()[1]
         with pytest.raises(InputError, match=f"port {port} on 127.0.0.1 is in use"):
             ViewerServer(scene, port=port)
-        assert main(["view", *known.inputs, "--port", str(port), "--no-collisions"]) == 2
-    assert f"port {port} on 127.0.0.1 is in use" in capsys.readouterr().err
+        # The port is checked before the inputs are loaded (here one is missing).
+        assert main(["view", str(known.sim_path), "missing.npz", "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert f"port {port} on 127.0.0.1 is in use" in err and "missing.npz" not in err
 
 
 def test_export_never_overwrites_other_files(scene, tmp_path):
@@ -330,3 +337,37 @@ def test_collision_ratio_at_evenly_spaced_frames(known):
         assert np.isnan(np.delete(panel.metrics["collision_pct"], frames)).all()
     manifest, _ = pack_scene(ViewerScene([pred], 30.0, T, (0.0, 1.0), np.zeros((256, 3), np.uint8)))
     assert manifest["panels"][0]["metrics"]["collision_pct"][1] is None  # JSON null: a gap in the plot
+
+
+def test_dataset_sequence_and_run_inputs(tmp_path, body):
+    from loosefit.data.store import DatasetStore
+    from loosefit.garment import Garment
+    from tests.viz.test_inputs import bent_motion, grid
+
+    verts, faces = grid(frames=2)
+    store = DatasetStore.create(tmp_path / "data.zarr")
+    store.add_garment("g", Garment(verts=verts[0], faces=faces, pinned=np.zeros(16, bool), kind="skirt", params={}, name="g"))
+    store.add_body("b", np.full(6, 0.5, np.float32))
+    motion = bent_motion(body)
+    motion.fps = 24.0
+    store.add_motion("m", motion)
+    store.write_sequence("s1", verts, "g", "b", "m", sim_params={}, stats={}, split="train")
+    pred = verts + np.float32([0.0, 0.003, 0.004])  # 5 mm everywhere
+    MeshSequence(pred, faces).save(tmp_path / "pred.npz")
+    scene = build_scene([f"{tmp_path / 'data.zarr'}:s1", str(tmp_path / "pred.npz")], body=body, collisions=False)
+    sim, prediction = scene.panels
+    assert scene.fps == 24.0 and sim.title == "s1" and [t.role for t in sim.tracks] == ["body", "garment"]
+    np.testing.assert_array_equal(sim.garment.verts, verts)
+    assert sim.body.verts.shape == (2, body.num_verts, 3)
+    np.testing.assert_allclose(prediction.garment.errors, 5.0, atol=1e-3)
+    np.testing.assert_allclose(prediction.metrics["rmse_mm"], [5.0, 5.0], atol=1e-3)
+    with pytest.raises(InputError, match="s2") as err:
+        build_scene([f"{tmp_path / 'data.zarr'}:s2"], body=body)
+    assert err.value.path == tmp_path / "data.zarr"
+    # A folder that is neither a store nor a run, given a motion: named as not a run folder.
+    (tmp_path / "run").mkdir()
+    motion.save(tmp_path / "walk.npz")
+    with pytest.raises(InputError, match="not a loosefit run folder") as err:
+        build_scene([f"{tmp_path / 'run'}:{tmp_path / 'walk.npz'}"], body=body)
+    with pytest.raises(InputError, match="no such motion file"):
+        build_scene([f"{tmp_path / 'run'}:{tmp_path / 'missing.npz'}"], body=body)

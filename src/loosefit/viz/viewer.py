@@ -131,7 +131,7 @@ class ViewerServer:
     """The page and one scene served on ``http://host:port/`` by a threaded ``http.server``.
 
     Args:
-        scene: what to show.
+        scene: what to show; None: nothing until :meth:`show` (the port is taken at once either way).
         port: TCP port; 0 picks a free one (see :attr:`url`).
         host: the address to listen on (default: this machine only).
 
@@ -139,15 +139,10 @@ class ViewerServer:
         InputError: the port is in use (or cannot be opened).
     """
 
-    def __init__(self, scene: ViewerScene, port: int = 8000, host: str = "127.0.0.1"):
-        manifest, data = pack_scene(scene)
-        manifest["data"] = {"binary": "data/scene.bin"}
-        files = {
-            "/data/manifest.js": (manifest_script(manifest), "text/javascript; charset=utf-8"),
-            "/data/scene.bin": (data, "application/octet-stream"),
-        }
+    def __init__(self, scene: ViewerScene | None, port: int = 8000, host: str = "127.0.0.1"):
+        self._files: dict[str, tuple[bytes, str]] = {}
         try:
-            self.httpd = ThreadingHTTPServer((host, port), functools.partial(_Handler, files=files))
+            self.httpd = ThreadingHTTPServer((host, port), functools.partial(_Handler, files=self._files))
         except OSError as e:
             if e.errno == errno.EADDRINUSE:
                 raise InputError(f"port {port} on {host} is in use: choose another with --port "
@@ -156,6 +151,15 @@ class ViewerServer:
         self.httpd.daemon_threads = True
         self.host, self.port = host, self.httpd.server_address[1]
         self._thread: threading.Thread | None = None
+        if scene is not None:
+            self.show(scene)
+
+    def show(self, scene: ViewerScene) -> None:
+        """Serve ``scene`` (a page loaded afterwards shows it)."""
+        manifest, data = pack_scene(scene)
+        manifest["data"] = {"binary": "data/scene.bin"}
+        self._files["/data/manifest.js"] = (manifest_script(manifest), "text/javascript; charset=utf-8")
+        self._files["/data/scene.bin"] = (data, "application/octet-stream")
 
     @property
     def url(self) -> str:
@@ -230,10 +234,16 @@ def view(inputs: list[str], port: int = 8000, export: str | Path | None = None, 
     """``loosefit view INPUT... [--port P] [--export DIR]``: export the page to ``DIR``, or serve it on
     ``http://127.0.0.1:P/`` until interrupted. Returns the index path (export) or the server (``serve=False``:
     started in the background; close it when done)."""
-    scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames)
     if export is not None:
+        scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames)
         return export_scene(scene, export)
-    server = ViewerServer(scene, port=port)
+    server = ViewerServer(None, port=port)  # a port in use fails before the inputs are loaded
+    try:
+        scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames)
+    except BaseException:
+        server.httpd.server_close()
+        raise
+    server.show(scene)
     if not serve:
         return server.start()
     print(f"loosefit view: serving {len(scene.panels)} panel(s), {scene.num_frames} frames on {server.url} "

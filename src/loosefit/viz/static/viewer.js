@@ -235,13 +235,19 @@
     if (scales.has('%')) axes.push({ scale: '%', side: 1, stroke: '#ccc', grid: { show: false }, label: 'collision (%)' });
     const opts = {
       width: 360, height: 260, series, axes,
-      scales: { x: { time: false } },
+      // Metric axes start at zero, so that a nearly constant curve looks constant.
+      scales: {
+        x: { time: false },
+        mm: { range: (u, lo, hi) => [0, hi > 0 ? hi * 1.1 : 1] },
+        '%': { range: (u, lo, hi) => [0, hi > 0 ? Math.min(100, hi * 1.1) : 1] },
+      },
       cursor: { drag: { x: false, y: false } },
       hooks: {
         draw: [(u) => {
           const cx = Math.round(u.valToPos(viewer.frame, 'x', true));
           const ctx = u.ctx;
           ctx.save();
+          ctx.setLineDash([]);
           ctx.strokeStyle = CURSOR_COLOR;
           ctx.lineWidth = 2 * (window.devicePixelRatio || 1);
           ctx.beginPath();
