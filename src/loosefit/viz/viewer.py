@@ -85,6 +85,7 @@ def pack_scene(scene: ViewerScene) -> tuple[dict, bytes]:
         "fps": float(scene.fps),
         "numFrames": int(scene.num_frames),
         "errorRange": [float(scene.error_range[0]), float(scene.error_range[1])],
+        "errorMax": float(scene.error_max),
         "colormap": scene.colormap.reshape(-1).tolist(),
         "panels": panels,
         "buffers": buffers,

@@ -29,6 +29,9 @@ from loosefit.viz.scene import BODY_COLOR, GARMENT_COLOR
 #: The heat map's colour map (matplotlib name) and its number of entries.
 COLORMAP = "viridis"
 COLORMAP_SIZE = 256
+#: The heat map spans 0 mm to this percentile of every prediction's errors (a few outlying vertices would
+#: otherwise leave the rest of the garment in the bottom colour); larger errors take the top colour.
+ERROR_RANGE_PERCENTILE = 99.0
 #: Frames per panel at which the collision ratio is computed by default (evenly spaced).
 DEFAULT_COLLISION_FRAMES = 100
 
@@ -68,13 +71,15 @@ class ViewerPanel:
 @dataclass
 class ViewerScene:
     """Everything the page plays: panels, ``fps``, ``num_frames``, the heat map's range ``error_range``
-    (mm, low and high ends of the colour map) and its colour table ``colormap (256, 3)`` uint8 RGB."""
+    (mm, low and high ends of the colour map; larger errors take the top colour), its colour table
+    ``colormap (256, 3)`` uint8 RGB, and the largest error ``error_max`` (mm)."""
 
     panels: list[ViewerPanel]
     fps: float
     num_frames: int
     error_range: tuple[float, float]
     colormap: np.ndarray
+    error_max: float = 0.0
 
 
 def colormap_table(name: str = COLORMAP, size: int = COLORMAP_SIZE) -> np.ndarray:
@@ -246,6 +251,9 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
     if collisions:
         _collisions(panels, collision_frames)
     num_frames = max(t.verts.shape[0] for p in panels for t in p.tracks)
-    highs = [float(t.errors.max()) for p in panels for t in p.tracks if t.errors is not None]
-    high = max(highs) if highs and max(highs) > 0 else 1.0
-    return ViewerScene(panels, fps, num_frames, (0.0, high), colormap_table())
+    errors = [t.errors.ravel() for p in panels for t in p.tracks if t.errors is not None]
+    high = float(np.percentile(np.concatenate(errors), ERROR_RANGE_PERCENTILE)) if errors else 0.0
+    if not high > 0:
+        high = max([float(e.max()) for e in errors] + [0.0]) or 1.0
+    return ViewerScene(panels, fps, num_frames, (0.0, high), colormap_table(),
+                       max((float(e.max()) for e in errors), default=0.0))

@@ -208,7 +208,7 @@
     const fmt = (x) => (Math.abs(x) >= 100 ? x.toFixed(0) : x.toPrecision(3));
     $('legend-low').textContent = fmt(lo);
     $('legend-mid').textContent = fmt((lo + hi) / 2);
-    $('legend-high').textContent = fmt(hi);
+    $('legend-high').textContent = (M.errorMax > hi ? '\u2265 ' : '') + fmt(hi);
     $('legend-ref').textContent = M.panels[0].title;
   }
 
