@@ -135,7 +135,8 @@ def _run_panel(run: Path, motion_path: Path, body) -> tuple[ViewerPanel, float]:
     posed = body.pose(motion)
     tracks = [ViewerTrack("body", posed.verts[: len(verts)], body.faces, BODY_COLOR),
               ViewerTrack("garment", verts, animator.faces, GARMENT_COLOR)]
-    return ViewerPanel(f"{run.name} ({animator.method}) on {motion_path.stem}", f"{run}:{motion_path}", tracks), motion.fps
+    name = run.name if run.name == animator.method else f"{run.name} ({animator.method})"
+    return ViewerPanel(f"{name} on {motion_path.stem}", f"{run}:{motion_path}", tracks), motion.fps
 
 
 def load_input(spec: str, body=None) -> tuple[ViewerPanel, float]:

@@ -141,12 +141,15 @@
     camera = new THREE.PerspectiveCamera(30, 1, radius / 100, radius * 100);
     camera.up.set(0, 0, 1);
     const dir = new THREE.Vector3(0.45, -1.0, 0.3).normalize();
-    // Far enough for the bounding sphere to fit both the vertical and the horizontal field of view of a panel.
+    // Far enough for the box's height to fit the vertical field of view of a panel and its horizontal
+    // diagonal the horizontal one, measured from the box's near side.
     const canvas = renderer.domElement;
     const aspect = canvas.clientWidth / panels.length / Math.max(1, canvas.clientHeight);
-    const half = (30 / 2) * Math.PI / 180;
-    const halfFov = Math.min(half, Math.atan(Math.tan(half) * aspect));
-    const dist = radius / Math.sin(halfFov) * 1.02;
+    const size = box.getSize(new THREE.Vector3());
+    const halfV = (30 / 2) * Math.PI / 180;
+    const halfH = Math.atan(Math.tan(halfV) * aspect);
+    const halfWidth = Math.hypot(size.x, size.y) / 2;
+    const dist = 1.08 * (Math.max(size.z / 2 / Math.tan(halfV), halfWidth / Math.tan(halfH)) + halfWidth);
     camera.position.copy(center).addScaledVector(dir, dist);
     controls = new THREE.OrbitControls(camera, renderer.domElement);
     controls.target.copy(center);
