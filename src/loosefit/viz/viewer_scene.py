@@ -98,10 +98,11 @@ def _panel_from_tracks(tracks, title: str, source: str) -> ViewerPanel:
 
 
 def _npz_panel(path: Path) -> tuple[ViewerPanel, float]:
-    from loosefit.viz.inputs import _read_npz, mesh_sequence_panel
+    from loosefit.viz.inputs import mesh_sequence_panel
 
-    tracks = mesh_sequence_panel(path)
-    fps = float(_read_npz(path).get("fps", 30.0))
+    tracks = mesh_sequence_panel(path)  # errors name the file; the file is readable past this line
+    with np.load(path, allow_pickle=False) as z:
+        fps = float(z["fps"]) if "fps" in z.files else 30.0
     return _panel_from_tracks(tracks, path.stem, str(path)), fps
 
 
