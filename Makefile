@@ -3,7 +3,10 @@ PYTHON ?= python3.11
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test clean package-check
+CHROMIUM := /usr/bin/chromium
+SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
+
+.PHONY: demo test clean package-check viewer-vendor
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) (Python 3.11)"; exit 1; }
@@ -15,12 +18,22 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/loosefit demo --out demo_out
 
-test: $(STAMP)
+# The viewer's browser tests drive Debian's Chromium through Playwright (no browser download).
+$(CHROMIUM):
+	$(SUDO) apt-get update
+	DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y chromium
+
+test: $(STAMP) $(CHROMIUM)
 	$(VENV)/bin/python -m pytest -q tests
 
 # CI step of packaging: build the wheel, install it into a fresh venv, check the extras (about 10 s).
 package-check: $(STAMP)
 	$(VENV)/bin/python scripts/check_wheel.py
+
+# three.js and uPlot for `loosefit view`, pinned, from the npm registry into src/loosefit/viz/static/vendor/
+# (committed: installing loosefit needs no npm; run this only to change a version).
+viewer-vendor:
+	scripts/fetch_viewer_vendor.sh
 
 clean:
 	rm -rf $(VENV) demo_out

@@ -267,6 +267,15 @@ def cmd_export_rig(args):
                   f"influences: moved {m['rms_mm']:.2f} mm RMS, {m['max_mm']:.2f} mm at most")
 
 
+def cmd_view(args):
+    from loosefit.viz.viewer import view
+
+    result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
+                  collision_frames=args.collision_frames)
+    if args.export is not None:
+        print(f"wrote {result}: open it in a browser (from disk or any web server)")
+
+
 def cmd_demo(args):
     from loosefit.demo import run_demo
 
@@ -480,6 +489,17 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the models run")
     sp.add_argument("--no-images", action="store_true", help="leave out the rendered error maps")
     sp.set_defaults(func=cmd_report)
+
+    sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser")
+    sp.add_argument("input", nargs="+", help="SEQ.npz (mesh sequence), DATA.zarr:SEQUENCE or RUN:MOTION; the first "
+                    "is the simulation, the others predictions compared with it")
+    sp.add_argument("--port", type=int, default=8000, help="port of the local server (127.0.0.1)")
+    sp.add_argument("--export", default=None, metavar="DIR", help="write the page as static files to DIR instead "
+                    "of serving it (opens from disk)")
+    sp.add_argument("--no-collisions", action="store_true", help="skip the per-frame collision ratio")
+    sp.add_argument("--collision-frames", type=int, default=100, help="compute the collision ratio at this many "
+                    "evenly spaced frames (0: every frame; ~0.5 s a frame for a 13.7k-vertex body)")
+    sp.set_defaults(func=cmd_view)
 
     sp = sub.add_parser("demo", help="the main job on the embedded default data")
     sp.add_argument("--out", default="demo_out")
