@@ -220,7 +220,8 @@ _FREE_LEG = {  # where the lifted foot's ankle goes: offsets from the pelvis (ou
 
 
 def spin(rng: np.random.Generator, skel: Skeleton, T: int, fps: float) -> Performance:
-    """Fast spins on one foot (1-3 turns per second, arms out): each bout shifts the weight onto
+    """Fast spins on one foot (1-2 turns per second, arms out; a dancer's pirouette turns about twice a
+    second, and faster spins fling a skirt straight out): each bout shifts the weight onto
     one foot, rises onto its ball, pivots several turns with the other leg lifted, lands that foot
     and settles; bouts alternate feet and pick their own direction, speed and arm style."""
     t = np.arange(T) / fps
@@ -231,7 +232,7 @@ def spin(rng: np.random.Generator, skel: Skeleton, T: int, fps: float) -> Perfor
     while cursor < T / fps:
         b = dict(start=cursor, stance=stance, prep=rng.uniform(0.35, 0.6), up=rng.uniform(0.3, 0.5),
                  hold=rng.uniform(0.6, 2.5), down=rng.uniform(0.35, 0.55), settle=rng.uniform(0.3, 0.6),
-                 rate=rng.choice([-1.0, 1.0]) * rng.uniform(1.0, 3.0) * 2 * np.pi,
+                 rate=rng.choice([-1.0, 1.0]) * rng.uniform(1.0, 2.0) * 2 * np.pi,
                  releve=rng.uniform(15, 28) * _DEG, turnout=rng.uniform(15, 40) * _DEG)
         b["spin_on"] = cursor + b["prep"]
         b["spin_off"] = b["spin_on"] + b["up"] + b["hold"] + b["down"]

@@ -7,7 +7,7 @@ the same one. Motions start at the origin facing -y; their root translation foll
 stay planted while on the floor, flights are ballistic); every joint stays inside the limits of
 :mod:`loosefit.motion.limits`; all curves are smooth from the first frame.
 
-Kinds: ``walk``, ``run``, ``turn`` (stepping on the spot), ``spin`` (1-3 turns per second on one
+Kinds: ``walk``, ``run``, ``turn`` (stepping on the spot), ``spin`` (1-2 turns per second on one
 foot, arms out), ``jump``, ``kick``, ``squat``, ``bow``, ``arm_raise``, ``wave``, ``sway`` (dance)
 and ``mix`` (random kinds one after another, cross-faded over 0.3-0.6 s).
 """
