@@ -61,6 +61,7 @@ from loosefit.models.registry import METHODS, run_config_class  # noqa: E402
 from loosefit.motion.curves import smooth_noise  # noqa: E402
 from loosefit.motion.motion import Motion  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
+from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
 from loosefit.train.pipeline import train_model  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
@@ -315,7 +316,7 @@ def main() -> None:
                         help="network sizes and training: CPU_TRAINING, or the paper's (the YAML configs)")
     parser.add_argument("--set", action="append", default=[], help="METHOD:section.key=value config override (repeatable)")
     parser.add_argument("--simparams", default=None, help="a simulated configs/datasets/simparams.yaml dataset")
-    parser.add_argument("--bones", type=int, default=80, help="virtual bones per garment when preparing")
+    parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones per garment when preparing")
     parser.add_argument("--perturb-joint", default="LeftArm", help="the joint perturbed in the robustness test")
     parser.add_argument("--perturb-degrees", default="30,45", help="range of the perturbation angle, degrees")
     parser.add_argument("--name", default="accuracy", help="results name: benchmarks/results/<name>.json")

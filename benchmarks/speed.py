@@ -50,6 +50,7 @@ from loosefit.models.dataset import GarmentSequences  # noqa: E402
 from loosefit.models.registry import model_class, run_config_class  # noqa: E402
 from loosefit.motion.procedural import generate  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
+from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
 from loosefit.sim import SimParams, load_plan, simulate_sequence  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -191,7 +192,7 @@ def main() -> None:
     parser.add_argument("--batch-frames", type=int, default=150, help="frames per batched motion")
     parser.add_argument("--repeats", type=int, default=3, help="timed batches (the median is reported)")
     parser.add_argument("--sim-seconds", type=float, default=2.0, help="simulated spin (plus the pre-roll)")
-    parser.add_argument("--bones", type=int, default=80, help="virtual bones of the prepared dataset")
+    parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones of the prepared dataset")
     args = parser.parse_args()
     if args.quick:
         args.vertices, args.stream_frames, args.batch, args.batch_frames, args.sim_seconds, args.repeats = 0, 30, 2, 60, 1.0, 1

@@ -45,6 +45,9 @@ from threadpoolctl import threadpool_limits
 from loosefit.errors import InputError
 from loosefit.io.npz import load_npz, save_npz
 
+#: Virtual bones per garment (VirtualBones Sec. 5 uses 80): the default of fit_virtual_bones, PrepareSettings,
+#: prepare and the CLI.
+DEFAULT_BONES = 80
 #: Dem Bones' translation-affinity weight used by default (see the module docstring for its cost).
 DEFAULT_TRANS_AFFINE = 0.1
 #: Frames seen by the weight solve unless told otherwise.
@@ -287,7 +290,7 @@ def fit_virtual_bones(
     frames,
     rest_verts: np.ndarray,
     faces: np.ndarray,
-    bones: int = 80,
+    bones: int = DEFAULT_BONES,
     influences: int = 8,
     iterations: int = 20,
     trans_affine: float = DEFAULT_TRANS_AFFINE,
