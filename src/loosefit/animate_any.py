@@ -21,6 +21,7 @@ from loosefit.models.fitgar_inputs import GarmentBodyPair
 from loosefit.models.motion_features import to_world
 from loosefit.models.registry import model_class
 from loosefit.motion.motion import Motion
+from loosefit.threads import torch_threads
 from loosefit.train.pipeline import MODEL_META
 
 #: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (Eq. 5).
@@ -97,17 +98,11 @@ class AnyGarmentAnimator:
         inputs = pair.frames(motion)
         items = frame_items(pair, inputs)
         chunks: dict[str, list[torch.Tensor]] = {name: [] for name in outputs}
-        saved = torch.get_num_threads()
-        try:
-            if self.threads:
-                torch.set_num_threads(self.threads)
-            with torch.no_grad():
-                for start in range(0, len(items), self.frames_per_pass):
-                    out = self.model(collate_frames(items[start:start + self.frames_per_pass]))
-                    for name in outputs:
-                        chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
-        finally:
-            torch.set_num_threads(saved)
+        with torch_threads(self.threads), torch.no_grad():
+            for start in range(0, len(items), self.frames_per_pass):
+                out = self.model(collate_frames(items[start:start + self.frames_per_pass]))
+                for name in outputs:
+                    chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
         return {name: to_world(torch.cat(c).numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
 def is_static_run(run_dir: str | Path) -> bool:

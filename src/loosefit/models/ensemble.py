@@ -29,7 +29,6 @@ against that set's simulations, :func:`convex_fit_error`).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import pickle
@@ -46,6 +45,7 @@ from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences, SequenceData
 from loosefit.models.layers.mlp import mlp
 from loosefit.paths import atomic_path
+from loosefit.threads import torch_threads
 
 
 @dataclass(frozen=True)
@@ -83,17 +83,6 @@ class EnsembleConfig:
             raise InputError(f"pivots, latent, hidden sizes and threads must be >= 1 and steps >= 0, got {self}")
         if not (self.sigma > 0 and self.lr > 0):
             raise InputError(f"sigma and lr must be > 0, got {self.sigma}, {self.lr}")
-
-
-@contextlib.contextmanager
-def torch_threads(count: int):
-    """Run the block with ``count`` torch CPU threads, then restore the previous setting."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 # ---------------------------------------------------------------- parameter space

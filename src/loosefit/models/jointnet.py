@@ -47,7 +47,7 @@ from loosefit.models.dataset import GarmentSequences
 from loosefit.models.layers.mlp import mlp
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
-from loosefit.train.losses import normal_loss, vertex_l1
+from loosefit.train.losses import masked_errors_mm, normal_loss, vertex_l1
 
 STAGES = ("stage1", "stage2")
 #: Standard deviation of the initial PSD displacement bases, metres: small enough to leave the
@@ -382,9 +382,5 @@ class JointNet(GarmentModel):
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
         """The base metrics (``rmse_mm``, ``mean_vertex_error_mm``), with the PSD only once it trains (``stage2``)."""
         with torch.no_grad():
-            err = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"] - batch["verts"]
-            mask = self.mask(batch)
-            n = mask.sum().clamp_min(1)
-            sq, dist = (err**2).sum(-1).mean(-1), err.norm(dim=-1).mean(-1)  # (B, T)
-            return {"rmse_mm": float(((sq * mask).sum() / n).sqrt() * 1e3),
-                    "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3)}
+            pred = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"]
+            return masked_errors_mm(pred, batch["verts"], self.mask(batch))

@@ -50,7 +50,13 @@ from loosefit.models.layers.mlp import NEGATIVE_SLOPE, mlp
 from loosefit.rig.normalization import RunningStats
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
-from loosefit.train.losses import collision_loss, laplacian_difference, laplacian_operator, vertex_distance
+from loosefit.train.losses import (
+    collision_loss,
+    laplacian_difference,
+    laplacian_operator,
+    masked_errors_mm,
+    vertex_distance,
+)
 
 #: The identity rotation in the 6D representation (its first two columns).
 IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
@@ -346,11 +352,5 @@ class VirtualBones(GarmentModel):
             out = self(batch["root"], batch["joints"])
             pred = out["lf"] if stage == "low" else out["verts"]
             mask = self.mask(batch)
-            n = mask.sum().clamp_min(1)
-
-            def rmse(a, b):
-                return float((((a - b) ** 2).sum(-1).mean(-1) * mask).sum().div(n).sqrt() * 1e3)
-
-            dist = (pred - batch["verts"]).norm(dim=-1).mean(-1)
-            return {"rmse_mm": rmse(pred, batch["verts"]), "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3),
-                    "lf_rmse_mm": rmse(out["lf"], batch["lf"])}
+            return {**masked_errors_mm(pred, batch["verts"], mask),
+                    "lf_rmse_mm": masked_errors_mm(out["lf"], batch["lf"], mask)["rmse_mm"]}
