@@ -45,13 +45,13 @@ from loosefit.body import AnnyBody  # noqa: E402
 from loosefit.config import load_config  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.garment import make_garment  # noqa: E402
-from loosefit.models.base import parameter_count  # noqa: E402
 from loosefit.models.dataset import GarmentSequences  # noqa: E402
 from loosefit.models.registry import model_class, run_config_class  # noqa: E402
 from loosefit.motion.procedural import generate  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
 from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
 from loosefit.sim import SimParams, load_plan, simulate_sequence  # noqa: E402
+from loosefit.train.protocol import parameter_count  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 #: Method variants: name -> (method, config overrides on top of ``configs/models/<method>.yaml``).

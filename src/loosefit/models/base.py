@@ -22,7 +22,6 @@ from torch import nn
 from loosefit.models.dataset import GarmentSequences
 from loosefit.rig.virtual_bones import skin_bones, sparse_weights
 from loosefit.train.losses import frame_mask, masked_errors_mm
-from loosefit.train.protocol import parameter_count  # noqa: F401 - the models' name for it
 
 
 class GarmentModel(nn.Module):
