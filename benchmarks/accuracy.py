@@ -62,7 +62,7 @@ from loosefit.motion.curves import smooth_noise  # noqa: E402
 from loosefit.motion.motion import Motion  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
 from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
-from loosefit.train.pipeline import train_model  # noqa: E402
+from loosefit.training import train_model  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
 ORDER = ("body-lbs", "virtualbones", "jointnet")

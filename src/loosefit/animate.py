@@ -21,7 +21,7 @@ from loosefit.models.motion_features import FeatureStream, heading_frames, motio
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
 from loosefit.threads import torch_threads
-from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
+from loosefit.training import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
 
 
@@ -49,7 +49,7 @@ class Animator:
     """A trained garment model ready to animate.
 
     Args:
-        run_dir: a folder written by :func:`loosefit.train.pipeline.train_model`.
+        run_dir: a folder written by :func:`loosefit.training.train_model`.
         checkpoint: ``"last"`` (the end of training), ``"best"`` (the best validation epoch; it falls back to
             ``"last"`` when absent) or a checkpoint path. ``"last"`` is the default because validation runs on
             the held-out motions: picking the epoch by them would flatter any accuracy measured on them.

@@ -22,7 +22,7 @@ from loosefit.models.motion_features import to_world
 from loosefit.models.registry import model_class
 from loosefit.motion.motion import Motion
 from loosefit.threads import torch_threads
-from loosefit.train.pipeline import MODEL_META
+from loosefit.training import MODEL_META
 
 #: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (Eq. 5).
 OUTPUTS = ("verts", "coarse")

@@ -159,7 +159,7 @@ def cmd_prepare(args):
 
 
 def cmd_train(args):
-    from loosefit.train.pipeline import train_model
+    from loosefit.training import train_model
 
     if args.method == "collision":
         from loosefit.config import load_config
