@@ -29,10 +29,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_results  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-VB, JN, LBS = "src/loosefit/models/virtualbones.py", "src/loosefit/models/jointnet.py", "src/loosefit/models/body_lbs.py"
-FG, SG = "src/loosefit/models/fitgar.py", "src/loosefit/models/swingar.py"
-T_VB, T_JN, T_LBS = "tests/models/test_virtualbones.py", "tests/models/test_jointnet.py", "tests/models/test_body_lbs.py"
-T_FG, T_SG = "tests/models/test_fitgar.py", "tests/models/test_swingar.py"
+VB, JN, LBS, FG, SG = (f"src/loosefit/models/{m}.py" for m in ("virtualbones", "jointnet", "body_lbs", "fitgar", "swingar"))
+T_VB, T_JN, T_LBS, T_FG, T_SG = (f"tests/models/test_{m}.py"
+                                 for m in ("virtualbones", "jointnet", "body_lbs", "fitgar", "swingar"))
 
 #: name -> (file, [(text, replacement)...], test file, what the bug breaks)
 BUGS = {
@@ -137,7 +136,7 @@ def run_bug(rev: str | None, name: str, timeout: float) -> dict:
             return {"what": what, "result": "timeout", "seconds": timeout}
         seconds = round(time.perf_counter() - start, 1)
         failed = [line.split(" ")[1] for line in proc.stdout.splitlines() if line.startswith(("FAILED", "ERROR"))]
-        result = "caught" if proc.returncode == 1 else "missed" if proc.returncode == 0 else f"pytest rc {proc.returncode}"
+        result = {0: "missed", 1: "caught"}.get(proc.returncode, f"pytest rc {proc.returncode}")
         return {"what": what, "tests": tests, "result": result, "by": failed[:1], "seconds": seconds}
 
 

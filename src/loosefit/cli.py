@@ -304,7 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("prepare", help="virtual bones, descriptors, fit attributes and statistics of a dataset")
     sp.add_argument("data")
-    sp.add_argument("--bones", type=int, default=None, help="virtual bones per garment (default: PrepareSettings.bones, 80)")
+    sp.add_argument("--bones", type=int, default=None,
+                    help="virtual bones per garment (default: PrepareSettings.bones, 80)")
     sp.add_argument("--force", action="store_true", help="redo garments already prepared")
     sp.add_argument("--set", action="append", help="prepare setting override, e.g. influences=6 (repeatable; "
                     "see PrepareSettings)")

@@ -249,7 +249,8 @@ def test_each_loss_weight_moves_the_total_by_exactly_its_term(tiny_train, weight
 
 
 def test_psd_deforms_the_rest_mesh_before_the_skinning(tiny_train):
-    """JointNet Eq. 5 (Sec. 3.3): the joint-specific displacements live in the canonical (rest) space; stage 1 has none."""
+    """JointNet Eq. 5 (Sec. 3.3): the joint-specific displacements live in the canonical (rest) space;
+    stage 1 has none."""
     model = _model(tiny_train)
     with torch.no_grad():
         model.psd_basis.normal_(0.0, 1e-3)

@@ -437,8 +437,10 @@ def test_coarse_stage_skins_the_unposed_blend_shapes_and_feeds_the_corrective(mo
         expected = (posed[..., :3] @ rest)[..., 0] + posed[..., 3]
         assert torch.allclose(out["coarse"], expected, atol=1e-5)
         G, shape = model.garment_features(g)
-        m = model.motion_features(model.poses(torch.cat([root[:, :1].expand(-1, CONFIG.motion_frames - 1, -1), root], 1),
-                                              torch.cat([joints[:, :1].expand(-1, CONFIG.motion_frames - 1, -1, -1), joints], 1)), 5)
+        first = CONFIG.motion_frames - 1  # the first pose repeated before the motion, as forward does
+        history = (torch.cat([root[:, :1].expand(-1, first, -1), root], 1),
+                   torch.cat([joints[:, :1].expand(-1, first, -1, -1), joints], 1))
+        m = model.motion_features(model.poses(*history), 5)
         nodes = model.coarse(g, G, shape, m, root, joints)["nodes"]
         dist = (out["coarse"][..., :, None, :] - joint_pos[..., None, :, :]).norm(dim=-1)
         assert torch.allclose(nodes, torch.cat([out["coarse"], dist], -1), atol=1e-5)

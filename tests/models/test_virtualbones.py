@@ -222,7 +222,8 @@ def test_each_loss_weight_moves_the_total_by_exactly_its_term(tiny_train, stage,
     with torch.no_grad():
         loss, terms = model.training_loss(batch, stage)
         assert terms[term] > 0
-        expected = terms["vertex"] + sum(getattr(model.config, f"{k}_weight") * terms[k] for k in terms if k != "vertex")
+        weighted = [getattr(model.config, f"{k}_weight") * terms[k] for k in terms if k != "vertex"]
+        expected = terms["vertex"] + sum(weighted)
         assert float(loss) == pytest.approx(expected, rel=1e-6)
         moved, moved_terms = _with(model, **{weight: getattr(model.config, weight) + 2.5}).training_loss(batch, stage)
     assert moved_terms == terms

@@ -130,8 +130,8 @@ class SimParams:
         return dataclasses.asdict(self)
 
     def with_overrides(self, overrides: list[str] | dict[str, Any] | None) -> "SimParams":
-        """A copy with ``["bending=1e-5", "self_collision=true"]`` (YAML scalars, :func:`loosefit.config.apply_overrides`)
-        or a dict applied."""
+        """A copy with ``["bending=1e-5", "self_collision=true"]`` (YAML scalars,
+        :func:`loosefit.config.apply_overrides`) or a dict applied."""
         if not overrides:
             return self
         if isinstance(overrides, dict):
