@@ -10,8 +10,9 @@ and records whether a test failed (caught) or all passed (missed).
     python benchmarks/planted_bugs.py --rev main       # the tests of another revision (before/after)
     python benchmarks/planted_bugs.py --only vb-      # the bugs whose name starts with vb-
 
-Writes ``benchmarks/results/planted-bugs-<label>.json``. A bug whose text no longer occurs exactly once
-in the source is reported as ``not planted`` (the source moved on): edit its entry.
+Writes ``benchmarks/results/planted-bugs-<label>.json``. An edit may list a text for each revision (the
+ones that do not occur are skipped); a bug none of whose texts occur, or one occurring twice, is reported
+as ``not planted`` (the source moved on): edit its entry.
 """
 
 from __future__ import annotations
@@ -58,8 +59,9 @@ BUGS = {
     "jn-sparsity-dropped": (JN, [(" + self.config.lambda_sparse * sparse", "")], T_JN,
                             "the L1 of the association (JointNet Eq. 8) not in the total"),
     "jn-psd-posed-space": (JN, [("            rest = rest + displacement\n", ""),
-                                ("verts = self.skin(rest, R, T)",
-                                 "verts = self.skin(rest, R, T) + (0 if displacement is None else displacement)")],
+                                *[(f"verts = self.skin(rest, R, {t})",  # the translation's name before and after
+                                   f"verts = self.skin(rest, R, {t}) + (0 if displacement is None else displacement)")
+                                  for t in ("T", "trans")]],
                            T_JN, "the PSD displacement added after the skinning, not in the canonical rest space"),
     "jn-no-fourier": (JN, [("association @ psi + self.fourier_features()", "association @ psi")], T_JN,
                       "the garment prior (Fourier features of the bone rest positions) left out"),
@@ -109,15 +111,19 @@ def checkout(rev: str | None, dest: Path) -> None:
 
 
 def plant(root: Path, path: str, edits: list[tuple[str, str]]) -> bool:
-    """Apply the edits to ``root / path``; False when a text does not occur exactly once."""
+    """Apply the edits to ``root / path``; an edit whose text does not occur is skipped (an alternative
+    for another revision); False when no edit applies or a text occurs more than once."""
     file = root / path
     text = file.read_text()
+    applied = 0
     for old, new in edits:
-        if text.count(old) != 1:
+        if text.count(old) > 1:
             return False
-        text = text.replace(old, new)
+        if text.count(old) == 1:
+            text = text.replace(old, new)
+            applied += 1
     file.write_text(text)
-    return True
+    return applied > 0
 
 
 def run_bug(rev: str | None, name: str, timeout: float) -> dict:
