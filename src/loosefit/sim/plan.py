@@ -26,6 +26,11 @@ Plan format (paths are relative to the plan file)::
 A job's id is ``<garment>+<shape>+<motion>+<sim_params>``; the garment entry in the dataset is
 ``<garment>+<shape>`` (templates are fitted to each shape). Motions are generated on, or
 retargeted to, the average body and shared by all shapes.
+
+The file is read by :mod:`loosefit.config` (so ``1e-5`` is a number); each garment and motion entry is
+checked as a typed spec (:class:`TemplateGarment`, :class:`FileGarment`, :class:`ProceduralMotion`,
+:class:`FileMotion`, whose fields hold the defaults) and each parameter set is a :class:`SimParams`.
+The plan keeps the entries as written: a job's hash is that of the file's text, not of the defaults.
 """
 
 from __future__ import annotations
