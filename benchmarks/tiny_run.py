@@ -51,12 +51,12 @@ def main() -> None:
         out["jobs"] = {j.id: j.hash for j in load_plan(tmp / "p.yaml").jobs}
         run_plan(tmp / "p.yaml", tmp / "d.zarr", progress=False)
         summary = prepare(tmp / "d.zarr", bones=6, progress=False)["garments"]
-        out["prepare"] = {g: {k: v for k, v in e.items() if k != "seconds"} for g, e in summary.items()}
+        out["prepare"] = {g: {k: v for k, v in e.items() if "seconds" not in k} for g, e in summary.items()}
         for method, overrides in OVERRIDES.items():
             r = train_model(method, tmp / "d.zarr", "skirt+average", tmp / method, overrides=overrides + COMMON)
             out[method] = {"val": r.val_metrics, "train": r.train_metrics, "params": r.parameter_count,
                            "step": r.global_step,
-                           "history": [{k: v for k, v in h.items() if k != "seconds"} for h in r.history]}
+                           "history": [{k: v for k, v in h.items() if "seconds" not in k} for h in r.history]}
     print(json.dumps(out, sort_keys=True, default=str))
 
 
