@@ -63,3 +63,13 @@ def test_evaluate_writes_tables(tmp_path, capsys):
 def test_bad_input_exits_2_naming_the_problem(tmp_path, capsys, argv, message):
     assert main([a.format(tmp=tmp_path) for a in argv]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_prepare_settings_overrides_are_checked_before_the_store_is_opened(tmp_path, capsys):
+    store = tmp_path / "none.zarr"
+    assert main(["prepare", str(store), "--set", "bone=3"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown key 'bone'" in err and "'bones'" in err and "'influences'" in err  # the allowed keys
+    assert main(["prepare", str(store), "--set", "influences=many"]) == 2
+    assert "'influences': expected an integer" in capsys.readouterr().err
+    assert not store.exists()
