@@ -58,7 +58,7 @@ VARIANTS = {
     "one-step": ("fitgar", ["model.two_step=false"]),
     "no-pool": ("fitgar", ["model.pooling=false"]),
 }
-#: Detail error at most this times the coarse error (the issue's floor; the paper reaches 0.50).
+#: Detail error at most this times the coarse error (the project's floor; the FitGar paper reaches 0.50).
 DETAIL_OVER_COARSE = 0.6
 
 

@@ -16,8 +16,9 @@ For each dress (the dress of ``configs/datasets/bench.yaml``, and the same templ
    ``--batch`` motions of ``--batch-frames`` frames, the median of ``--repeats`` calls after an untimed one).
 
 Speed-ups are the simulator's time per frame over the method's (at the faster thread count). The
-issue-5 targets: every method at least 50x faster than the simulator, streaming above 60 fps on the
-bench dress. The machine is shared: the load average is recorded with the numbers.
+project's targets, for real-time use in games and VR: every method at least 50x faster than the
+simulator, streaming above 60 fps on the bench dress. The machine is shared: the load average is
+recorded with the numbers.
 
 Run: .venv/bin/python benchmarks/speed.py [--quick] [--threads 1,2] [--vertices 12000] [--stream-frames 100]
          [--batch 4] [--batch-frames 150] [--repeats 3] [--sim-seconds 2] [--bones 80]
@@ -165,7 +166,7 @@ def time_variants(data: GarmentSequences, stream_motion, batch_motions, threads:
 
 
 def targets(garments: list[dict]) -> list[dict]:
-    """The issue-5 speed targets as pass/fail entries."""
+    """The speed targets (see the module docstring) as pass/fail entries."""
     out = []
     for g in garments:
         for name, row in g["methods"].items():

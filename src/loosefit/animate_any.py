@@ -24,7 +24,7 @@ from loosefit.motion.motion import Motion
 from loosefit.threads import torch_threads
 from loosefit.training import MODEL_META
 
-#: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (Eq. 5).
+#: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (FitGar Eq. 5).
 OUTPUTS = ("verts", "coarse")
 
 

@@ -4,7 +4,7 @@ One network per simulation-parameter set is trained on that set's sequences (any
 :class:`~loosefit.models.base.GarmentModel` of one garment: the ensemble never looks inside). For new
 parameters ``theta`` the garment is a convex combination of the outputs of ``K`` *pivot* networks::
 
-    G(theta) = sum_k w_k(theta) G_k,    w_k = exp(-|g(theta_k) - g(theta)|^2 / (2 sigma^2)) / sum_l (...)   (Eqs. 3-4)
+    G(theta) = sum_k w_k(theta) G_k,    w_k = exp(-|g(theta_k) - g(theta)|^2 / (2 sigma^2)) / sum_l (...)   (VirtualBones Eqs. 3-4)
 
 where ``theta`` is the parameter vector normalised by :class:`ParamSpace` (chosen keys, log10 of the
 stiffness-like ones, standardised over the training sets) and ``g`` an MLP into a latent space. The
@@ -299,7 +299,7 @@ def select_pivots(theta: np.ndarray, count: int, fit_error: Callable[[list[int],
 
 
 class RBFEnsemble(nn.Module):
-    """Pivot networks blended by RBF weights over simulation parameters (Eqs. 3-4).
+    """Pivot networks blended by RBF weights over simulation parameters (VirtualBones Eqs. 3-4).
 
     Args:
         pivots: the ``K`` pivot models (frozen: their parameters get ``requires_grad=False``).
@@ -329,7 +329,7 @@ class RBFEnsemble(nn.Module):
 
     def weights(self, theta: torch.Tensor, exclude: torch.Tensor | None = None) -> torch.Tensor:
         """Normalised RBF weights ``(..., K)`` of normalised parameters ``theta (..., P)`` (a softmax of
-        the log-kernel: equal to Eq. 4 normalised, without underflow for a sharp kernel).
+        the log-kernel: equal to VirtualBones Eq. 4 normalised, without underflow for a sharp kernel).
 
         ``exclude`` (``(...,)`` int64, -1 for none) names one pivot per row whose weight is forced to 0
         (the others renormalised): the leave-one-out fit."""

@@ -94,7 +94,7 @@ class FitGarConfig:
         detail_dense: hidden sizes of each detail branch's fully connected layers.
         magnitude_bias: initial bias of the magnitude branches' last layer (their ReLU starts open).
         coarse_weight, detail_weight: weights of the two loss terms.
-        output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no Eq. 4):
+        output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no FitGar Eq. 4):
             ``"plain"`` (a 3-vector, unbounded) and ``"limited"`` (within plus or minus ``limit_factor``
             times the output scale).
         limit_factor: the ``"limited"`` output's bound in output scales (the paper divides by 5).

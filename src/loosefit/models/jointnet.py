@@ -311,7 +311,7 @@ class JointNet(GarmentModel):
         return torch.relu(self.association)
 
     def fourier_features(self) -> torch.Tensor:
-        """Garment prior ``(B, K)`` from the bone rest positions (paper Eq. 3)."""
+        """Garment prior ``(B, K)`` from the bone rest positions (JointNet Eq. 3)."""
         phase = 2 * math.pi * self.bone_rest @ self.fourier_freqs.T  # (B, K/2)
         return torch.cat([self.fourier_alpha * torch.cos(phase), self.fourier_alpha * torch.sin(phase)], -1)
 
@@ -367,7 +367,7 @@ class JointNet(GarmentModel):
         return [p for n, p in self.named_parameters() if not n.startswith(("psd_mlp.", "psd_basis"))]
 
     def sparsity_loss(self) -> torch.Tensor:
-        """``||relu(A)||_1`` (paper Eq. 8)."""
+        """``||relu(A)||_1`` (JointNet Eq. 8)."""
         return self.association_matrix().sum()
 
     def training_loss(self, batch: dict, stage: str):
