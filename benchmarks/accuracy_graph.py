@@ -45,7 +45,7 @@ from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
 from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.models.fitgar_data import Smoother  # noqa: E402
-from loosefit.train.pipeline import train_model  # noqa: E402
+from loosefit.training import train_model  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
 #: Variant -> (method, overrides on top of the config): the full model and FitGar Sec. 5.3's ablations.
@@ -58,7 +58,7 @@ VARIANTS = {
     "one-step": ("fitgar", ["model.two_step=false"]),
     "no-pool": ("fitgar", ["model.pooling=false"]),
 }
-#: Detail error at most this times the coarse error (the issue's floor; the paper reaches 0.50).
+#: Detail error at most this times the coarse error (the project's floor; the FitGar paper reaches 0.50).
 DETAIL_OVER_COARSE = 0.6
 
 

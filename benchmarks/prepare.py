@@ -38,7 +38,7 @@ from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.garment import make_garment  # noqa: E402
 from loosefit.geometry.smoothing import frequency_split  # noqa: E402
 from loosefit.motion.procedural import generate  # noqa: E402
-from loosefit.rig.virtual_bones import fit_virtual_bones, frame_errors, solve_bone_transforms  # noqa: E402
+from loosefit.rig.virtual_bones import DEFAULT_BONES, fit_virtual_bones, frame_errors, solve_bone_transforms  # noqa: E402
 
 DRESS = {"length": 0.8}  # as in configs/datasets/bench.yaml
 MOTION_KINDS = ("walk", "run", "spin", "jump", "kick", "squat", "bow", "wave", "sway", "mix")
@@ -138,7 +138,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=3000, help="training frames of the timing dataset")
     parser.add_argument("--vertices", type=int, default=6000, help="garment size of the timing dataset")
-    parser.add_argument("--bones", type=int, default=80, help="bones of the timed prepare")
+    parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="bones of the timed prepare")
     parser.add_argument("--sweep", default="20,40,80,150", help="bone counts of the error sweep")
     parser.add_argument("--sweep-seconds", type=float, default=5.0, help="length of each simulated sweep motion")
     parser.add_argument("--data", help="a simulated dataset: time prepare on a copy, sweep its garment 'dress'")

@@ -16,8 +16,9 @@ For each dress (the dress of ``configs/datasets/bench.yaml``, and the same templ
    ``--batch`` motions of ``--batch-frames`` frames, the median of ``--repeats`` calls after an untimed one).
 
 Speed-ups are the simulator's time per frame over the method's (at the faster thread count). The
-issue-5 targets: every method at least 50x faster than the simulator, streaming above 60 fps on the
-bench dress. The machine is shared: the load average is recorded with the numbers.
+project's targets, for real-time use in games and VR: every method at least 50x faster than the
+simulator, streaming above 60 fps on the bench dress. The machine is shared: the load average is
+recorded with the numbers.
 
 Run: .venv/bin/python benchmarks/speed.py [--quick] [--threads 1,2] [--vertices 12000] [--stream-frames 100]
          [--batch 4] [--batch-frames 150] [--repeats 3] [--sim-seconds 2] [--bones 80]
@@ -45,12 +46,13 @@ from loosefit.body import AnnyBody  # noqa: E402
 from loosefit.config import load_config  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.garment import make_garment  # noqa: E402
-from loosefit.models.base import parameter_count  # noqa: E402
 from loosefit.models.dataset import GarmentSequences  # noqa: E402
 from loosefit.models.registry import model_class, run_config_class  # noqa: E402
 from loosefit.motion.procedural import generate  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
+from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
 from loosefit.sim import SimParams, load_plan, simulate_sequence  # noqa: E402
+from loosefit.train.protocol import parameter_count  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 #: Method variants: name -> (method, config overrides on top of ``configs/models/<method>.yaml``).
@@ -164,7 +166,7 @@ def time_variants(data: GarmentSequences, stream_motion, batch_motions, threads:
 
 
 def targets(garments: list[dict]) -> list[dict]:
-    """The issue-5 speed targets as pass/fail entries."""
+    """The speed targets (see the module docstring) as pass/fail entries."""
     out = []
     for g in garments:
         for name, row in g["methods"].items():
@@ -192,7 +194,7 @@ def main() -> None:
     parser.add_argument("--batch-frames", type=int, default=150, help="frames per batched motion")
     parser.add_argument("--repeats", type=int, default=3, help="timed batches (the median is reported)")
     parser.add_argument("--sim-seconds", type=float, default=2.0, help="simulated spin (plus the pre-roll)")
-    parser.add_argument("--bones", type=int, default=80, help="virtual bones of the prepared dataset")
+    parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones of the prepared dataset")
     args = parser.parse_args()
     if args.quick:
         args.vertices, args.stream_frames, args.batch, args.batch_frames, args.sim_seconds, args.repeats = 0, 30, 2, 60, 1.0, 1

@@ -7,7 +7,7 @@ from loosefit.animate import Animator
 from loosefit.data import DatasetStore
 from loosefit.errors import InputError
 from loosefit.motion import Motion
-from loosefit.train.pipeline import train_model
+from loosefit.training import train_model
 
 
 @pytest.fixture(scope="module")

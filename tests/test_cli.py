@@ -146,3 +146,13 @@ def test_render_holds_the_last_frame_of_shorter_sequences(tmp_path):
     left = [im[:, :64] for im in images]
     assert not np.array_equal(left[2], left[3]) and all(np.array_equal(left[3], im) for im in left[4:])
     assert not np.array_equal(images[3][:, 64:], images[9][:, 64:])
+
+
+def test_prepare_settings_overrides_are_checked_before_the_store_is_opened(tmp_path, capsys):
+    store = tmp_path / "none.zarr"
+    assert main(["prepare", str(store), "--set", "bone=3"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown key 'bone'" in err and "'bones'" in err and "'influences'" in err  # the allowed keys
+    assert main(["prepare", str(store), "--set", "influences=many"]) == 2
+    assert "'influences': expected an integer" in capsys.readouterr().err
+    assert not store.exists()

@@ -21,7 +21,8 @@ from loosefit.errors import InputError
 from loosefit.models.motion_features import FeatureStream, heading_frames, motion_features, to_world
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
-from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META
+from loosefit.threads import torch_threads
+from loosefit.training import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
 
 
@@ -77,7 +78,7 @@ class Animator:
     """A trained garment model ready to animate.
 
     Args:
-        run_dir: a folder written by :func:`loosefit.train.pipeline.train_model`.
+        run_dir: a folder written by :func:`loosefit.training.train_model`.
         checkpoint: ``"last"`` (the end of training), ``"best"`` (the best validation epoch; it falls back to
             ``"last"`` when absent) or a checkpoint path. ``"last"`` is the default because validation runs on
             the held-out motions: picking the epoch by them would flatter any accuracy measured on them.
@@ -155,7 +156,7 @@ class Animator:
 
         root, joints = padded("root").to(self.device), padded("joints").to(self.device)
         chunks, state = [], None
-        with _threads(self.threads), torch.no_grad():
+        with torch_threads(self.threads), torch.no_grad():
             for start in range(0, T, self.chunk_frames):
                 outputs = self.model(root[:, start:start + self.chunk_frames], joints[:, start:start + self.chunk_frames],
                                      state)
@@ -192,7 +193,7 @@ class AnimationStream:
         if rotations.shape != (self.animator.num_joints, 3):
             raise InputError(f"a frame needs rotations of shape ({self.animator.num_joints}, 3), got {rotations.shape}")
         root, joints, (rot, origin) = self.features.step(rotations, translation)
-        with _threads(self.animator.threads), torch.no_grad():
+        with torch_threads(self.animator.threads), torch.no_grad():
             device = self.animator.device
             out = self.animator.model(torch.from_numpy(root)[None, None].to(device),
                                       torch.from_numpy(joints)[None, None].to(device), self.state)
@@ -223,18 +224,3 @@ def _bind_garment(model, config, garment, body):
     graph = garment_graph(garment.name or "garment", garment.verts, garment.faces, body.collision_proxy(),
                           body.shape.to_array(), config.descriptor_samples, config.density)
     return BoundSwinGar(model, graph)
-
-
-class _threads:
-    """Temporarily set torch's CPU thread count (None: leave it)."""
-
-    def __init__(self, n: int | None):
-        self.n = n
-
-    def __enter__(self):
-        self.saved = torch.get_num_threads()
-        if self.n:
-            torch.set_num_threads(self.n)
-
-    def __exit__(self, *exc):
-        torch.set_num_threads(self.saved)

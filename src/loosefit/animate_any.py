@@ -23,9 +23,10 @@ from loosefit.models.motion_features import to_world
 from loosefit.models.registry import model_class
 from loosefit.train.protocol import to_device
 from loosefit.motion.motion import Motion
-from loosefit.train.pipeline import MODEL_META
+from loosefit.threads import torch_threads
+from loosefit.training import MODEL_META
 
-#: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (Eq. 5).
+#: Vertex outputs a caller may ask for: the detail mesh (FitGar Eq. 9) or the coarse one (FitGar Eq. 5).
 OUTPUTS = ("verts", "coarse")
 
 
@@ -102,17 +103,11 @@ class AnyGarmentAnimator:
         inputs = pair.frames(motion)
         items = frame_items(pair, inputs)
         chunks: dict[str, list[torch.Tensor]] = {name: [] for name in outputs}
-        saved = torch.get_num_threads()
-        try:
-            if self.threads:
-                torch.set_num_threads(self.threads)
-            with torch.no_grad():
-                for start in range(0, len(items), self.frames_per_pass):
-                    out = self.model(to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device))
-                    for name in outputs:
-                        chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
-        finally:
-            torch.set_num_threads(saved)
+        with torch_threads(self.threads), torch.no_grad():
+            for start in range(0, len(items), self.frames_per_pass):
+                out = self.model(to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device))
+                for name in outputs:
+                    chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
         return {name: to_world(torch.cat(c).cpu().numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
 def is_static_run(run_dir: str | Path) -> bool:

@@ -165,9 +165,11 @@ def cmd_simulate(args):
 
 
 def cmd_prepare(args):
-    from loosefit.rig.prepare import prepare
+    from loosefit.config import apply_overrides, config_to_dict
+    from loosefit.rig.prepare import prepare, prepare_settings
 
-    summary = prepare(args.data, bones=args.bones, force=args.force)
+    settings = apply_overrides(prepare_settings({} if args.bones is None else {"bones": args.bones}), args.set or [])
+    summary = prepare(args.data, force=args.force, **config_to_dict(settings))
     for name, g in summary["garments"].items():
         rig = f"{g['bones']} bones, LF RMSE {g['rmse_lf_mm']:.2f} mm" if "bones" in g else "no training sequences"
         print(f"{name}: {rig}")
@@ -175,7 +177,7 @@ def cmd_prepare(args):
 
 
 def cmd_train(args):
-    from loosefit.train.pipeline import train_model
+    from loosefit.training import train_model
 
     if args.method == "collision":
         if args.nproc != 1 or args.device not in (None, "cpu"):
@@ -415,8 +417,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("prepare", help="virtual bones, descriptors, fit attributes and statistics of a dataset")
     sp.add_argument("data")
-    sp.add_argument("--bones", type=int, default=80, help="virtual bones per garment")
+    sp.add_argument("--bones", type=int, default=None,
+                    help="virtual bones per garment (default: PrepareSettings.bones, 80)")
     sp.add_argument("--force", action="store_true", help="redo garments already prepared")
+    sp.add_argument("--set", action="append", help="prepare setting override, e.g. influences=6 (repeatable; "
+                    "see PrepareSettings)")
     sp.set_defaults(func=cmd_prepare)
 
     sp = sub.add_parser("train", help="train a garment model")

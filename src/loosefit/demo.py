@@ -45,7 +45,7 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     from loosefit.metrics.report import SequencePair, evaluate
     from loosefit.rig.prepare import prepare
     from loosefit.sim import run_plan
-    from loosefit.train.pipeline import StaleRunError, train_model
+    from loosefit.training import StaleRunError, train_model
     from loosefit.viz.render import render_video, save_png, render_frames
     from loosefit.viz.scene import BODY_COLOR, MeshTrack
 

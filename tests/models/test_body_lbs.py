@@ -68,3 +68,37 @@ def test_follows_the_body_skeleton_like_the_simulator_pins(tiny_train):
 
 def test_config_file_has_only_an_empty_model_section():
     assert load_config(Config, CONFIG_FILE) == Config()
+
+
+def test_only_joints_that_skin_the_garment_and_only_their_own_frame_move_it(tiny_train):
+    """What the method reads: each frame's own pose, and of it only the joints with a skinning weight on
+    the garment (or their ancestors); a joint that weighs on no garment vertex is irrelevant."""
+    model = BodyLBS.from_data(tiny_train, BodyLBSConfig())
+    s = tiny_train.sequences[0]
+    root, joints = torch.from_numpy(s.root)[None, :6], torch.from_numpy(s.joints)[None, :6]
+    weight = model.weights.sum(0).numpy()  # (J,) total weight of each joint on the garment
+    parents = model.parents
+    ancestors = set()
+    for j in np.flatnonzero(weight > 0):
+        while j >= 0:
+            ancestors.add(int(j))
+            j = parents[j]
+    unused = next(j for j in range(1, len(weight)) if j not in ancestors)
+    used = max(np.flatnonzero(weight > 0), key=lambda j: weight[j])
+    with torch.no_grad():
+        base = model(root, joints)["verts"]
+
+        def change(joint: int) -> torch.Tensor:
+            j = joints.clone()
+            j[:, 3, joint - 1] += 0.3
+            return (model(root, j)["verts"] - base).norm(dim=-1).amax(-1)[0]
+
+        moved, still = change(int(used)), change(unused)
+        r = root.clone()
+        r[:, 3, 0] += 0.05
+        lifted = model(r, joints)["verts"] - base
+    assert moved[3] > 1e-3 and moved[[0, 1, 2, 4, 5]].max() == 0
+    assert still.max() == 0
+    # the root height lifts every vertex of that frame by exactly its change
+    assert torch.allclose(lifted[0, 3], torch.tensor([0.0, 0.0, 0.05]).expand_as(lifted[0, 3]), atol=1e-5)
+    assert lifted[0, [0, 1, 2, 4, 5]].abs().max() == 0

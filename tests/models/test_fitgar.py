@@ -266,3 +266,30 @@ def test_limited_output_is_bounded():
     plain = DirectOutput(4, (), "plain", scale=2.0)
     x = torch.randn(5, 4)
     torch.testing.assert_close(plain(x)["displacement"], 2.0 * (x @ plain.out.weight.T + plain.out.bias))
+
+
+def test_detail_generator_reads_the_predicted_coarse_mesh(scene):
+    """FitGar Eqs. 5-9 in order: ``M_coarse = I M_b + Delta_coarse``; the detail graph's node features (the
+    vertex normals and the joint distances) are those of that predicted coarse mesh, not of the body
+    anchor or of a target; ``M_detail = M_coarse + Delta_detail``. The targets never reach the output."""
+    items = scene["skirt"][:1]
+    model = tiny_model(items).eval()
+    batch = collate_frames(items)
+    with torch.no_grad():
+        out = model(batch)
+        coarse = batch["anchor"] + model.coarse_displacement(batch)
+        assert torch.equal(out["coarse"], coarse)
+        assert torch.equal(out["verts"], coarse + model.detail_displacement(batch, coarse))
+        assert _moved(coarse, batch["anchor"]) > 1e-4
+        # the detail displacement follows the coarse mesh it is given: a bend (new normals) and a shift
+        # (new joint distances) each move it
+        bent = coarse.clone()
+        bent[::2, 2] += 0.01
+        assert _moved(model.detail_displacement(batch, bent), out["detail_displacement"]) > 1e-6
+        assert _moved(model.detail_displacement(batch, coarse + 0.01), out["detail_displacement"]) > 1e-6
+        # the anchor reaches the detail generator only through the coarse mesh
+        shifted = dict(batch, anchor=batch["anchor"] + 0.01)
+        assert torch.equal(model.detail_displacement(shifted, coarse), out["detail_displacement"])
+        # training targets are no inputs
+        noisy = dict(batch, verts=batch["verts"] + 0.05, smooth=batch["smooth"] + 0.05)
+        assert all(torch.equal(model(noisy)[k], out[k]) for k in out)

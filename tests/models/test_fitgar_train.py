@@ -109,7 +109,7 @@ def test_loosefit_train_fitgar(store, run, body):
 
 
 def test_train_fitgar_refuses_a_garment(store, tmp_path):
-    from loosefit.train.pipeline import train_model
+    from loosefit.training import train_model
 
     with pytest.raises(InputError, match="every garment"):
         train_model("fitgar", store, "skirt+average", tmp_path / "run")
@@ -167,7 +167,7 @@ def test_loosefit_animate_cli(run, heavy_case, tmp_path):
 
 
 def test_resume_of_a_finished_run_trains_no_further(store, run):
-    from loosefit.train.pipeline import train_model
+    from loosefit.training import train_model
 
     before = (run / "checkpoints" / "last.pt").read_bytes()
     result = train_model("fitgar", store, None, run, config=TINY_CONFIG, resume=True)

@@ -230,3 +230,82 @@ def test_config_file_holds_the_defaults():
     assert config.data == WindowConfig(window=60, stride=50, burn_in=10)
     with pytest.raises(InputError, match="even"):
         JointNetConfig(features=31)
+
+
+# ---------------------------------------------------------------------- the paper's structure
+
+
+@pytest.mark.parametrize("weight, term", [("lambda_norm", "normal"), ("lambda_sparse", "sparsity")])
+def test_each_loss_weight_moves_the_total_by_exactly_its_term(tiny_train, weight, term):
+    """JointNet Eq. 6: L1 vertex term plus the weighted normal and association-sparsity terms."""
+    model = _model(tiny_train)
+    batch = _batch(tiny_train, 8)
+    with torch.no_grad():
+        loss, terms = model.training_loss(batch, "stage2")
+        model.config = JointNetConfig(**{**TINY.__dict__, weight: getattr(TINY, weight) + 0.5})
+        moved, moved_terms = model.training_loss(batch, "stage2")
+    assert moved_terms == terms and terms[term] > 0
+    assert float(moved) - float(loss) == pytest.approx(0.5 * terms[term], rel=1e-4)
+
+
+def test_psd_deforms_the_rest_mesh_before_the_skinning(tiny_train):
+    """JointNet Eq. 5 (Sec. 3.3): the joint-specific displacements live in the canonical (rest) space;
+    stage 1 has none."""
+    model = _model(tiny_train)
+    with torch.no_grad():
+        model.psd_basis.normal_(0.0, 1e-3)
+        batch = _batch(tiny_train, 8)
+        out = model(batch["root"], batch["joints"])
+        R, T = out["bones"]
+        assert out["displacement"].abs().max() > 1e-4
+        assert torch.allclose(out["verts"], model.skin(model.rig_rest + out["displacement"], R, T), atol=1e-6)
+        plain = model(batch["root"], batch["joints"], psd=False)
+        assert plain["displacement"] is None
+        assert torch.allclose(plain["verts"], model.skin(model.rig_rest, R, T), atol=1e-6)
+
+
+def test_a_bone_listens_only_to_its_associated_joints(tiny_train):
+    """JointNet Eqs. 2 and 4: bone features are ``relu(A) psi`` plus the bone's Fourier prior. A bone whose row
+    of ``A`` holds one joint moves with that joint's neighbourhood and ignores a joint outside it."""
+    model = _model(tiny_train)
+    G = len(model.selected)
+    table = model.neighbours.numpy()
+    J = int(model.joints_mean.shape[0]) + 1
+    listened = 0
+    reads = {int(r) - 1 for r in table[listened] if 0 < r < J}  # rig joints in its neighbourhood (joints index j-1)
+    ignored = next(j for j in model.selected if j - 1 not in reads)  # a joint outside that neighbourhood
+    with torch.no_grad():
+        model.association.fill_(-1.0)
+        model.association[0, listened] = 1.0  # bone 0: one joint
+        model.association[1] = 1.0 / G  # bone 1: every joint
+        batch = _batch(tiny_train, 8)
+        base = model(batch["root"], batch["joints"])["bones"][0]
+
+        def bone_change(joint: int) -> torch.Tensor:
+            joints = batch["joints"].clone()
+            joints[:, 4, joint - 1] += 0.3
+            return (model(batch["root"], joints)["bones"][0] - base).abs().flatten(3).amax(-1)[0, 4]
+
+        own, other = bone_change(model.selected[listened]), bone_change(ignored)
+    assert own[0] > 1e-6 and own[1] > 1e-6
+    assert other[0] == 0 and other[1] > 1e-6
+
+
+def test_fourier_prior_of_the_bone_rest_positions(tiny_train):
+    """JointNet Eq. 3: ``[alpha cos(2 pi c . p), alpha sin(2 pi c . p)]`` of each bone's rest position ``p``,
+    added to the bone features: a bone that listens to no joint still gets its own transform."""
+    model = _model(tiny_train)
+    p, c, a = model.bone_rest.double(), model.fourier_freqs.double(), model.fourier_alpha.detach().double()
+    phase = 2 * math.pi * p @ c.T
+    expected = torch.cat([a * torch.cos(phase), a * torch.sin(phase)], -1)
+    assert torch.allclose(model.fourier_features().detach().double(), expected, atol=1e-5)
+    with torch.no_grad():
+        model.association.fill_(-1.0)  # no joint at all: the bones differ only through their prior
+        batch = _batch(tiny_train, 8)
+        R, T = model(batch["root"], batch["joints"], psd=False)["bones"]
+        offsets = (R @ model.bone_rest[:, :, None])[..., 0] + T - model.bone_rest
+        assert (offsets[0, 0, 0] - offsets[0, 0, 1]).abs().max() > 1e-5
+        model.fourier_alpha.zero_()
+        R, T = model(batch["root"], batch["joints"], psd=False)["bones"]
+        standardised = (matrix_to_euler(R, "xyz") - model.euler_mean) / model.euler_std
+        assert torch.allclose(standardised[0, 0, 0], standardised[0, 0, 1], atol=1e-4)  # the same MLP input

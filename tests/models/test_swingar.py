@@ -416,3 +416,34 @@ def test_resume_gives_identical_weights(data, tmp_path):
     assert result.global_step == 6
     for key, value in reference.state_dict().items():
         assert torch.equal(value, resumed.state_dict()[key]), key
+
+
+def test_coarse_stage_skins_the_unposed_blend_shapes_and_feeds_the_corrective(model, data):
+    """SwinGar Sec. III-C in order: blend shapes ``B_t`` deform the *unposed* garment, which the dynamic
+    weights ``W_t`` (a softmax over the joints) skin by the body's joint transforms into ``M_c``; the
+    corrective predictor reads ``M_c`` (positions and distances to every joint); the output is ``M_c``
+    plus the correction plus the root translation, applied last."""
+    g = data.graphs[0].tensors()
+    s = data.sequences[0].sequences[0]
+    root, joints = torch.from_numpy(s.root[None, :5]), torch.from_numpy(s.joints[None, :5])
+    with torch.no_grad():
+        model.blend_out.weight.normal_(0.0, 0.05)  # blend shapes of a few centimetres
+        out = model(g, root, joints)
+        assert out["blend"].abs().max() > 1e-3
+        assert torch.allclose(out["weights"].sum(-1), torch.ones(()), atol=1e-5) and out["weights"].min() >= 0
+        A, joint_pos = model.joint_transforms(root, joints, g["rest_joints"])
+        rest = (g["rest"] + out["blend"])[..., None]  # (B, T, V, 3, 1)
+        posed = torch.einsum("btvj,btjxy->btvxy", out["weights"], A[..., :3, :])
+        expected = (posed[..., :3] @ rest)[..., 0] + posed[..., 3]
+        assert torch.allclose(out["coarse"], expected, atol=1e-5)
+        G, shape = model.garment_features(g)
+        first = CONFIG.motion_frames - 1  # the first pose repeated before the motion, as forward does
+        history = (torch.cat([root[:, :1].expand(-1, first, -1), root], 1),
+                   torch.cat([joints[:, :1].expand(-1, first, -1, -1), joints], 1))
+        m = model.motion_features(model.poses(*history), 5)
+        nodes = model.coarse(g, G, shape, m, root, joints)["nodes"]
+        dist = (out["coarse"][..., :, None, :] - joint_pos[..., None, :, :]).norm(dim=-1)
+        assert torch.allclose(nodes, torch.cat([out["coarse"], dist], -1), atol=1e-5)
+        lift = torch.stack([-g["rest_joints"][0, 0].expand(1, 5), -g["rest_joints"][0, 1].expand(1, 5),
+                            root[..., 0] - g["rest_joints"][0, 2]], -1)
+        assert torch.allclose(out["verts"], out["coarse"] + out["correction"] + lift[:, :, None], atol=1e-6)

@@ -191,3 +191,93 @@ def test_yaml_config_mirrors_the_defaults():
     path = Path(__file__).resolve().parents[2] / "configs" / "models" / "virtualbones.yaml"
     assert load_config(Config, path) == Config()
     assert Config().train.stage("low").epochs == Config().train.stage("high").epochs == 50
+
+
+# ---------------------------------------------------------------------- the paper's structure
+
+
+def _perturbed(model):
+    """The model with its networks moved off their near-rest start (outputs depend on every layer)."""
+    torch.manual_seed(1)
+    with torch.no_grad():
+        for p in model.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    return model
+
+
+def _with(model, **change):
+    """The same weights under another config (loss weights are read at each call)."""
+    model.config = VirtualBonesConfig(**{**model.config.__dict__, **change})
+    return model
+
+
+@pytest.mark.parametrize("stage, weight, term", [("low", "laplacian_weight", "laplacian"),
+                                                 ("low", "bone_weight", "bone"),
+                                                 ("high", "collision_weight", "collision")])
+def test_each_loss_weight_moves_the_total_by_exactly_its_term(tiny_train, stage, weight, term):
+    """VirtualBones Eq. 2 and Sec. 4.3: the total is the vertex term plus each weighted term."""
+    model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "bone_weight": 1.0,
+                                                            "collision_margin": 0.05}))
+    batch = _batch(WindowDataset(tiny_train, window=20, stride=20, burn_in=5))
+    with torch.no_grad():
+        loss, terms = model.training_loss(batch, stage)
+        assert terms[term] > 0
+        weighted = [getattr(model.config, f"{k}_weight") * terms[k] for k in terms if k != "vertex"]
+        expected = terms["vertex"] + sum(weighted)
+        assert float(loss) == pytest.approx(expected, rel=1e-6)
+        moved, moved_terms = _with(model, **{weight: getattr(model.config, weight) + 2.5}).training_loss(batch, stage)
+    assert moved_terms == terms
+    assert float(moved) - float(loss) == pytest.approx(2.5 * terms[term], rel=1e-4)
+
+
+def test_high_frequency_module_reads_the_predicted_low_frequency_mesh(tiny_train):
+    """VirtualBones Sec. 4.3: the EdgeConv layers run on the low-frequency mesh the first module predicts
+    (not the rest mesh), the GRU on the predicted bone motion, and the output is that mesh plus the offsets."""
+    model = _perturbed(_model(tiny_train))
+    seq = tiny_train.sequences[0]
+    root, joints = torch.from_numpy(seq.root)[None, :10], torch.from_numpy(seq.joints)[None, :10]
+    with torch.no_grad():
+        out = model(root, joints)
+        raw, rot, trans, lf, _ = model.low_frequency(model._inputs(root, joints))
+        assert torch.equal(lf, out["lf"])
+        assert torch.equal(lf, model.skin(model.rest_verts, rot, trans))
+        offsets, _ = model.high_frequency(raw, lf)
+        assert torch.allclose(out["verts"], lf + offsets, atol=1e-6)
+        # the offsets follow the mesh they are given, frame by frame ...
+        bent = lf.clone()
+        bent[:, 4] += 0.02 * torch.randn_like(bent[:, 4])
+        moved = (model.high_frequency(raw, bent)[0] - offsets).norm(dim=-1).amax(-1)[0]
+        assert moved[4] > 1e-4 and moved[:4].max() == 0 and moved[5:].max() == 0
+        # ... and the bone motion (through the GRU: this frame and the later ones, never the earlier)
+        shaken = raw.clone()
+        shaken[:, 6] += 0.1
+        moved = (model.high_frequency(shaken, lf)[0] - offsets).norm(dim=-1).amax(-1)[0]
+        assert moved[:6].max() == 0 and moved[6:].min() > 1e-5
+        # the rest mesh reaches the offsets only through the predicted mesh
+        model.rest_verts.add_(0.03)
+        assert torch.equal(model.high_frequency(raw, lf)[0], offsets)
+        shifted = model(root, joints)
+        assert (shifted["lf"] - lf).abs().max() > 1e-3
+        assert torch.allclose(shifted["verts"], shifted["lf"] + model.high_frequency(raw, shifted["lf"])[0], atol=1e-6)
+
+
+def test_every_motion_feature_moves_the_bones_and_only_later_frames(tiny_train):
+    """VirtualBones Sec. 4.2: the low-frequency GRU reads the root height, the root displacement and
+    heading change, the root tilt and every joint rotation; a recurrent network is causal."""
+    model = _perturbed(_model(tiny_train))
+    seq = tiny_train.sequences[0]
+    root, joints = torch.from_numpy(seq.root)[None, :8], torch.from_numpy(seq.joints)[None, :8]
+    groups = {"height": (slice(0, 1), None), "displacement": (slice(1, 3), None), "heading": (slice(3, 5), None),
+              "tilt": (slice(5, 11), None), "first joint": (None, 0), "last joint": (None, joints.shape[2] - 1)}
+    with torch.no_grad():
+        base = model(root, joints)
+        for name, (cols, joint) in groups.items():
+            r, j = root.clone(), joints.clone()
+            if cols is not None:
+                r[:, 5, cols] += 0.2 * root[0, :, cols].std(0).clamp_min(0.05)
+            else:
+                j[:, 5, joint] += 0.2
+            out = model(r, j)
+            bones = (out["bones"][0] - base["bones"][0]).abs().flatten(2).amax(-1)[0]
+            assert bones[:5].max() == 0 and bones[5] > 1e-6, name
+            assert torch.equal(out["verts"][:, :5], base["verts"][:, :5]), name

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import shutil
 
 import numpy as np
@@ -156,3 +157,16 @@ def test_bad_input(tmp_path):
         prepare(store.path, bone=3, progress=False)
     with pytest.raises(InputError, match="not prepared"):
         read_stats(store.path)
+
+
+def test_settings_are_a_typed_config_with_one_bone_default():
+    from loosefit.rig.prepare import PrepareSettings, prepare_settings
+    from loosefit.rig.virtual_bones import DEFAULT_BONES, fit_virtual_bones
+
+    assert prepare_settings() == PrepareSettings() and PrepareSettings().bones == DEFAULT_BONES == 80
+    assert inspect.signature(fit_virtual_bones).parameters["bones"].default == DEFAULT_BONES
+    assert prepare_settings({"bones": 12, "trans_affine": 1}).trans_affine == 1.0
+    with pytest.raises(InputError, match=r"unknown prepare settings \['bone'\]; known: \['bones', 'influences'"):
+        prepare_settings({"bone": 3})
+    with pytest.raises(InputError, match="'influences': expected an integer"):
+        prepare_settings({"influences": "many"})

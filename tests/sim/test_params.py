@@ -51,3 +51,16 @@ def test_bad_yaml_file(tmp_path):
         SimParams.load(path)
     with pytest.raises(InputError, match="NAME=VALUE"):
         SimParams().with_overrides(["bending"])
+
+
+def test_one_config_mechanism_for_files_and_overrides(tmp_path):
+    """YAML files and overrides go through loosefit.config: exponents without a dot are numbers, integers
+    are accepted for floats, an unknown name lists the known ones, a wrong type names the key."""
+    path = tmp_path / "fabric.yaml"
+    path.write_text("bending: 1e-5\ntension: 300\n")
+    p = SimParams.load(path, ["air_drag=3e-1"])
+    assert (p.bending, p.tension, p.air_drag) == (1e-5, 300.0, 0.3) and isinstance(p.tension, float)
+    with pytest.raises(InputError, match=r"unknown simulation parameters \['drag'\]; known: \['density', "):
+        SimParams().with_overrides(["drag=1"])
+    with pytest.raises(InputError, match="override 'quality=fast'.*'quality': expected an integer"):
+        SimParams().with_overrides(["quality=fast"])

@@ -2,7 +2,7 @@ import pytest
 import yaml
 
 from loosefit.errors import InputError
-from loosefit.sim.plan import load_plan
+from loosefit.sim.plan import FileMotion, ProceduralMotion, TemplateGarment, load_plan
 
 PLAN = {
     "name": "t",
@@ -102,3 +102,28 @@ def test_shipped_plans():
     garments = plans["garments"]
     assert len(garments.garments) >= 30 and len(garments.shapes) == 3
     assert {g["template"] for g in garments.garments.values()} == {"skirt", "dress", "long_shirt", "jumpsuit"}
+
+
+def test_specs_are_typed_configs_and_yaml_exponents_are_numbers(tmp_path):
+    """Plans read through loosefit.config: ``1e-5`` (no dot, a string to plain YAML 1.1) is a number, each
+    garment and motion entry is a typed spec whose defaults live in one place, and a wrong type or an
+    unknown key is named with the allowed keys."""
+    path = tmp_path / "plan.yaml"
+    path.write_text("garments:\n  g: {template: skirt, params: {length: 0.5}}\n"
+                    "motions:\n  m: {procedural: walk, seconds: 2}\n  f: {file: c.bvh}\n"
+                    "sim_params:\n  soft: {bending: 1e-6, density: 5e-2}\n")
+    plan = load_plan(path)
+    assert (plan.sim_params["soft"].bending, plan.sim_params["soft"].density) == (1e-6, 0.05)
+    garment = plan.garment_spec("g")
+    assert isinstance(garment, TemplateGarment) and garment.make_kwargs() == {"length": 0.5}  # make_garment's defaults
+    assert plan.motion_spec("m") == ProceduralMotion("walk", 2.0, 0)
+    assert plan.motion_spec("f") == FileMotion("c.bvh", None, 0, None)
+    assert plan.garments["g"] == {"template": "skirt", "params": {"length": 0.5}}  # as written: hashes unchanged
+    for change, message in [({"motions": {"m": {"procedural": "walk", "seconds": 1, "speed": 2}}},
+                             r"motion 'm': unknown keys \['speed'\]; allowed: \['procedural', 'seconds', 'seed'\]"),
+                            ({"garments": {"g": {"template": "skirt", "seed": "one"}}},
+                             r"garment 'g': config key 'seed': expected an integer"),
+                            ({"motions": {"m": {"file": "c.bvh", "frames": 0}}}, r"'frames' must be an integer >= 1")]:
+        with pytest.raises(InputError, match=message) as err:
+            load_plan(_write(tmp_path, {**PLAN, **change}))
+        assert "plan.yaml" in str(err.value)

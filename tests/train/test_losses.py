@@ -1,6 +1,7 @@
 """Loss terms against hand-computed values."""
 
 import numpy as np
+import pytest
 import torch
 
 from loosefit.train import losses
@@ -40,3 +41,23 @@ def test_normal_and_collision_terms():
     nearest = torch.zeros(1, 1, 2, dtype=torch.long)
     assert torch.allclose(losses.collision_loss(pred, body, normals, nearest), torch.tensor(0.01))
     assert torch.allclose(losses.collision_loss(pred, body, normals, nearest, margin=0.005), torch.tensor(0.0125))
+
+
+def test_masked_validation_errors_against_numpy():
+    """``rmse_mm`` pools the squared vertex distances of the counted frames; ``mean_vertex_error_mm`` the distances."""
+    from loosefit.train.losses import masked_errors_mm
+
+    gen = torch.Generator().manual_seed(0)
+    pred, target = torch.randn(2, 5, 7, 3, generator=gen), torch.randn(2, 5, 7, 3, generator=gen)
+    mask = torch.ones(2, 5)
+    mask[0, :2] = 0  # a burn-in of two frames in the first window
+    d = np.linalg.norm((pred - target).numpy().astype(np.float64), axis=-1)  # (2, 5, 7)
+    counted = np.concatenate([d[0, 2:], d[1]])  # (8, 7)
+    got = masked_errors_mm(pred, target, mask)
+    assert got["rmse_mm"] == pytest.approx(np.sqrt((counted**2).mean()) * 1e3, rel=1e-5)
+    assert got["mean_vertex_error_mm"] == pytest.approx(counted.mean() * 1e3, rel=1e-5)
+    everything = masked_errors_mm(pred, target)
+    assert everything["rmse_mm"] == pytest.approx(np.sqrt((d**2).mean()) * 1e3, rel=1e-5)
+    assert everything["mean_vertex_error_mm"] == pytest.approx(d.mean() * 1e3, rel=1e-5)
+    one = masked_errors_mm(pred[0, 0], target[0, 0])  # one frame (V, 3)
+    assert one["mean_vertex_error_mm"] == pytest.approx(d[0, 0].mean() * 1e3, rel=1e-5)

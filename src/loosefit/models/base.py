@@ -16,13 +16,12 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-import numpy as np
 import torch
 from torch import nn
 
 from loosefit.models.dataset import GarmentSequences
 from loosefit.rig.virtual_bones import skin_bones, sparse_weights
-from loosefit.train.losses import frame_mask
+from loosefit.train.losses import frame_mask, masked_errors_mm
 
 
 class GarmentModel(nn.Module):
@@ -130,13 +129,7 @@ class GarmentModel(nn.Module):
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
         """``rmse_mm`` (true root mean square) and ``mean_vertex_error_mm`` over the counted frames."""
         with torch.no_grad():
-            pred = self(batch["root"], batch["joints"])["verts"]
-            mask = self.mask(batch)
-            sq = ((pred - batch["verts"]) ** 2).sum(-1).mean(-1)  # (B, T) mean squared vertex error
-            dist = (pred - batch["verts"]).norm(dim=-1).mean(-1)
-            n = mask.sum().clamp_min(1)
-            return {"rmse_mm": float(((sq * mask).sum() / n).sqrt() * 1e3),
-                    "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3)}
+            return masked_errors_mm(self(batch["root"], batch["joints"])["verts"], batch["verts"], self.mask(batch))
 
     def skin(self, rest: torch.Tensor, rotations: torch.Tensor, translations: torch.Tensor) -> torch.Tensor:
         """:func:`loosefit.rig.skin_bones` with the model's ``skin_weights (V, B)`` buffer (methods driven
@@ -151,6 +144,3 @@ class GarmentModel(nn.Module):
     def batch_size(self, batch: dict) -> int:
         return int(batch["root"].shape[0])
 
-
-def parameter_count(model: nn.Module) -> int:
-    return int(sum(np.prod(p.shape) for p in model.parameters()))

@@ -4,7 +4,7 @@ One network per simulation-parameter set is trained on that set's sequences (any
 :class:`~loosefit.models.base.GarmentModel` of one garment: the ensemble never looks inside). For new
 parameters ``theta`` the garment is a convex combination of the outputs of ``K`` *pivot* networks::
 
-    G(theta) = sum_k w_k(theta) G_k,    w_k = exp(-|g(theta_k) - g(theta)|^2 / (2 sigma^2)) / sum_l (...)   (Eqs. 3-4)
+    G(theta) = sum_k w_k(theta) G_k,    w_k = exp(-|g(theta_k) - g(theta)|^2 / (2 sigma^2)) / sum_l (...)   (VirtualBones Eqs. 3-4)
 
 where ``theta`` is the parameter vector normalised by :class:`ParamSpace` (chosen keys, log10 of the
 stiffness-like ones, standardised over the training sets) and ``g`` an MLP into a latent space. The
@@ -29,7 +29,6 @@ against that set's simulations, :func:`convex_fit_error`).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import pickle
@@ -46,6 +45,7 @@ from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences, SequenceData
 from loosefit.models.layers.mlp import mlp
 from loosefit.paths import atomic_path
+from loosefit.threads import torch_threads
 
 
 @dataclass(frozen=True)
@@ -83,17 +83,6 @@ class EnsembleConfig:
             raise InputError(f"pivots, latent, hidden sizes and threads must be >= 1 and steps >= 0, got {self}")
         if not (self.sigma > 0 and self.lr > 0):
             raise InputError(f"sigma and lr must be > 0, got {self.sigma}, {self.lr}")
-
-
-@contextlib.contextmanager
-def torch_threads(count: int):
-    """Run the block with ``count`` torch CPU threads, then restore the previous setting."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 # ---------------------------------------------------------------- parameter space
@@ -310,7 +299,7 @@ def select_pivots(theta: np.ndarray, count: int, fit_error: Callable[[list[int],
 
 
 class RBFEnsemble(nn.Module):
-    """Pivot networks blended by RBF weights over simulation parameters (Eqs. 3-4).
+    """Pivot networks blended by RBF weights over simulation parameters (VirtualBones Eqs. 3-4).
 
     Args:
         pivots: the ``K`` pivot models (frozen: their parameters get ``requires_grad=False``).
@@ -340,7 +329,7 @@ class RBFEnsemble(nn.Module):
 
     def weights(self, theta: torch.Tensor, exclude: torch.Tensor | None = None) -> torch.Tensor:
         """Normalised RBF weights ``(..., K)`` of normalised parameters ``theta (..., P)`` (a softmax of
-        the log-kernel: equal to Eq. 4 normalised, without underflow for a sharp kernel).
+        the log-kernel: equal to VirtualBones Eq. 4 normalised, without underflow for a sharp kernel).
 
         ``exclude`` (``(...,)`` int64, -1 for none) names one pivot per row whose weight is forced to 0
         (the others renormalised): the leave-one-out fit."""

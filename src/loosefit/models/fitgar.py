@@ -60,6 +60,7 @@ from loosefit.models.layers.edge_pool import EdgeContractionPooling
 from loosefit.models.layers.gat_block import GATBlock
 from loosefit.rig.fit_attribute import FitAttributeModel
 from loosefit.train import StageConfig, TrainConfig
+from loosefit.train.losses import masked_errors_mm
 
 #: Coarse node features: body normal (3), relative skinning feature (3), first fit factor (1).
 COARSE_FEATURES = 7
@@ -93,7 +94,7 @@ class FitGarConfig:
         detail_dense: hidden sizes of each detail branch's fully connected layers.
         magnitude_bias: initial bias of the magnitude branches' last layer (their ReLU starts open).
         coarse_weight, detail_weight: weights of the two loss terms.
-        output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no Eq. 4):
+        output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no FitGar Eq. 4):
             ``"plain"`` (a 3-vector, unbounded) and ``"limited"`` (within plus or minus ``limit_factor``
             times the output scale).
         limit_factor: the ``"limited"`` output's bound in output scales (the paper divides by 5).
@@ -400,7 +401,6 @@ class FitGar(nn.Module):
             if stage == "detail":
                 pred, target = coarse + self.detail_displacement(batch, coarse), batch["verts"]
                 out["detail_error_mm"] = float((pred - target).norm(dim=-1).mean() * 1e3)
-            out["rmse_mm"] = float(((pred - target) ** 2).sum(-1).mean().sqrt() * 1e3)
-            out["mean_vertex_error_mm"] = float((pred - target).norm(dim=-1).mean() * 1e3)
+            out.update(masked_errors_mm(pred, target))
         return out
 

@@ -1,7 +1,8 @@
 """JointNet (Diao et al. 2024): joint-wise motion features, a sparse joint-to-bone association and
 joint-specific pose-space deformation, on top of the garment's virtual bones.
 
-Per frame ``t``, in the canonical heading frame (:mod:`loosefit.models.motion_features`):
+Per frame, in the canonical heading frame (:mod:`loosefit.models.motion_features`); shapes for ``N``
+windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints of which ``J_s`` selected:
 
 1. **Joint-wise encoding.** Each selected body joint ``j`` (by default every non-root joint but the
    fingers and thumbs) sees the root features, its own rotation and those of its skeleton neighbours
@@ -16,7 +17,8 @@ Per frame ``t``, in the canonical heading frame (:mod:`loosefit.models.motion_fe
 4. **Bone transforms.** A per-bone (shared) MLP ``F`` (K, 1024, 2048, 1024, 6) gives three Euler angles
    and a three-vector offset, both standardised by the training statistics of the rig's bone
    transforms. The bone rotates about its rest position ``c`` and moves by the offset, so
-   ``R = euler(angles)``, ``T = c + offset - R c`` (``v = R p + T`` takes ``c`` to ``c + offset``);
+   rotation ``R = euler(angles)`` and translation ``c + offset - R c`` (``R p`` plus it takes ``c`` to
+   ``c + offset``);
    the rotation and the translation are thereby decoupled.
 5. **Joint-specific PSD.** A shared MLP ``phi`` (K, 480, 128, |X|) gives ``|X|`` blend weights per
    joint; with a learnt displacement basis ``D_j (|X|, V, 3)`` per joint, the rest mesh becomes
@@ -47,7 +49,7 @@ from loosefit.models.dataset import GarmentSequences
 from loosefit.models.layers.mlp import mlp
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
-from loosefit.train.losses import normal_loss, vertex_l1
+from loosefit.train.losses import masked_errors_mm, normal_loss, vertex_l1
 
 STAGES = ("stage1", "stage2")
 #: Standard deviation of the initial PSD displacement bases, metres: small enough to leave the
@@ -161,7 +163,7 @@ def neighbour_table(selected: list[int], parents: list[int]) -> np.ndarray:
 class JointGRU(nn.Module):
     """``G`` independent single-layer GRUs (torch's gate equations) evaluated together.
 
-    ``forward(x (B, T, G, C), h (B, G, H) or None) -> (outputs (B, T, G, H), last state (B, G, H))``.
+    ``forward(x (N, T, G, C), h (N, G, H) or None) -> (outputs (N, T, G, H), last state (N, G, H))``.
 
     Two evaluation orders give the same numbers. One frame (streaming) is one grouped product per
     weight matrix for all joints (:meth:`all_joints_per_frame`). Many frames (training, batched
@@ -187,8 +189,8 @@ class JointGRU(nn.Module):
 
     def joint_by_joint(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` evaluated one joint at a time with torch's GRU kernel (the ``nn.GRU`` call)."""
-        B, T, G, _ = x.shape
-        h = x.new_zeros(G, B, self.hidden) if h is None else h.transpose(0, 1)  # (G, B, H)
+        N, T, G, _ = x.shape
+        h = x.new_zeros(G, N, self.hidden) if h is None else h.transpose(0, 1)  # (G, N, H)
         outputs, last = [], []
         for g in range(G):
             weights = [self.weight_ih[g], self.weight_hh[g], self.bias_ih[g, 0], self.bias_hh[g, 0]]
@@ -200,10 +202,10 @@ class JointGRU(nn.Module):
 
     def all_joints_per_frame(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` evaluated frame by frame, all joints in one grouped product per weight matrix."""
-        B, T, G, _ = x.shape
-        h = x.new_zeros(G, B, self.hidden) if h is None else h.transpose(0, 1)  # (G, B, H)
-        # every frame's input gates at once: (G, T, B, 3H)
-        gates_x = (grouped_linear(self.weight_ih, x.permute(2, 1, 0, 3).flatten(1, 2)) + self.bias_ih).unflatten(1, (T, B))
+        N, T, G, _ = x.shape
+        h = x.new_zeros(G, N, self.hidden) if h is None else h.transpose(0, 1)  # (G, N, H)
+        # every frame's input gates at once: (G, T, N, 3H)
+        gates_x = (grouped_linear(self.weight_ih, x.permute(2, 1, 0, 3).flatten(1, 2)) + self.bias_ih).unflatten(1, (T, N))
         outputs = []
         for t in range(T):
             gates_h = grouped_linear(self.weight_hh, h) + self.bias_hh
@@ -309,20 +311,20 @@ class JointNet(GarmentModel):
         return torch.relu(self.association)
 
     def fourier_features(self) -> torch.Tensor:
-        """Garment prior ``(B, K)`` from the bone rest positions (paper Eq. 3)."""
+        """Garment prior ``(B, K)`` from the bone rest positions (JointNet Eq. 3)."""
         phase = 2 * math.pi * self.bone_rest @ self.fourier_freqs.T  # (B, K/2)
         return torch.cat([self.fourier_alpha * torch.cos(phase), self.fourier_alpha * torch.sin(phase)], -1)
 
     def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
-        """Raw features -> ``(B, T, J_s, 11 + 6 * (2 + C))`` per-joint GRU inputs (standardised)."""
+        """Raw features -> ``(N, T, J_s, 11 + 6 * (2 + C))`` per-joint GRU inputs (standardised)."""
         root, joints = self.normalise(root, joints)
         pad = joints.new_zeros(joints.shape[:2] + (1, 6))
-        table = torch.cat([root[:, :, None, 5:11], joints, pad], 2)  # (B, T, J + 1, 6): rows as in neighbour_table
-        gathered = table[:, :, self.neighbours].flatten(-2)  # (B, T, J_s, 6 * (2 + C))
+        table = torch.cat([root[:, :, None, 5:11], joints, pad], 2)  # (N, T, J + 1, 6): rows as in neighbour_table
+        gathered = table[:, :, self.neighbours].flatten(-2)  # (N, T, J_s, 6 * (2 + C))
         return torch.cat([root[:, :, None].expand(-1, -1, gathered.shape[2], -1), gathered], -1)
 
     def bone_transforms(self, bone_features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(B, T, Nb, K)`` bone features -> rotations ``(B, T, Nb, 3, 3)`` and translations ``(B, T, Nb, 3)``."""
+        """``(N, T, B, K)`` bone features -> rotations ``(N, T, B, 3, 3)`` and translations ``(N, T, B, 3)``."""
         out = self.bone_mlp(bone_features)
         euler = self.euler_mean + self.euler_std * out[..., :3]
         offset = self.offset_mean + self.offset_std * out[..., 3:]
@@ -331,27 +333,27 @@ class JointNet(GarmentModel):
 
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None, psd: bool = True,
                 frames: torch.Tensor | None = None) -> dict:
-        """Raw features ``root (B, T, 11)``, ``joints (B, T, J-1, 6)`` and the GRU state ``(B, J_s, H)`` (None:
-        zeros, the start of a motion) -> ``{"verts": (B, T, V, 3) canonical, "bones": (rotations (B, T, Nb,
-        3, 3), translations (B, T, Nb, 3)), "association": (Nb, J_s), "displacement": (B, T, V, 3) PSD
-        offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state": (B, J_s, H)}``.
+        """Raw features ``root (N, T, 11)``, ``joints (N, T, J-1, 6)`` and the GRU state ``(N, J_s, H)`` (None:
+        zeros, the start of a motion) -> ``{"verts": (N, T, V, 3) canonical, "bones": (rotations (N, T, B,
+        3, 3), translations (N, T, B, 3)), "association": (B, J_s), "displacement": (N, T, V, 3) PSD
+        offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state": (N, J_s, H)}``.
         With ``frames`` (``(T',)`` indices) the outputs hold those frames only; the GRUs run over all ``T``."""
         hidden, state = self.gru(self.joint_inputs(root, joints), state)
         if frames is not None:
             hidden = hidden[:, frames]
-        B, T, G, _ = hidden.shape
+        N, T, G, _ = hidden.shape
         psi = grouped_linear(self.joint_out_weight, hidden.transpose(0, 2).flatten(1, 2)) + self.joint_out_bias
-        psi = psi.unflatten(1, (T, B)).permute(2, 1, 0, 3)  # (B, T, J_s, K)
+        psi = psi.unflatten(1, (T, N)).permute(2, 1, 0, 3)  # (N, T, J_s, K)
         association = self.association_matrix()
-        bone_features = association @ psi + self.fourier_features()  # (B, T, Nb, K)
-        R, T = self.bone_transforms(bone_features)
+        bone_features = association @ psi + self.fourier_features()  # (N, T, B, K)
+        R, trans = self.bone_transforms(bone_features)
         rest, displacement = self.rig_rest, None
         if psd:
-            weights = self.psd_mlp(psi)  # (B, T, J_s, |X|)
+            weights = self.psd_mlp(psi)  # (N, T, J_s, |X|)
             displacement = (weights.flatten(-2) @ self.psd_basis.flatten(0, 1).flatten(-2)).unflatten(-1, (-1, 3))
             rest = rest + displacement
-        verts = self.skin(rest, R, T)
-        return {"verts": verts, "bones": (R, T), "association": association, "displacement": displacement, "state": state}
+        verts = self.skin(rest, R, trans)
+        return {"verts": verts, "bones": (R, trans), "association": association, "displacement": displacement, "state": state}
 
     # ------------------------------------------------------------------ trainer protocol
 
@@ -365,7 +367,7 @@ class JointNet(GarmentModel):
         return [p for n, p in self.named_parameters() if not n.startswith(("psd_mlp.", "psd_basis"))]
 
     def sparsity_loss(self) -> torch.Tensor:
-        """``||relu(A)||_1`` (paper Eq. 8)."""
+        """``||relu(A)||_1`` (JointNet Eq. 8)."""
         return self.association_matrix().sum()
 
     def training_loss(self, batch: dict, stage: str):
@@ -382,9 +384,5 @@ class JointNet(GarmentModel):
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
         """The base metrics (``rmse_mm``, ``mean_vertex_error_mm``), with the PSD only once it trains (``stage2``)."""
         with torch.no_grad():
-            err = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"] - batch["verts"]
-            mask = self.mask(batch)
-            n = mask.sum().clamp_min(1)
-            sq, dist = (err**2).sum(-1).mean(-1), err.norm(dim=-1).mean(-1)  # (B, T)
-            return {"rmse_mm": float(((sq * mask).sum() / n).sqrt() * 1e3),
-                    "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3)}
+            pred = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"]
+            return masked_errors_mm(pred, batch["verts"], self.mask(batch))

@@ -11,18 +11,21 @@ height, root displacement and heading change since the previous frame, root tilt
 to each bone's rotation, a 6D residual on the identity (the rest transform), and position, the place
 its rest centroid ``c_j`` moves to as an offset from that bone's mean position over the training
 frames in units of the pooled standard deviation. The translation follows: ``T_j = c'_j - R_j c_j``
-(a rotation error then does not move the bone). Linear blend skinning of the rig's rest mesh with
-the SSDR weights gives the canonical low-frequency mesh. Loss (Eq. 2): mean vertex distance to the
+(a rotation error then does not move the bone). This output parameterisation is loosefit's: the paper
+says only that the module gives the bones' motions. Linear blend skinning of the rig's rest mesh with
+the SSDR weights gives the canonical low-frequency mesh. Loss (VirtualBones Eq. 2): mean vertex distance to the
 low-frequency target plus ``laplacian_weight`` times the mean distance between the uniform-Laplacian
 coordinates of the two meshes; optionally ``bone_weight`` times the mean squared difference between
 the network's normalised outputs and those of the SSDR bone transforms (not in the paper: off by default).
 
 High-frequency module (Sec. 4.3): a GRU over the predicted bone motions (the low-frequency module's
 normalised outputs) and a linear layer give a global feature for every vertex; EdgeConv layers over
-the mesh edges of the low-frequency mesh (vertex positions in) give local features; a shared per-vertex
-MLP maps both to a displacement (in units of the training high-frequency offsets' standard deviation)
-added to the low-frequency mesh. Loss: mean vertex distance to the simulated mesh (``hf_target="residual"``:
-between the offsets and the simulation's high-frequency part) plus
+the mesh edges of the low-frequency mesh give local features; a shared per-vertex MLP maps both to a
+displacement (in units of the training high-frequency offsets' standard deviation) added to the
+low-frequency mesh. The EdgeConv input is each vertex's position (VirtualBones Sec. 4.3), here
+standardised by the training low-frequency meshes' mean and standard deviation: a departure from the
+authors' released code, which feeds raw positions. Loss: mean vertex distance to the simulated mesh
+(``hf_target="residual"``: between the offsets and the simulation's high-frequency part) plus
 ``collision_weight`` times the body penetration term ``max(margin - n_k . (v_i - b_k), 0)``.
 
 Training (trainer stages ``["low", "high"]``): "low" optimises the low-frequency module alone; "high"
@@ -50,7 +53,13 @@ from loosefit.models.layers.mlp import NEGATIVE_SLOPE, mlp
 from loosefit.rig.normalization import RunningStats
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
-from loosefit.train.losses import collision_loss, laplacian_difference, laplacian_operator, vertex_distance
+from loosefit.train.losses import (
+    collision_loss,
+    laplacian_difference,
+    laplacian_operator,
+    masked_errors_mm,
+    vertex_distance,
+)
 
 #: The identity rotation in the 6D representation (its first two columns).
 IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
@@ -82,7 +91,7 @@ class VirtualBonesConfig:
             released networks' widths are 8 and 16, the third keeps 16.
         head_hidden: hidden widths of the shared per-vertex MLP on [local, global]; empty for a single
             linear layer, as released.
-        laplacian_weight: lambda_Lap of Eq. 2. The paper does not give it; 1.0 here (both terms are
+        laplacian_weight: lambda_Lap of VirtualBones Eq. 2. The paper does not give it; 1.0 here (both terms are
             mean distances in metres).
         collision_weight: weight of the collision term of Sec. 4.3 (not given in the paper).
         collision_margin: distance below which a vertex counts as penetrating, metres (0 in the paper).
@@ -346,11 +355,5 @@ class VirtualBones(GarmentModel):
             out = self(batch["root"], batch["joints"])
             pred = out["lf"] if stage == "low" else out["verts"]
             mask = self.mask(batch)
-            n = mask.sum().clamp_min(1)
-
-            def rmse(a, b):
-                return float((((a - b) ** 2).sum(-1).mean(-1) * mask).sum().div(n).sqrt() * 1e3)
-
-            dist = (pred - batch["verts"]).norm(dim=-1).mean(-1)
-            return {"rmse_mm": rmse(pred, batch["verts"]), "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3),
-                    "lf_rmse_mm": rmse(out["lf"], batch["lf"])}
+            return {**masked_errors_mm(pred, batch["verts"], mask),
+                    "lf_rmse_mm": masked_errors_mm(out["lf"], batch["lf"], mask)["rmse_mm"]}

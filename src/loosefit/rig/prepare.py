@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
+from loosefit.config import config_from_dict
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_axis_angle
@@ -53,6 +54,7 @@ from loosefit.rig.fit_attribute import DEFAULT_FACTORS, FitAttributeModel, dista
 from loosefit.rig.normalization import NormalizationStats, RunningStats
 from loosefit.rig.spectral import DEFAULT_SAMPLES, DEFAULT_SIGMA, spectral_descriptor
 from loosefit.rig.virtual_bones import (
+    DEFAULT_BONES,
     DEFAULT_MAX_SOLVE_FRAMES,
     DEFAULT_THREADS,
     DEFAULT_TRANS_AFFINE,
@@ -69,7 +71,7 @@ DONE = "done"
 
 @dataclass(frozen=True)
 class PrepareSettings:
-    """Settings of :func:`prepare`.
+    """Settings of :func:`prepare` (a :mod:`loosefit.config` dataclass: from a mapping or YAML, with overrides).
 
     Attributes:
         bones: virtual bones per garment (VirtualBones uses 80).
@@ -89,7 +91,7 @@ class PrepareSettings:
         threads: OpenMP threads of the SSDR solver (1 is fastest on shared 2-core machines).
     """
 
-    bones: int = 80
+    bones: int = DEFAULT_BONES
     influences: int = 8
     iterations: int = 20
     transform_iterations: int = 30
@@ -117,14 +119,25 @@ class PrepareSettings:
         return {"factors": self.fit_factors, "seed": self.seed}
 
 
+def prepare_settings(values: dict | None = None, source: str | Path | None = None) -> PrepareSettings:
+    """:class:`PrepareSettings` from a mapping (:func:`loosefit.config.config_from_dict`; missing keys keep
+    their defaults); an unknown key raises :class:`InputError` listing the allowed ones."""
+    names = [f.name for f in dataclasses.fields(PrepareSettings)]
+    unknown = sorted(set(values or {}) - set(names))
+    if unknown:
+        raise InputError(f"unknown prepare settings {unknown}; known: {names}", source)
+    return config_from_dict(PrepareSettings, values, source)
+
+
 def prepare(
-    store_path: str | Path, bones: int = 80, body=None, force: bool = False, progress: bool = True, **settings
+    store_path: str | Path, bones: int | None = None, body=None, force: bool = False, progress: bool = True,
+    **settings
 ) -> dict:
     """Prepare a simulated dataset for training (see the module docstring for what is stored).
 
     Args:
         store_path: the dataset (opened for appending).
-        bones: virtual bones per garment.
+        bones: virtual bones per garment (None: :attr:`PrepareSettings.bones`).
         body: the body model the dataset's body shapes belong to, for the fit attribute (default: Anny,
             loaded only when there is a factor analysis to fit).
         force: redo garments that are already done.
@@ -135,10 +148,7 @@ def prepare(
         A summary: per garment the rig's bone count, errors and time, the fit attribute's status,
         and the names of the dataset statistics.
     """
-    unknown = sorted(set(settings) - {f.name for f in dataclasses.fields(PrepareSettings)})
-    if unknown:
-        raise InputError(f"unknown prepare settings {unknown}")
-    s = PrepareSettings(bones=int(bones), **settings)
+    s = prepare_settings({**settings, **({} if bones is None else {"bones": int(bones)})})
     store = DatasetStore.open(store_path, mode="a")
     store.write_attrs("prepare", {"status": "writing"})
     sequences = {name: store.sequence(name) for name in store.sequence_names(status="ok")}

@@ -3,7 +3,7 @@
 VirtualBones (Pan et al. 2022, Sec. 4.1) turns the low-frequency garment sequence into a rest mesh ``P``,
 sparse skinning weights ``W (V, B)`` and per-frame rigid bone transforms ``[R | T]`` such that::
 
-    v_i(t) = sum_j W[i, j] (R_j(t) p_i + T_j(t))            (Eq. 1)
+    v_i(t) = sum_j W[i, j] (R_j(t) p_i + T_j(t))            (VirtualBones Eq. 1)
 
 The bones are free (no hierarchy) and the networks of the later stages predict ``R, T`` per frame.
 Here the decomposition is Smooth Skinning Decomposition with Rigid bones (Le and Deng 2012) through
@@ -45,6 +45,9 @@ from threadpoolctl import threadpool_limits
 from loosefit.errors import InputError
 from loosefit.io.npz import load_npz, save_npz
 
+#: Virtual bones per garment (VirtualBones Sec. 5 uses 80): the default of fit_virtual_bones, PrepareSettings,
+#: prepare and the CLI.
+DEFAULT_BONES = 80
 #: Dem Bones' translation-affinity weight used by default (see the module docstring for its cost).
 DEFAULT_TRANS_AFFINE = 0.1
 #: Frames seen by the weight solve unless told otherwise.
@@ -194,7 +197,7 @@ def skin_bones(
     translations: torch.Tensor,
     sparse: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> torch.Tensor:
-    """Linear blend skinning by free bones (Eq. 1), any leading batch dimensions.
+    """Linear blend skinning by free bones (VirtualBones Eq. 1), any leading batch dimensions.
 
     Args:
         rest_verts: ``(V, 3)`` or ``(..., V, 3)`` rest mesh, metres.
@@ -287,7 +290,7 @@ def fit_virtual_bones(
     frames,
     rest_verts: np.ndarray,
     faces: np.ndarray,
-    bones: int = 80,
+    bones: int = DEFAULT_BONES,
     influences: int = 8,
     iterations: int = 20,
     trans_affine: float = DEFAULT_TRANS_AFFINE,

@@ -14,8 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from loosefit.config import apply_overrides, config_from_dict, load_yaml
 from loosefit.errors import InputError
 
 COLLIDERS = ("proxy", "full")
@@ -91,6 +90,7 @@ class SimParams:
     backend: str = "blender"
 
     def __post_init__(self):
+        # Types, YAML parsing ("1e-5" as a number) and overrides are loosefit.config's; here the ranges.
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if f.type == "bool":
@@ -100,11 +100,6 @@ class SimParams:
                 if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                     raise InputError(f"simulation parameter {f.name}={value!r} must be a positive integer")
             elif f.type == "float":
-                if isinstance(value, str):  # YAML 1.1 reads "1e-5" (no dot) as a string
-                    try:
-                        value = float(value)
-                    except ValueError:
-                        pass
                 number = isinstance(value, (int, float)) and not isinstance(value, bool)
                 if not number or not 0 <= value < float("inf"):
                     raise InputError(f"simulation parameter {f.name}={value!r} must be a finite number >= 0")
@@ -127,40 +122,39 @@ class SimParams:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any] | None, source: str | Path | None = None) -> "SimParams":
-        """Build from a mapping; unknown keys and bad values raise :class:`InputError` naming ``source``."""
-        values = dict(values or {})
-        unknown = sorted(set(values) - set(cls.names()))
+        """Build from a mapping (:func:`loosefit.config.config_from_dict`); unknown keys and bad values raise
+        :class:`InputError` naming ``source``."""
+        unknown = sorted(set(values or {}) - set(cls.names()))
         if unknown:
             raise InputError(f"unknown simulation parameters {unknown}; known: {cls.names()}", source)
-        try:
-            return cls(**values)
-        except InputError as e:
-            raise InputError(e.problem, source) from None
+        return config_from_dict(cls, values, source)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     def with_overrides(self, overrides: list[str] | dict[str, Any] | None) -> "SimParams":
-        """A copy with ``["bending=1e-5", "self_collision=true"]`` (YAML scalars) or a dict applied."""
+        """A copy with ``["bending=1e-5", "self_collision=true"]`` (YAML scalars,
+        :func:`loosefit.config.apply_overrides`) or a dict applied."""
         if not overrides:
             return self
-        if not isinstance(overrides, dict):
-            parsed = {}
-            for item in overrides:
-                key, sep, text = item.partition("=")
-                if not sep:
-                    raise InputError(f"bad simulation override {item!r}: expected NAME=VALUE")
-                parsed[key.strip()] = yaml.safe_load(text)
-            overrides = parsed
-        return SimParams.from_dict({**self.to_dict(), **overrides})
+        if isinstance(overrides, dict):
+            return SimParams.from_dict({**self.to_dict(), **overrides})
+        overrides = [overrides] if isinstance(overrides, str) else list(overrides)
+        for item in overrides:
+            key, sep, _ = item.partition("=")
+            if not sep:
+                raise InputError(f"bad simulation override {item!r}: expected NAME=VALUE")
+            if key.strip() not in self.names():
+                raise InputError(f"unknown simulation parameters {[key.strip()]}; known: {self.names()}")
+        return apply_overrides(self, overrides)
 
     @classmethod
     def load(cls, path: str | Path, overrides: list[str] | dict[str, Any] | None = None) -> "SimParams":
         """Read a YAML mapping of parameters (missing ones keep their defaults), then apply overrides."""
         path = Path(path)
         try:
-            values = yaml.safe_load(path.read_text())
-        except (OSError, yaml.YAMLError) as e:
+            values = load_yaml(path.read_text(), path)
+        except OSError as e:
             raise InputError(f"cannot read simulation parameters: {e}", path) from None
         if values is not None and not isinstance(values, dict):
             raise InputError("simulation parameters must be a YAML mapping of NAME: VALUE", path)

@@ -26,20 +26,25 @@ Plan format (paths are relative to the plan file)::
 A job's id is ``<garment>+<shape>+<motion>+<sim_params>``; the garment entry in the dataset is
 ``<garment>+<shape>`` (templates are fitted to each shape). Motions are generated on, or
 retargeted to, the average body and shared by all shapes.
+
+The file is read by :mod:`loosefit.config` (so ``1e-5`` is a number); each garment and motion entry is
+checked as a typed spec (:class:`TemplateGarment`, :class:`FileGarment`, :class:`ProceduralMotion`,
+:class:`FileMotion`, whose fields hold the defaults) and each parameter set is a :class:`SimParams`.
+The plan keeps the entries as written: a job's hash is that of the file's text, not of the defaults.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional, Union
 
-import yaml
-
+from loosefit.config import config_from_dict, load_yaml
 from loosefit.errors import InputError
 from loosefit.sim.params import SimParams
 from loosefit.sim.quality import QualityGate
@@ -77,6 +82,68 @@ class SequenceJob:
         return f"{self.garment}{SEPARATOR}{self.shape}"
 
 
+@dataclass(frozen=True)
+class TemplateGarment:
+    """A plan garment made from a template (:func:`loosefit.garment.make_garment`) on each shape.
+
+    Attributes:
+        template: the template's name.
+        seed: its random seed; edge_length: target edge length, metres (None: ``make_garment``'s defaults).
+        params: the template's own parameters (``length``, ``flare``...).
+    """
+
+    template: str
+    seed: Optional[int] = None
+    edge_length: Optional[float] = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def make_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of ``make_garment`` after the template and the body."""
+        given = {k: getattr(self, k) for k in ("seed", "edge_length") if getattr(self, k) is not None}
+        return {**given, **self.params}
+
+
+@dataclass(frozen=True)
+class FileGarment:
+    """A plan garment read from a mesh file (relative to the plan), fitted to one ``shape`` (None: every shape)."""
+
+    file: str
+    shape: Optional[str] = None
+
+
+@dataclass(frozen=True)
+class ProceduralMotion:
+    """A procedural plan motion (:func:`loosefit.motion.procedural.generate`) of ``seconds`` seconds."""
+
+    procedural: str
+    seconds: Optional[float] = None
+    seed: int = 0  # generate() takes it positionally: the default is the plan's
+
+    def __post_init__(self):
+        if self.seconds is None or not self.seconds > 0:
+            raise InputError(f"'seconds' must be a positive number, got {self.seconds!r}")
+
+
+@dataclass(frozen=True)
+class FileMotion:
+    """A plan motion read from a file (relative to the plan): ``frames`` frames (None: all) from ``start``."""
+
+    file: str
+    joint_map: Optional[str] = None
+    start: int = 0
+    frames: Optional[int] = None
+
+    def __post_init__(self):
+        for key, least in (("start", 0), ("frames", 1)):
+            value = getattr(self, key)
+            if value is not None and value < least:
+                raise InputError(f"{key!r} must be an integer >= {least}, got {value!r}")
+
+
+GarmentSpec = Union[TemplateGarment, FileGarment]
+MotionSpec = Union[ProceduralMotion, FileMotion]
+
+
 @dataclass
 class Plan:
     """A parsed simulation plan (see the module docstring for the file format)."""
@@ -89,6 +156,16 @@ class Plan:
     sim_params: dict[str, SimParams]
     gate: QualityGate
     jobs: list[SequenceJob] = field(default_factory=list)
+
+    def garment_spec(self, name: str) -> GarmentSpec:
+        """Garment ``name``'s entry as a typed spec (its defaults filled in)."""
+        spec = self.garments[name]
+        return config_from_dict(TemplateGarment if "template" in spec else FileGarment, spec, self.path)
+
+    def motion_spec(self, name: str) -> MotionSpec:
+        """Motion ``name``'s entry as a typed spec (its defaults filled in)."""
+        spec = self.motions[name]
+        return config_from_dict(ProceduralMotion if "procedural" in spec else FileMotion, spec, self.path)
 
     def resolve(self, value: str) -> Path:
         """A path from the plan, relative to the plan's folder."""
@@ -117,35 +194,29 @@ def _check_keys(spec: dict, allowed: set[str], what: str, path: Path) -> None:
         raise InputError(f"{what}: unknown keys {unknown}; allowed: {sorted(allowed)}", path)
 
 
+def _typed(cls: type, spec: dict, what: str, path: Path) -> dict:
+    """``spec`` checked as a ``cls`` (unknown keys, types, ranges by :mod:`loosefit.config`); returned as
+    written, defaults not filled in, so that job hashes stay those of the file's text."""
+    _check_keys(spec, {f.name for f in dataclasses.fields(cls)}, what, path)
+    try:
+        config_from_dict(cls, spec, path)
+    except InputError as e:
+        raise InputError(f"{what}: {e.problem.removeprefix('config: ')}", path) from None
+    return spec
+
+
 def _garment_spec(name: str, spec, path: Path) -> dict:
     spec = _mapping(spec, f"garment {name!r}", path)
     if ("template" in spec) == ("file" in spec):
         raise InputError(f"garment {name!r} needs exactly one of 'template' or 'file'", path)
-    if "template" in spec:
-        _check_keys(spec, {"template", "seed", "edge_length", "params"}, f"garment {name!r}", path)
-        _mapping(spec.get("params"), f"garment {name!r} params", path)
-    else:
-        _check_keys(spec, {"file", "shape"}, f"garment {name!r}", path)
-    return spec
+    return _typed(TemplateGarment if "template" in spec else FileGarment, spec, f"garment {name!r}", path)
 
 
 def _motion_spec(name: str, spec, path: Path) -> dict:
     spec = _mapping(spec, f"motion {name!r}", path)
     if ("procedural" in spec) == ("file" in spec):
         raise InputError(f"motion {name!r} needs exactly one of 'procedural' or 'file'", path)
-    if "procedural" in spec:
-        _check_keys(spec, {"procedural", "seconds", "seed"}, f"motion {name!r}", path)
-        seconds = spec.get("seconds")
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or seconds <= 0:
-            raise InputError(f"motion {name!r}: 'seconds' must be a positive number, got {seconds!r}", path)
-    else:
-        _check_keys(spec, {"file", "joint_map", "start", "frames"}, f"motion {name!r}", path)
-        for key in ("start", "frames"):
-            value = spec.get(key, 0 if key == "start" else None)
-            least = int(key == "frames")
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
-                raise InputError(f"motion {name!r}: {key!r} must be an integer >= {least}, got {value!r}", path)
-    return spec
+    return _typed(ProceduralMotion if "procedural" in spec else FileMotion, spec, f"motion {name!r}", path)
 
 
 def _shape_spec(name: str, spec, path: Path) -> dict:
@@ -169,9 +240,10 @@ def load_plan(path: str | Path) -> Plan:
     """
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as e:
+        text = path.read_text()
+    except OSError as e:
         raise InputError(f"cannot read simulation plan: {e}", path) from None
+    raw = load_yaml(text, path)  # loosefit.config's reader: "1e-5" is a number
     raw = _mapping(raw, "a simulation plan", path)
     _check_keys(raw, _TOP_KEYS, "plan", path)
     shapes = _named(_mapping(raw.get("shapes"), "shapes", path), "shape", path) or {"average": {}}

@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from loosefit.errors import InputError
 from loosefit.sim.params import SimParams
-from loosefit.sim.plan import Plan, SequenceJob, load_plan
+from loosefit.sim.plan import Plan, ProceduralMotion, SequenceJob, TemplateGarment, load_plan
 from loosefit.sim.quality import QualityGate
 from loosefit.extras import require
 from loosefit.sim.sequence import SimResult, backend_run_cloth, save_result, simulate_sequence
@@ -83,17 +83,11 @@ def load_plan_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
     """Garment ``name`` of ``plan`` (a template made, or a file loaded) on the body of ``shape_values``."""
     from loosefit.garment import Garment, import_garment, make_garment
 
-    spec = plan.garments[name]
+    spec = plan.garment_spec(name)
     body = plan_body(shape_values)
-    if "template" in spec:
-        return make_garment(
-            spec["template"],
-            body,
-            seed=int(spec.get("seed", 0)),
-            edge_length=float(spec.get("edge_length", 0.02)),
-            **spec.get("params", {}),
-        )
-    path = plan.resolve(spec["file"])
+    if isinstance(spec, TemplateGarment):
+        return make_garment(spec.template, body, **spec.make_kwargs())
+    path = plan.resolve(spec.file)
     return Garment.load(path) if Garment.sidecar_path(path).is_file() else import_garment(path, body)
 
 
@@ -101,18 +95,18 @@ def load_plan_motion(plan: Plan, name: str):
     """Motion ``name`` of ``plan`` (procedural, or a file with its start and frame count) on the average body."""
     from loosefit.body import AnnyShape
 
-    spec = plan.motions[name]
+    spec = plan.motion_spec(name)
     body = plan_body(tuple(AnnyShape().to_array().tolist()))  # motions are made on the average body
-    if "procedural" in spec:
+    if isinstance(spec, ProceduralMotion):
         from loosefit.motion.procedural import generate
 
-        return generate(spec["procedural"], float(spec["seconds"]), int(spec.get("seed", 0)), body)
+        return generate(spec.procedural, spec.seconds, spec.seed, body)
     from loosefit.motion.io import load_motion
 
-    path = plan.resolve(spec["file"])
-    motion = load_motion(path, body, joint_map=spec.get("joint_map"))
-    start, frames = int(spec.get("start", 0)), spec.get("frames")
-    motion = motion.slice(start, None if frames is None else start + int(frames))
+    path = plan.resolve(spec.file)
+    motion = load_motion(path, body, joint_map=spec.joint_map)
+    start, frames = spec.start, spec.frames
+    motion = motion.slice(start, None if frames is None else start + frames)
     if motion.num_frames == 0:
         raise InputError(f"motion {name!r}: no frames left after start={start}", path)
     return motion

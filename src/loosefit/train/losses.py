@@ -26,6 +26,23 @@ def _masked_mean(per_frame: torch.Tensor, mask: torch.Tensor | None) -> torch.Te
     return (per_frame * mask).sum() / mask.sum().clamp_min(1.0)
 
 
+def masked_errors_mm(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> dict[str, float]:
+    """The validation errors of every method, millimetres: ``rmse_mm`` (the root of the mean squared
+    vertex distance) and ``mean_vertex_error_mm`` over the frames where ``mask (B, T)`` is 1.
+
+    ``pred``, ``target``: ``(B, T, V, 3)`` metres with a mask, or any ``(..., V, 3)`` without one (every
+    frame counts). Per frame the squared distances and the distances are averaged over the vertices
+    first, then over the counted frames (all frames have the same vertex count).
+    """
+    err = pred - target
+    sq, dist = (err**2).sum(-1).mean(-1), err.norm(dim=-1).mean(-1)
+    if mask is None:
+        return {"rmse_mm": float(sq.mean().sqrt() * 1e3), "mean_vertex_error_mm": float(dist.mean() * 1e3)}
+    n = mask.sum().clamp_min(1)
+    return {"rmse_mm": float(((sq * mask).sum() / n).sqrt() * 1e3),
+            "mean_vertex_error_mm": float((dist * mask).sum() / n * 1e3)}
+
+
 def vertex_distance(pred, target, mask=None) -> torch.Tensor:
     """Mean per-vertex Euclidean distance, metres (VirtualBones' vertex term)."""
     return _masked_mean((pred - target).norm(dim=-1).mean(-1), mask)

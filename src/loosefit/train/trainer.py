@@ -18,6 +18,7 @@ constructing the model, so that its initial weights are reproducible too.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import json
@@ -38,6 +39,7 @@ from loosefit.config import config_to_dict, save_config
 from loosefit.train import distributed
 from loosefit.errors import InputError, LoosefitError
 from loosefit.paths import atomic_path
+from loosefit.threads import torch_threads
 from loosefit.train.metrics_log import MetricsLog
 from loosefit.train.protocol import batch_size, collate_fn, model_stages, parameter_count, stage_parameters, to_device
 from loosefit.train.run import RunDir, load_checkpoint, save_checkpoint
@@ -591,8 +593,8 @@ def train(
         log.info("%s has no checkpoint yet: training from the start", run.path)
     device = _device(config.device)
 
-    threads_before = torch.get_num_threads()
-    torch.set_num_threads(config.threads)
+    threads = contextlib.ExitStack()  # closed in the finally below
+    threads.enter_context(torch_threads(config.threads))
     trainer = _Trainer(model, train_set, val_set, config, run, device)
     model.to(device)
     joined = distributed.setup(device)  # several processes: join their group (gloo / nccl)
@@ -632,6 +634,6 @@ def train(
     finally:
         if trainer.log is not None:
             trainer.log.close()
-        torch.set_num_threads(threads_before)
+        threads.close()
         if joined:
             distributed.teardown(wait=finished)

@@ -9,7 +9,7 @@ import pytest
 from loosefit.animate import Animator
 from loosefit.errors import InputError
 from loosefit.rig.prepare import prepare
-from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META, StaleRunError, train_model
+from loosefit.training import METHOD_CONFIG, MODEL_META, StaleRunError, train_model
 
 SMALL_JOINTNET = ["model.gru_hidden=16", "model.features=16", "model.bone_mlp=[32]", "model.psd_mlp=[16]",
                   "model.psd_shapes=4", "train.stages.stage1.epochs=2", "train.stages.stage2.epochs=1",
