@@ -67,3 +67,18 @@ def test_pinned_vertices_follow_their_targets():
     out, _ = run_cloth(faces, pinned, garment, collider, np.array([[0, 1, 2]]), SimParams(), 30.0)
     np.testing.assert_allclose(out[:, pinned], garment[:, pinned], atol=1e-5)
     assert np.abs(out[-1, ~pinned, 2] - garment[-1, ~pinned, 2]).max() > 0.01  # the rest hangs
+
+
+def test_the_floor_stops_falling_cloth():
+    """A patch dropped from 0.3 m lands on a floor at z = 0.1 and rests there, within the collision distance;
+    without the floor it falls through (0.5 g t^2 = 1.2 m in 0.5 s)."""
+    verts, faces = _patch(z=0.3)
+    frames = 16
+    garment = np.repeat(verts[None], frames, 0)
+    collider = np.repeat(np.array([[[50.0, 0, 0], [51, 0, 0], [50, 1, 0]]], np.float32), frames, 0)
+    pinned = np.zeros(len(verts), bool)
+    params = SimParams(air_drag=0.0, quality=10)
+    landed, _ = run_cloth(faces, pinned, garment, collider, np.array([[0, 1, 2]]), params, 30.0, floor=0.1)
+    fallen, _ = run_cloth(faces, pinned, garment, collider, np.array([[0, 1, 2]]), params, 30.0)
+    assert landed[-1, :, 2].min() > 0.1 - 0.002 and landed[-1, :, 2].max() < 0.1 + 2 * params.collision_distance
+    assert fallen[-1, :, 2].max() < 0.0

@@ -113,7 +113,7 @@ def test_simulate_sequence_dispatches_to_the_backend_with_its_step_rule(monkeypa
     calls = {}
 
     def fake(name):
-        def run_cloth(faces, pinned, garment_frames, collider, collider_faces, params, fps, workdir=None):
+        def run_cloth(faces, pinned, garment_frames, collider, collider_faces, params, fps, workdir=None, floor=None):
             calls[name] = params.quality
             return garment_frames.copy(), np.full(len(garment_frames), 0.001)
         return run_cloth

@@ -115,7 +115,7 @@ def test_shape_change_closed_form():
 
 
 def test_hanging_closed_form():
-    body = np.array([[[0.0, 0, 0], [0, 0, 1.7]]] * 2)  # soles at 0, head top at 1.7 m
+    body = np.array([[[0.0, 0, 0], [0, 0, 1.7]]] * 2)  # soles at 0 (the floor), head top at 1.7 m
     garment = np.array([[[0.0, 0, 1.0], [0, 0, 0.5], [0, 0, 0.3], [0, 0, 0.2]],
                         [[0.0, 0, 1.0], [0, 0, 1.1], [0, 0, 1.8], [0, 0, -0.02]]])
     pinned = np.array([True, False, False, False])
@@ -123,6 +123,12 @@ def test_hanging_closed_form():
     np.testing.assert_allclose(above_pins, [0.0, 2 / 3])
     np.testing.assert_allclose(above_head, [0.0, 0.25])
     np.testing.assert_allclose(below_feet, [0.0, 0.25])
+    # In a jump's flight the body is 0.5 m up: a hem below the airborne feet but above the floor is fine.
+    airborne = body.copy()
+    airborne[1, :, 2] += 0.5
+    hem = np.array([[[0.0, 0, 1.5], [0, 0, 0.4], [0, 0, 0.3], [0, 0, 0.2]],
+                    [[0.0, 0, 1.5], [0, 0, 0.45], [0, 0, 0.1], [0, 0, -0.05]]])
+    np.testing.assert_allclose(hanging(hem, pinned, airborne)[2], [0.0, 0.25])
 
 
 @pytest.fixture(scope="module")

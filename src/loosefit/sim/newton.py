@@ -153,8 +153,12 @@ def run_cloth(
     params: SimParams,
     fps: float,
     workdir: str | Path | None = None,
+    floor: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Simulate a garment on a moving collider with Newton's VBD solver.
+
+    ``floor`` is accepted for the common interface but not modelled yet: Newton's cloth has no ground
+    (Blender's has a collision plane there); hems that reach the ground go through it.
 
     Args:
         faces: ``(F, 3)`` garment triangles.

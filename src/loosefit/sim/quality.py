@@ -6,7 +6,7 @@ used): the fraction of garment vertices more than ``depth`` inside it.
 What a person sees at once is checked too: a garment not hanging from the body where it is pinned
 (``pinned_gap``, ``above_pins``), crumpled cloth (``area_change``, ``shrunk``, ``fold``: triangle
 area change from the rest shape and the rise of the mean dihedral angle) and cloth above the head
-or below the feet (``outside_body``). Their limits were set on good Blender simulations, with the
+or below the floor (``outside_body``). Their limits were set on good Blender simulations, with the
 largest value measured on any of them (and the limit):
 
 =============  =====================================================  ===========
@@ -15,13 +15,16 @@ statistic      good simulations (largest)                             limit
 pinned_gap     0.025 m (template skirt, 0.5 s walk); every pinned     0.05 m
                vertex within 0.037 m (demo skirt, 10 motions) and
                0.031 m (bench skirt and dress, walk-1 and spin-1)
-above_pins     0.14 (demo skirt kick: the hem lifted over the         0.3
-               waistband); 0.022 on spin2; 0 elsewhere
+above_pins     0.018 (bench skirt jump-1, mean over frames: in the    0.3
+               flight the skirt floats over its waistband, 76% of it
+               in the worst frame); 0.004 on kick-1
 area_change    0.53 (bench skirt walk-1, default fabric)              1.0
 shrunk         0.009 (demo skirt spin)                                0.05
 fold           24.0 degrees (demo skirt spin, tension 300)            40 degrees
 outside_body   0.014 (bench dress walk-1, air drag 0.3: hem dragged   0.05
-               under a sole)
+               under a sole); the floor is the lowest the body gets
+               in the sequence, so a hem below airborne feet counts
+               only where it goes through the floor
 =============  =====================================================  ===========
 
 The good simulations: the demo dataset's skirt (1,171 vertices) on 10 procedural motions with the
@@ -154,8 +157,9 @@ def hanging(frames: np.ndarray, pinned: np.ndarray, body_frames: np.ndarray) -> 
     Returns:
         ``above_pins (T,)`` fraction of free vertices more than 2 cm above the highest pinned
         vertex (zeros when nothing or everything is pinned), ``above_head (T,)`` fraction of
-        vertices above the body's highest point, ``below_feet (T,)`` fraction more than 1 cm below
-        its lowest point.
+        vertices above the body's highest point, ``below_floor (T,)`` fraction more than 1 cm below
+        the floor: the lowest point of the body in the whole sequence (in a jump the hem hangs below
+        the airborne feet, which is right; below the soles on the ground it is not).
     """
     z = frames[..., 2]
     if pinned.any() and not pinned.all():
@@ -163,8 +167,8 @@ def hanging(frames: np.ndarray, pinned: np.ndarray, body_frames: np.ndarray) -> 
     else:
         above_pins = np.zeros(len(frames))
     top = body_frames[..., 2].max(1, keepdims=True)
-    low = body_frames[..., 2].min(1, keepdims=True)
-    return above_pins, (z > top).mean(1), (z < low - 0.01).mean(1)
+    floor = body_frames[..., 2].min()
+    return above_pins, (z > top).mean(1), (z < floor - 0.01).mean(1)
 
 
 def max_speed(frames: np.ndarray, fps: float) -> float:
@@ -190,13 +194,14 @@ class QualityGate:
         max_speed: fastest vertex, m/s; beyond it the simulation exploded.
         max_pinned_gap: mean distance of the pinned vertices from the body in the worst frame, m:
             pins hold a garment on the body (a waistband put around the neck hangs off it).
-        max_above_pins: fraction of free vertices more than 2 cm above the highest pinned one in
-            the worst frame: a garment hangs from its pins (one simulated upside down does not).
+        max_above_pins: fraction of free vertices more than 2 cm above the highest pinned one,
+            mean over frames: a garment hangs from its pins (one simulated upside down does not;
+            a skirt in a jump's flight floats over them for a moment).
         max_area_change: 99th percentile of the relative triangle area change in the worst frame.
         max_shrunk: fraction of triangles shrunk below half their rest area in the worst frame.
         max_fold: increase of the mean dihedral angle (degrees) over the rest shape's in the
             worst frame: crumpled cloth is folded at every edge.
-        max_outside_body: fraction of vertices above the head or over 1 cm below the feet in
+        max_outside_body: fraction of vertices above the head or over 1 cm below the floor in
             the worst frame.
     See the module docstring for the values measured on good simulations.
     """
@@ -242,7 +247,7 @@ class QualityGate:
             ("area_change", self.max_area_change, "crumpled: 99th percentile area change {:.2f} > {:.2f}"),
             ("shrunk", self.max_shrunk, "crumpled: {:.1%} of triangles under half their area > {:.1%}"),
             ("fold", self.max_fold, "crumpled: mean fold angle up by {:.1f} degrees > {:.1f}"),
-            ("outside_body", self.max_outside_body, "{:.1%} of vertices above the head or below the feet > {:.1%}"),
+            ("outside_body", self.max_outside_body, "{:.1%} of vertices above the head or below the floor > {:.1%}"),
         ]
         reasons = [text.format(stats[key], limit) for key, limit, text in limits if stats[key] > limit]
         return ("failed", "; ".join(reasons)) if reasons else ("ok", "")
@@ -278,7 +283,8 @@ def measure(
         ``pinned_drift`` (m, largest change from the rest pose of a pinned vertex's distance to its anchor,
         the body vertex nearest to it at rest; 0 when nothing is pinned),
         ``pinned_gap`` (m, mean distance of the pinned vertices from the nearest body vertex, worst frame),
-        ``above_pins``, ``outside_body`` (fractions of vertices, worst frame, :func:`hanging`),
+        ``above_pins`` (fraction of free vertices, mean over frames), ``outside_body`` (fraction of
+        vertices, worst frame; both from :func:`hanging`),
         ``area_change``, ``shrunk`` and ``fold`` (degrees) from :func:`shape_change`, worst frame.
     """
     if not np.isfinite(frames).all():
@@ -294,7 +300,7 @@ def measure(
     anchored = np.linalg.norm(frames[:, pinned] - body_frames[:, anchor], axis=-1)
     strain = edge_strain(frames, rest, faces)
     area_p99, shrunk, dihedral = shape_change(frames, rest, faces)
-    above_pins, above_head, below_feet = hanging(frames, pinned, body_frames)
+    above_pins, above_head, below_floor = hanging(frames, pinned, body_frames)
     return {
         "nan": False,
         "max_speed": max_speed(frames, fps),
@@ -306,9 +312,9 @@ def measure(
         "pinned_distance": float(gap.max()) if gap.size else 0.0,
         "pinned_drift": float(np.abs(anchored - rest_gap).max()) if gap.size else 0.0,
         "pinned_gap": float(gap.mean(1).max()) if gap.size else 0.0,
-        "above_pins": float(above_pins.max()),
+        "above_pins": float(above_pins.mean()),  # a jump's flight lifts a skirt over its pins for a moment
         "area_change": float(area_p99.max()),
         "shrunk": float(shrunk.max()),
         "fold": float(dihedral[1:].max() - dihedral[0]),
-        "outside_body": float((above_head + below_feet).max()),
+        "outside_body": float((above_head + below_floor).max()),
     }

@@ -103,11 +103,12 @@ def simulate_sequence(
         steps = steps_per_frame(collider, garment_frames[0], params.collision_distance, params.quality,
                                 travel_per_step=travel_per_step(params.backend))
         params = dataclasses.replace(params, quality=steps)
+    body_verts = body.pose(motion, shape).verts
+    floor = float(min(body_verts[..., 2].min(), body.rest_verts(shape)[:, 2].min()))  # the soles on the ground
     verts, seconds = backend_run_cloth(params.backend)(
-        faces, pinned, garment_frames, collider, collider_faces, params, motion.fps
+        faces, pinned, garment_frames, collider, collider_faces, params, motion.fps, floor=floor
     )
     verts = verts[lead:]
-    body_verts = body.pose(motion, shape).verts
     stats = measure(verts, rest, faces, pinned, body_verts, body.faces, body.rest_verts(shape), motion.fps)
     stats.update(
         ms_per_frame=float(1000.0 * seconds.mean()),
