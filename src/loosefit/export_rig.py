@@ -22,6 +22,7 @@ from loosefit.errors import InputError
 from loosefit.io.skinned_mesh import SkinnedMesh, dense_to_sparse
 from loosefit.models.motion_features import heading_frames, motion_features
 from loosefit.motion.motion import Motion
+from loosefit.threads import torch_threads
 
 #: Influences per vertex engines take (glTF: 4 per JOINTS_n / WEIGHTS_n set).
 INFLUENCES = (4, 8)
@@ -51,19 +52,13 @@ def predict_bones(animator: Animator, motion: Motion) -> tuple[np.ndarray, np.nd
     feats = motion_features(motion)
     root, joints = torch.from_numpy(feats["root"])[None], torch.from_numpy(feats["joints"])[None]
     rotations, translations, state = [], [], None
-    saved = torch.get_num_threads()
-    try:
-        if animator.threads:
-            torch.set_num_threads(animator.threads)
-        with torch.no_grad():
-            for start in range(0, motion.num_frames, animator.chunk_frames):
-                stop = start + animator.chunk_frames
-                out = model(root[:, start:stop], joints[:, start:stop], state)
-                rotations.append(out["bones"][0][0].double().numpy())
-                translations.append(out["bones"][1][0].double().numpy())
-                state = out["state"]
-    finally:
-        torch.set_num_threads(saved)
+    with torch_threads(animator.threads), torch.no_grad():
+        for start in range(0, motion.num_frames, animator.chunk_frames):
+            stop = start + animator.chunk_frames
+            out = model(root[:, start:stop], joints[:, start:stop], state)
+            rotations.append(out["bones"][0][0].double().numpy())
+            translations.append(out["bones"][1][0].double().numpy())
+            state = out["state"]
     R, T = np.concatenate(rotations), np.concatenate(translations)
     Rh, origin = heading_frames(motion)
     return Rh[:, None] @ R, (Rh[:, None] @ T[..., None])[..., 0] + origin[:, None]

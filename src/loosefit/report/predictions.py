@@ -8,7 +8,6 @@ sequence's own shape and motion (for the collision ratio and the error maps).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -68,18 +67,6 @@ def load_sequences(data: str | Path, names: list[str] | None = None, split: str 
     return out
 
 
-def _meta(run: Path) -> dict:
-    from loosefit.train.pipeline import MODEL_META
-
-    path = run / MODEL_META
-    if not path.is_file():
-        raise InputError(f"not a loosefit run folder (no {MODEL_META})", run)
-    try:
-        return json.loads(path.read_text())
-    except ValueError as e:
-        raise InputError(f"cannot read {MODEL_META}: {e}", run) from None
-
-
 def animate_run(run: str | Path, sequences: list[Sequence], device: str = "cpu") -> tuple[str, dict[str, np.ndarray]]:
     """The method name of ``run`` and its predictions ``{sequence name: (T, V, 3)}`` of the sequences it
     can animate (a per-garment run: those of its garment).
@@ -87,11 +74,11 @@ def animate_run(run: str | Path, sequences: list[Sequence], device: str = "cpu")
     Raises:
         InputError: not a run folder, or a run for a garment none of ``sequences`` wears.
     """
-    from loosefit.animate import Animator
+    from loosefit.animate import Animator, read_run_meta
     from loosefit.animate_any import AnyGarmentAnimator, is_static_run
 
     run = Path(run)
-    meta = _meta(run)
+    meta = read_run_meta(run)
     if is_static_run(run):
         animator = AnyGarmentAnimator(run, device=device)
         out = {s.name: animator.animate(animator.pair(s.garment_mesh.verts, s.faces, s.body), s.motion) for s in sequences}
