@@ -16,7 +16,7 @@ from loosefit.motion.bvh import import_bvh, read_bvh, retarget_bvh, skeleton_to_
 from loosefit.motion.motion import Motion
 from loosefit.motion.axes import detect_axes
 from loosefit.motion.joint_map import load_joint_map, resolve_joint_map
-from loosefit.motion.resample import resample
+from loosefit.motion.resample import resample, slow_down
 from loosefit.motion.rig import TargetRig
 
 MOCAP = Path(__file__).parents[3] / "shared/mocap/cmu-cc"
@@ -225,6 +225,21 @@ def test_resample_is_exact_for_uniform_rotation_and_linear_translation():
     assert out.num_frames == 31 and out.fps == 30.0
     assert np.abs(out.rotations - expected.rotations).max() < 1e-5
     assert np.abs(out.translation - expected.translation).max() < 1e-6
+
+
+def test_slow_down_keeps_source_frames_and_rate():
+    """Every 4th frame of a walk slowed 4x is a frame of the walk; the rate stays, the length grows."""
+    t = np.arange(31) / 30.0
+    rng = np.random.default_rng(0)
+    rotations = rng.normal(size=(31, 3, 3)) * 0.4
+    motion = Motion(rotations, np.outer(t, [1.0, 0.0, 0.2]), 30.0)
+    slowed = slow_down(motion, 4)
+    assert slowed.fps == 30.0 and slowed.num_frames == 30 * 4 + 1
+    assert np.abs(slowed.translation[::4] - motion.translation).max() < 1e-9
+    same = axis_angle_to_matrix(torch.from_numpy(slowed.rotations[::4])) - axis_angle_to_matrix(torch.from_numpy(rotations))
+    assert same.abs().max() < 1e-6
+    # in between, a quarter of the way along the source's step
+    assert np.allclose(slowed.translation[1], motion.translation[0] + 0.25 * (motion.translation[1] - motion.translation[0]))
 
 
 def _bones(rig: TargetRig, source_of: dict[int, int]):

@@ -99,9 +99,25 @@ def test_shipped_plans():
     assert len({j.sim_params for j in sim.jobs if j.split == "test"}) == 2
     for name in ("bending", "density", "time_scale"):
         assert len({getattr(p, name) for p in sim.sim_params.values()}) >= 4
+    # SwinGar/FitGar's store: >= 24 training and >= 6 held-out garments (every kind held out), >= 3 shapes,
+    # >= 6 motions of 6-10 s with real clips; nothing of the test split in training.
     garments = plans["garments"]
-    assert len(garments.garments) >= 30 and len(garments.shapes) == 3
-    assert {g["template"] for g in garments.garments.values()} == {"skirt", "dress", "long_shirt", "jumpsuit"}
+    kinds = {"skirt", "dress", "long_shirt", "jumpsuit"}
+    kind = lambda name: garments.garments[name]["template"]  # noqa: E731
+    train = [j for j in garments.jobs if j.split == "train"]
+    test = [j for j in garments.jobs if j.split == "test"]
+    train_garments = {j.garment for j in train}
+    held_out = {j.garment for j in test} - train_garments
+    assert len(train_garments) >= 24 and {kind(g) for g in train_garments} == kinds
+    assert len(held_out) >= 6 and {kind(g) for g in held_out} == kinds
+    assert len(garments.shapes) >= 3 and {j.shape for j in test} - {j.shape for j in train}
+    assert {j.motion for j in test} - {j.motion for j in train}
+    assert len(garments.motions) >= 6 and any("file" in m for m in garments.motions.values())
+    for name, m in garments.motions.items():
+        seconds = m["seconds"] if "procedural" in m else m["frames"] / 30
+        assert 6 <= seconds <= 10, name
+        if "file" in m:
+            assert garments.resolve(m["file"]).is_file()
 
 
 def test_specs_are_typed_configs_and_yaml_exponents_are_numbers(tmp_path):
@@ -127,3 +143,11 @@ def test_specs_are_typed_configs_and_yaml_exponents_are_numbers(tmp_path):
         with pytest.raises(InputError, match=message) as err:
             load_plan(_write(tmp_path, {**PLAN, **change}))
         assert "plan.yaml" in str(err.value)
+
+
+def test_slowdown_is_checked(tmp_path):
+    for value in (0.5, "fast", True):
+        with pytest.raises(InputError, match="'slowdown'.*(>= 1|expected a number)"):
+            load_plan(_write(tmp_path, {**PLAN, "motions": {"walk": {"procedural": "walk", "seconds": 2, "slowdown": value}}}))
+    plan = load_plan(_write(tmp_path, {**PLAN, "motions": {"walk": {"procedural": "walk", "seconds": 2, "slowdown": 4}, "clip": PLAN["motions"]["clip"]}}))
+    assert plan.motion_spec("walk").slowdown == 4 and plan.motion_spec("clip").slowdown == 1

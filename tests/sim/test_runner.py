@@ -132,3 +132,30 @@ def test_template_garment_and_procedural_motion(tmp_path):
     assert store.motion("sway").num_frames == 12 and store.body("tall")[4] == np.float32(0.9)
     seq = store.sequence("skirt+tall+sway+quick")
     assert seq.verts.shape == (12, len(garment.verts), 3) and seq.split == "train"
+
+
+def test_slowed_plan_motions(plan_path, tmp_path):
+    """``slowdown: 4`` plays a motion 4x slower: a procedural one keeps its ``seconds``, a file's frames are
+    counted after the slow-down; every 4th frame is a frame of the motion as made."""
+    from loosefit.body import AnnyShape
+    from loosefit.motion.motion import Motion
+    from loosefit.motion.procedural import generate
+    from loosefit.sim.plan import load_plan
+
+    plan = {
+        "garments": {"skirt": {"template": "skirt"}},
+        "motions": {"sway": {"procedural": "sway", "seconds": 2.0, "seed": 1, "slowdown": 4},
+                    "walk": {"file": str(plan_path.parent / "walk.npz"), "slowdown": 2, "start": 2, "frames": 9}},
+    }
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    loaded = load_plan(path)
+    sway = runner.load_plan_motion(loaded, "sway")
+    assert sway.num_frames == 60 and sway.fps == 30
+    made = generate("sway", 0.5 + 1 / 30, 1, runner.plan_body(tuple(AnnyShape().to_array().tolist())))
+    np.testing.assert_allclose(sway.translation[::4], made.translation[:15], atol=1e-9)
+    walk = runner.load_plan_motion(loaded, "walk")
+    original = Motion.load(plan_path.parent / "walk.npz")
+    assert walk.num_frames == 9
+    np.testing.assert_allclose(walk.translation[::2], original.translation[1:6], atol=1e-9)
+

@@ -22,6 +22,19 @@ def resample(motion: Motion, fps: float) -> Motion:
     return Motion(rotations, translation, fps, motion.rig, motion.joint_names, motion.name)
 
 
+def slow_down(motion: Motion, factor: float) -> Motion:
+    """``motion`` played ``factor`` times slower at its own frame rate (``factor`` > 1: slower).
+
+    Output frame ``k`` is the source at time ``k / (factor * fps)``; the result has ``floor((T - 1) * factor) + 1``
+    frames, so every ``factor``-th frame of an integer factor is a source frame exactly. A quasi-static
+    version of a motion: the cloth's inertial forces fall as ``1 / factor^2``.
+    """
+    if not factor > 0:
+        raise ValueError(f"slow-down factor must be positive, got {factor}")
+    slowed = resample(motion, motion.fps * factor)
+    return Motion(slowed.rotations, slowed.translation, motion.fps, motion.rig, motion.joint_names, motion.name)
+
+
 def resample_quaternions(q: np.ndarray, translation: np.ndarray, fps_in: float, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """Quaternions ``(T, J, 4)`` and translations ``(T, 3)`` at ``fps_in`` -> the same at ``fps``."""
     T = q.shape[0]

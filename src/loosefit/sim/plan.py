@@ -13,6 +13,7 @@ Plan format (paths are relative to the plan file)::
     motions:                       # procedural (loosefit.motion.procedural) or a file
       walk: {procedural: walk, seconds: 4, seed: 1}
       clip: {file: ../mocap/005_02.bvh, joint_map: cc, start: 1, frames: 300}
+      slow: {procedural: walk, seconds: 6, seed: 1, slowdown: 4}   # 1.5 s of a walk over 6 s
     sim_params:                    # named SimParams sets (missing fields keep their defaults)
       default: {}
       stiff: {bending: 1.0e-4}
@@ -113,31 +114,42 @@ class FileGarment:
 
 @dataclass(frozen=True)
 class ProceduralMotion:
-    """A procedural plan motion (:func:`loosefit.motion.procedural.generate`) of ``seconds`` seconds."""
+    """A procedural plan motion (:func:`loosefit.motion.procedural.generate`) of ``seconds`` seconds, played
+    ``slowdown`` times slower (:func:`loosefit.motion.resample.slow_down`; the result still lasts ``seconds``)."""
 
     procedural: str
     seconds: Optional[float] = None
     seed: int = 0  # generate() takes it positionally: the default is the plan's
+    slowdown: float = 1.0
 
     def __post_init__(self):
         if self.seconds is None or not self.seconds > 0:
             raise InputError(f"'seconds' must be a positive number, got {self.seconds!r}")
+        _check_slowdown(self.slowdown)
 
 
 @dataclass(frozen=True)
 class FileMotion:
-    """A plan motion read from a file (relative to the plan): ``frames`` frames (None: all) from ``start``."""
+    """A plan motion read from a file (relative to the plan): ``frames`` frames (None: all) from ``start``,
+    counted after the motion is played ``slowdown`` times slower."""
 
     file: str
     joint_map: Optional[str] = None
     start: int = 0
     frames: Optional[int] = None
+    slowdown: float = 1.0
 
     def __post_init__(self):
+        _check_slowdown(self.slowdown)
         for key, least in (("start", 0), ("frames", 1)):
             value = getattr(self, key)
             if value is not None and value < least:
                 raise InputError(f"{key!r} must be an integer >= {least}, got {value!r}")
+
+
+def _check_slowdown(value) -> None:
+    if not value >= 1:  # the type is checked by loosefit.config
+        raise InputError(f"'slowdown' must be a number >= 1 (1: as made), got {value!r}")
 
 
 GarmentSpec = Union[TemplateGarment, FileGarment]

@@ -95,16 +95,22 @@ def load_plan_motion(plan: Plan, name: str):
     """Motion ``name`` of ``plan`` (procedural, or a file with its start and frame count) on the average body."""
     from loosefit.body import AnnyShape
 
+    from loosefit.motion.resample import slow_down
+
     spec = plan.motion_spec(name)
     body = plan_body(tuple(AnnyShape().to_array().tolist()))  # motions are made on the average body
     if isinstance(spec, ProceduralMotion):
-        from loosefit.motion.procedural import generate
+        from loosefit.motion.procedural import DEFAULT_FPS, generate
 
-        return generate(spec.procedural, spec.seconds, spec.seed, body)
+        if spec.slowdown == 1:
+            return generate(spec.procedural, spec.seconds, spec.seed, body)
+        # a frame more than needed, so that the slowed motion covers ``seconds`` whatever the rounding
+        motion = generate(spec.procedural, spec.seconds / spec.slowdown + 1.0 / DEFAULT_FPS, spec.seed, body)
+        return slow_down(motion, spec.slowdown).slice(0, int(round(spec.seconds * motion.fps)))
     from loosefit.motion.io import load_motion
 
     path = plan.resolve(spec.file)
-    motion = load_motion(path, body, joint_map=spec.joint_map)
+    motion = slow_down(load_motion(path, body, joint_map=spec.joint_map), spec.slowdown)
     start, frames = spec.start, spec.frames
     motion = motion.slice(start, None if frames is None else start + frames)
     if motion.num_frames == 0:
