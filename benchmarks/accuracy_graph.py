@@ -13,15 +13,15 @@ holds garments, bodies and motions the training never saw):
 3. the tables of FitGar's Table 1 (grouped by body shape) and Table 2 (grouped by garment, each test
    garment on its body and motions), and the targets: detail at most 0.6 x coarse (the paper: 1.52
    against 3.01 mm), the full model better than the plain-output ablation;
-4. with ``--speed``: frames per second of the paper-size network at ``--vertices`` garment vertices
-   (dresses of about that many vertices, untrained weights) per torch thread count.
+4. speed (frames per second of the paper-size network, per vertex and thread count) is measured by
+   ``benchmarks/graph_speed.py``.
 
 Say which data a result is: ``--set-name dynamic`` for motions as simulated, ``quasi-static`` for a store
 of slow motions or poses held until the cloth settles (a static method is judged where it applies).
 
 Run: .venv/bin/python benchmarks/accuracy_graph.py --data DATA.zarr --runs RUNS [--variants full,plain]
          [--config configs/models/fitgar.yaml] [--set train.epochs=5 ...] [--set-name dynamic]
-         [--speed] [--vertices 4000,10000] [--threads 1,2] [--name accuracy-graph]
+         [--name accuracy-graph]
 (writes benchmarks/results/<name>.json)
 """
 
@@ -98,48 +98,6 @@ def table(rows: list[dict], key: str) -> dict:
             for k, g in sorted(groups.items())}
 
 
-def speed(vertices: list[int], threads: list[int], config: Path, frames: int = 20) -> list[dict]:
-    """Frames per second of the untrained model of ``config`` on dresses of about ``vertices`` vertices: the
-    network alone (inputs made beforehand), one frame per pass, the 1-minute load average beside (the
-    machine may be shared)."""
-    from loosefit.config import load_config
-    from loosefit.garment import make_garment
-    from loosefit.models.fitgar import Config, FitGar
-    from loosefit.models.fitgar_data import collate_frames, frame_items
-    from loosefit.models.fitgar_inputs import GarmentBodyPair
-    from loosefit.motion.procedural import generate
-
-    body = AnnyBody()
-    motion = generate("walk", frames / 30.0, 0, body)
-    model = FitGar({"num_joints": body.num_joints, "num_shape": 6, "num_fit_factors": 3,
-                    "pose_features": 6 * body.num_joints, "fit_length": 8}, load_config(Config, config).model).eval()
-    rows = []
-    for n in vertices:
-        # about 1.15 / h^2 vertices per square metre of cloth: pick h from a coarse dress's count
-        coarse = make_garment("dress", body, seed=0, edge_length=0.04)
-        h = float(np.clip(0.04 * np.sqrt(len(coarse.verts) / n), 0.006, 0.06))
-        garment = make_garment("dress", body, seed=0, edge_length=h)
-        pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), np.zeros(3))
-        items = frame_items(pair, pair.frames(motion))
-        for t in threads:
-            saved = torch.get_num_threads()
-            torch.set_num_threads(t)
-            try:
-                with torch.no_grad():
-                    model(collate_frames(items[:1]))  # warm-up
-                    start = time.perf_counter()
-                    for it in items:
-                        model(collate_frames([it]))
-                    per_frame = (time.perf_counter() - start) / len(items)
-            finally:
-                torch.set_num_threads(saved)
-            rows.append({"vertices": len(garment.verts), "threads": t, "ms_per_frame": per_frame * 1e3,
-                         "fps": 1.0 / per_frame, "device": "cpu", "load_average": os.getloadavg()[0],
-                         "paper_ms_per_frame": 21.0})
-            print(rows[-1], flush=True)
-    return rows
-
-
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", type=Path, help="a simulated, prepared multi-garment store")
@@ -148,9 +106,6 @@ def main() -> None:
     p.add_argument("--config", type=Path, default=CONFIGS / "fitgar.yaml")
     p.add_argument("--set", action="append", default=[], help="config override for every variant (repeatable)")
     p.add_argument("--set-name", default="dynamic", help="what the data is: dynamic or quasi-static")
-    p.add_argument("--speed", action="store_true")
-    p.add_argument("--vertices", default="4000,10000")
-    p.add_argument("--threads", default="1,2")
     p.add_argument("--name", default="accuracy-graph")
     args = p.parse_args()
     results: dict = {"set": args.set_name}
@@ -178,9 +133,6 @@ def main() -> None:
                 targets.append({"target": "full beats plain output", "measured": [full["detail_mm"], plain],
                                 "passed": full["detail_mm"] < plain})
             results["targets"] = targets
-    if args.speed:
-        results["speed"] = speed([int(v) for v in args.vertices.split(",")], [int(t) for t in args.threads.split(",")],
-                                 args.config)
     save_results(args.name, results)
 
 

@@ -8,12 +8,12 @@
 3. Animate every sequence with each run from the garment's rest mesh (:class:`loosefit.animate.Animator`
    with ``garment=``) and report the RMSE against the simulation, next to body-LBS (the garment skinned
    with the skinning weights of its closest rest body vertex).
-4. Streaming and batch-16 time per frame of SwinGar at the paper's sizes (untrained weights: the time
-   does not depend on their values) on dresses of about 2.8k and 7.5k vertices, one torch thread.
+
+SwinGar's speed at the paper's sizes (streaming and batch 16) is measured by ``benchmarks/graph_speed.py``.
 
 Each step is skipped when its output exists under ``--work`` (the store, a run's ``run.json``).
 
-Run: .venv/bin/python benchmarks/swingar_small.py [--work /tmp/swingar-small] [--skip-speed]
+Run: .venv/bin/python benchmarks/swingar_small.py [--work /tmp/swingar-small]
 (writes benchmarks/results/swingar-small.json)
 """
 
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -74,44 +73,9 @@ def body_lbs(garment, body, motion) -> np.ndarray:
     return linear_blend_skinning(torch.from_numpy(garment.verts).double(), torch.from_numpy(weights).double(), A).numpy()
 
 
-def speed() -> dict:
-    from loosefit.body import AnnyBody
-    from loosefit.garment import make_garment
-    from loosefit.models.motion_features import motion_features
-    from loosefit.models.multi_garment import garment_graph
-    from loosefit.models.swingar import BoundSwinGar, SwinGar, SwinGarConfig
-    from loosefit.motion.procedural import generate
-
-    torch.set_num_threads(1)
-    body = AnnyBody()
-    feats = motion_features(generate("walk", 1.0, 0, body))
-    root, joints = torch.from_numpy(feats["root"])[None], torch.from_numpy(feats["joints"])[None]
-    torch.manual_seed(0)
-    model = SwinGar({"num_joints": body.num_joints, "parents": body.parents.tolist(), "shape_values": 6},
-                    SwinGarConfig()).eval()
-    out = {"parameters": int(sum(p.numel() for p in model.parameters()))}
-    for edge in (0.03, 0.018):
-        g = make_garment("dress", body, seed=1, edge_length=edge)
-        bound = BoundSwinGar(model, garment_graph("dress", g.verts, g.faces, body.collision_proxy(),
-                                                  body.shape.to_array(), 256))
-        with torch.no_grad():
-            state, times = None, []
-            for t in range(8):
-                start = time.perf_counter()
-                state = bound(root[:, t:t + 1], joints[:, t:t + 1], state)["state"]
-                times.append(time.perf_counter() - start)
-            start = time.perf_counter()
-            bound(root[:, :16], joints[:, :16])
-            batch = (time.perf_counter() - start) / 16
-        out[f"dress-{g.num_verts}"] = {"stream_ms_per_frame": float(np.median(times[2:]) * 1e3),
-                                       "batch16_ms_per_frame": batch * 1e3}
-    return out
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", default="/tmp/swingar-small")
-    parser.add_argument("--skip-speed", action="store_true")
     args = parser.parse_args()
     from loosefit.animate import Animator
     from loosefit.body import AnnyBody
@@ -156,8 +120,6 @@ def main() -> None:
     summary = {k: float(np.mean([r[k] for r in unseen])) for k in ["body-lbs", *VARIANTS]}
     results = {"plan": yaml.safe_load(PLAN), "config": SMALL, "rmse_mm": rows,
                "unseen_garment_mean_rmse_mm": summary, "validation_history": history}
-    if not args.skip_speed:
-        results["speed_paper_sizes_1_thread"] = speed()
     save_results("swingar-small", results)
 
 

@@ -447,3 +447,47 @@ def test_coarse_stage_skins_the_unposed_blend_shapes_and_feeds_the_corrective(mo
         lift = torch.stack([-g["rest_joints"][0, 0].expand(1, 5), -g["rest_joints"][0, 1].expand(1, 5),
                             root[..., 0] - g["rest_joints"][0, 2]], -1)
         assert torch.allclose(out["verts"], out["coarse"] + out["correction"] + lift[:, :, None], atol=1e-6)
+
+
+def test_corrective_zero_state_shortcut_keeps_the_outputs(model, data, monkeypatch):
+    """The corrective LSTM-GAT-LN starts every frame from a zero state and skips its state map there (the
+    map of zeros is its bias): streaming and whole-sequence outputs, and the gradients, equal those of the
+    full step on explicit zero states."""
+    from loosefit.models.layers.lstm_gat_ln import LSTMGATLN
+
+    g = data.graphs[1].tensors()
+    s = data.sequences[1].sequences[0]
+    root, joints = torch.from_numpy(s.root[None, :8]), torch.from_numpy(s.joints[None, :8])
+    with torch.no_grad():
+        model.corrective_lstm.peephole.normal_(0.0, 0.5)  # non-zero peepholes: the zero cell must still be zero
+        model.corrective_lstm.state_map.bias.normal_(0.0, 0.5)
+
+    def run():
+        whole = model(g, root, joints)
+        state, frames = None, []
+        with torch.no_grad():
+            for t in range(root.shape[1]):
+                out = model(g, root[:, t:t + 1], joints[:, t:t + 1], state=state)
+                state, frames = out["state"], frames + [out["verts"]]
+        model.zero_grad()
+        whole["verts"].square().sum().backward()
+        grads = {k: p.grad.clone() for k, p in model.named_parameters() if p.grad is not None}
+        return whole["verts"].detach(), torch.cat(frames, 1), grads
+
+    shortcut = run()
+    full_cell = LSTMGATLN.cell
+
+    def cell_on_explicit_zeros(self, x, table, valid, state=None, x_gates=None):
+        if state is None:
+            gx = self.input_map(x, table, valid) if x_gates is None else x_gates
+            zeros = gx.new_zeros(gx.shape[:-1] + (self.hidden,))
+            state = (zeros, zeros)
+        return full_cell(self, x, table, valid, state, x_gates)
+
+    monkeypatch.setattr(LSTMGATLN, "cell", cell_on_explicit_zeros)
+    full = run()
+    torch.testing.assert_close(shortcut[0], full[0])
+    torch.testing.assert_close(shortcut[1], full[1])
+    assert shortcut[2].keys() == full[2].keys()
+    for k in full[2]:
+        torch.testing.assert_close(shortcut[2][k], full[2][k], rtol=1e-5, atol=1e-7, msg=k)

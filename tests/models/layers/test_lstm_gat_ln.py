@@ -78,3 +78,23 @@ def test_gradients_are_finite_from_a_zero_state():
     out.sum().backward()
     for name, p in cell.named_parameters():
         assert torch.isfinite(p.grad).all() and p.grad.abs().sum() > 0, name
+
+
+def test_a_step_from_no_state_equals_a_step_from_explicit_zeros():
+    """From no state the cell skips its state map (zeros map to its bias): the same ``(H, C)`` as the full
+    step on explicit zeros, whose gradients stay finite."""
+    verts, faces = tube(5, 8)
+    table, valid = map(torch.from_numpy, attention_table(faces, len(verts)))
+    torch.manual_seed(3)
+    cell = LSTMGATLN(IN, HID, heads=2)
+    with torch.no_grad():
+        cell.peephole.normal_()
+        cell.state_map.bias.normal_()
+    x = torch.randn(2, len(verts), IN)
+    zeros = torch.zeros(2, len(verts), HID)
+    h0, c0 = cell.cell(x, table, valid)
+    h1, c1 = cell.cell(x, table, valid, (zeros, zeros))
+    torch.testing.assert_close(h0, h1, rtol=1e-6, atol=1e-7)  # the last bit: SIMD and scalar sigmoid differ
+    torch.testing.assert_close(c0, c1, rtol=1e-6, atol=1e-7)
+    h1.sum().backward()
+    assert all(torch.isfinite(p.grad).all() for p in cell.parameters() if p.grad is not None)

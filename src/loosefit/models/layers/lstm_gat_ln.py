@@ -50,12 +50,17 @@ class LSTMGATLN(nn.Module):
              state: tuple[torch.Tensor, torch.Tensor] | None = None,
              x_gates: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """One step (SwinGar Eq. 6): ``x (..., V, in)``, ``state (H, C)`` each ``(..., V, hidden)`` or None
-        (zeros) -> the new ``(H, C)``. ``x_gates``: ``self.input_map(x)`` when already computed."""
+        (zeros) -> the new ``(H, C)``. ``x_gates``: ``self.input_map(x)`` when already computed.
+
+        From a zero state the state map is not run: zero features aggregate to zero under any attention, so
+        ``S(0)`` is the map's bias, and the peepholes see a zero cell (the same values to the last bit or so,
+        without the graph pass: a third of SwinGar's corrective state maps, which start every frame from zeros)."""
         gx = self.input_map(x, table, valid) if x_gates is None else x_gates
         if state is None:
-            h = c = gx.new_zeros(gx.shape[:-1] + (self.hidden,))
-        else:
-            h, c = state
+            gi, gf, gg, go = (gx + self.state_map.bias).chunk(4, -1)
+            c = torch.sigmoid(gi) * torch.tanh(gg)
+            return torch.sigmoid(go) * torch.tanh(c), c
+        h, c = state
         gates = gx + self.state_map(h, table, valid)
         gi, gf, gg, go = gates.chunk(4, -1)
         i = torch.sigmoid(gi + self.peephole[0] * c)
