@@ -546,3 +546,16 @@ def test_animation_builds_the_descriptor_the_run_was_trained_with(store, body, t
             assert g["descriptor"].shape == (0,)
         verts = animator.animate(motion)
         assert verts.shape == (motion.num_frames, garment.num_verts, 3) and np.isfinite(verts).all()
+
+
+def test_config_files_load():
+    """``configs/models/swingar.yaml`` holds the paper's model (the defaults); ``swingar-cpu.yaml`` (the CPU
+    preset of ``benchmarks/accuracy_graph.py``) loads with every global descriptor."""
+    from loosefit.config import load_config
+    from loosefit.models.swingar import Config
+
+    root = Path(__file__).parents[2] / "configs" / "models"
+    assert load_config(Config, root / "swingar.yaml").model == SwinGarConfig()
+    for kind in DESCRIPTORS:
+        cpu = load_config(Config, root / "swingar-cpu.yaml", [f"model.global_descriptor={kind}"])
+        assert cpu.model.global_descriptor == kind and cpu.model.descriptor_samples == 256
