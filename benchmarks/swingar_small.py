@@ -63,16 +63,6 @@ def rmse_mm(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(((a - b) ** 2).sum(-1).mean()) * 1e3)
 
 
-def body_lbs(garment, body, motion) -> np.ndarray:
-    from loosefit.geometry.features import nearest_body_vertex
-    from loosefit.geometry.lbs import linear_blend_skinning, skinning_transforms
-
-    posed = body.pose(motion)
-    weights = body.skinning_weights()[nearest_body_vertex(garment.verts, body.rest_verts())]
-    A = skinning_transforms(torch.from_numpy(posed.joint_transforms).double(), torch.from_numpy(body.rest_joints()).double())
-    return linear_blend_skinning(torch.from_numpy(garment.verts).double(), torch.from_numpy(weights).double(), A).numpy()
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", default="/tmp/swingar-small")
@@ -82,6 +72,7 @@ def main() -> None:
     from loosefit.cli import main as cli
     from loosefit.data.store import DatasetStore
     from loosefit.sim import run_plan
+    from loosefit.sim.attach import body_lbs
 
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
@@ -110,7 +101,7 @@ def main() -> None:
         seq = store.sequence(seq_name)
         garment, motion, truth = store.garment(seq.garment), store.motion(seq.motion), seq.verts[:]
         row = {"sequence": seq_name, "split": seq.split, "garment_vertices": garment.num_verts,
-               "body-lbs": rmse_mm(body_lbs(garment, body, motion), truth)}
+               "body-lbs": rmse_mm(body_lbs(garment.verts, body, motion), truth)}
         for name in VARIANTS:
             if seq.garment not in animators[name]:
                 animators[name][seq.garment] = Animator(work / f"run-{name}", garment=garment, body=body)

@@ -221,6 +221,7 @@ def _bind_garment(model, config, garment, body):
     body = AnnyBody() if body is None else body
     if not hasattr(body, "shape") or not hasattr(body.shape, "to_array"):
         raise InputError("a multi-garment model reads Anny bodies (their shape values)")
+    # the descriptor the run was trained with (its method.yaml): spectral, Euclidean or none
     graph = garment_graph(garment.name or "garment", garment.verts, garment.faces, body.collision_proxy(),
-                          body.shape.to_array(), config.descriptor_samples, config.density)
+                          body.shape.to_array(), **config.graph_settings())
     return BoundSwinGar(model, graph)

@@ -122,7 +122,7 @@ def _train_garment_windows(cls, method: str, data, garment: str | None, run: Run
 
     seed_everything(cfg.train.seed)
     names = None if garment is None else [g.strip() for g in garment.split(",") if g.strip()]
-    settings = {"descriptor_samples": cfg.model.descriptor_samples, "density": cfg.model.density}
+    settings = cfg.model.graph_settings()  # the garment graphs the model reads (its global descriptor)
     train_data = MultiGarmentData(data, "train", names, **settings)
     val_data = None
     if val_split is not None:

@@ -491,3 +491,115 @@ def test_corrective_zero_state_shortcut_keeps_the_outputs(model, data, monkeypat
     assert shortcut[2].keys() == full[2].keys()
     for k in full[2]:
         torch.testing.assert_close(shortcut[2][k], full[2][k], rtol=1e-5, atol=1e-7, msg=k)
+
+
+# ---------------------------------------------------------------- global descriptor ablation (SwinGar Table I)
+
+DESCRIPTORS = ("spectral", "euclidean", "pooling", "none")
+
+
+@pytest.mark.parametrize("kind", DESCRIPTORS)
+def test_every_global_descriptor_builds_runs_and_trains(store, kind):
+    """Each variant builds from data carrying the descriptor it asks for, predicts, and every one of its
+    parameters gets a gradient (the pooling layer included; ``none`` has no shape encoder at all)."""
+    config = SwinGarConfig(**SMALL, global_descriptor=kind)
+    data = MultiGarmentData(store, "train", **config.graph_settings())
+    expected = {"spectral": (32,), "euclidean": (32,), "pooling": (0,), "none": (0,)}[kind]
+    assert all(g.descriptor.shape == expected for g in data.graphs)
+    assert {g.descriptor_distance for g in data.graphs} == {config.descriptor_distance}
+    torch.manual_seed(0)
+    model = SwinGar.from_data(data, config)
+    names = {n.split(".")[0] for n, _ in model.named_parameters()}
+    assert ("shape_encoder" in names) == (kind in ("spectral", "euclidean")) and ("pool" in names) == (kind == "pooling")
+    windows = MultiWindowDataset(data, window=6, stride=6, history=HISTORY)
+    batch = collate_by_graph([windows[0], windows[len(windows) - 1]])
+    loss, _ = model.training_loss(batch, "all")
+    loss.backward()
+    missing = [n for n, p in model.named_parameters() if p.grad is None or not p.grad.abs().sum() > 0]
+    assert not missing, f"{kind}: no gradient reaches {missing}"
+    G, a = model.garment_features(data.graphs[0].tensors())
+    assert a.shape == (SMALL["shape_mlp"][-1],) and (a >= 0).all()
+    if kind == "none":
+        assert torch.equal(a, torch.ones(SMALL["shape_mlp"][-1]))
+    if kind == "pooling":  # a = max over the vertices of ReLU(F G)
+        torch.testing.assert_close(a, torch.relu(model.pool[0](G)).max(0).values)
+
+
+def test_the_global_descriptor_reaches_the_output_only_where_it_is_used(data):
+    """``none`` and ``pooling`` ignore the descriptor's values (any, even none at all); ``spectral`` reads them."""
+    s = data.sequences[0].sequences[0]
+    root, joints = torch.from_numpy(s.root[None, :6]), torch.from_numpy(s.joints[None, :6])
+    graph = data.graphs[0].tensors()
+    other = {**graph, "descriptor": torch.rand(32)}
+    for kind in DESCRIPTORS:
+        if kind == "euclidean":
+            continue  # the same network as spectral; its data differs (tested above)
+        torch.manual_seed(0)
+        model = SwinGar.from_data(data, SwinGarConfig(**SMALL, global_descriptor=kind))
+        with torch.no_grad():
+            base = model(graph, root, joints)["verts"]
+            changed = float((model(other, root, joints)["verts"] - base).abs().max())
+            if kind in ("none", "pooling"):
+                assert changed == 0.0, kind
+                empty = {**graph, "descriptor": torch.zeros(0)}
+                assert torch.equal(model(empty, root, joints)["verts"], base)
+            else:
+                assert changed > 1e-6
+
+
+def test_global_descriptor_is_checked(data):
+    with pytest.raises(InputError, match="global_descriptor must be one of"):
+        SwinGarConfig(**SMALL, global_descriptor="heat")
+    with pytest.raises(InputError, match="distance must be one of"):
+        MultiGarmentData(data.store, "train", descriptor_samples=32, descriptor_distance="heat")
+    # a garment built with the geodesic descriptor does not feed a model trained on the Euclidean one
+    config = SwinGarConfig(**SMALL, global_descriptor="euclidean")
+    with pytest.raises(InputError, match="euclidean"):
+        SwinGar.from_data(data, config)
+    from loosefit.models.swingar import BoundSwinGar
+
+    torch.manual_seed(0)
+    model = SwinGar(SwinGar.data_sizes(data), config)
+    with pytest.raises(InputError, match="geodesic descriptor"):
+        BoundSwinGar(model, data.graphs[0])
+
+
+def test_animation_builds_the_descriptor_the_run_was_trained_with(store, body, tmp_path):
+    """A run trained with ``global_descriptor: euclidean`` animates a new garment with the Euclidean descriptor
+    (read from its ``method.yaml``), one trained with ``none`` without any."""
+    from loosefit.animate import Animator
+    from loosefit.rig.spectral import spectral_descriptor
+
+    cfg = tmp_path / "swingar.yaml"
+    cfg.write_text(yaml.safe_dump({"model": SMALL, "data": {"window": 8, "stride": 8},
+                                   "train": {"batch_size": 8, "progress": False, "tensorboard": False, "device": "cpu",
+                                             "stages": {"supervised": {"epochs": 1}, "all": {"epochs": 0}}}}))
+    garment = make_garment("skirt", body, seed=7, edge_length=0.05)
+    motion = DatasetStore.open(store).motion("walk")
+    for kind in ("euclidean", "none"):
+        run = tmp_path / kind
+        assert main(["train", "--method", "swingar", "--data", str(store), "--out", str(run), "--config", str(cfg),
+                     "--set", f"model.global_descriptor={kind}"]) == 0
+        animator = Animator(run, garment=garment, body=body)
+        g = animator.model.g
+        if kind == "euclidean":
+            expected = spectral_descriptor(garment.verts, garment.faces, 32, distance="euclidean")
+            np.testing.assert_allclose(g["descriptor"].numpy(), expected, atol=1e-7)
+            assert np.abs(expected - spectral_descriptor(garment.verts, garment.faces, 32)).max() > 1e-3
+        else:
+            assert g["descriptor"].shape == (0,)
+        verts = animator.animate(motion)
+        assert verts.shape == (motion.num_frames, garment.num_verts, 3) and np.isfinite(verts).all()
+
+
+def test_config_files_load():
+    """``configs/models/swingar.yaml`` holds the paper's model (the defaults); ``swingar-cpu.yaml`` (the CPU
+    preset of ``benchmarks/accuracy_graph.py``) loads with every global descriptor."""
+    from loosefit.config import load_config
+    from loosefit.models.swingar import Config
+
+    root = Path(__file__).parents[2] / "configs" / "models"
+    assert load_config(Config, root / "swingar.yaml").model == SwinGarConfig()
+    for kind in DESCRIPTORS:
+        cpu = load_config(Config, root / "swingar-cpu.yaml", [f"model.global_descriptor={kind}"])
+        assert cpu.model.global_descriptor == kind and cpu.model.descriptor_samples == 256

@@ -46,3 +46,25 @@ def sheet(nx: int, ny: int, width: float = 1.0, height: float = 0.8, jitter: flo
     a = (i * nx + j).ravel()
     faces = np.concatenate([np.stack([a, a + 1, a + nx], 1), np.stack([a + 1, a + nx + 1, a + nx], 1)])
     return verts, faces.astype(np.int64)
+
+
+def hex_sheet(width: float = 1.0, height: float = 0.8, h: float = 0.025, jitter: float = 0.15, seed: int = 0):
+    """A flat rectangle-like sheet in the XY plane of near-equilateral triangles (edge ``h``, rows of a
+    hexagonal lattice, odd rows shifted by ``h / 2``), as the garment remesher makes them; interior vertices
+    moved by up to ``jitter * h``. Returns ``verts (N, 3)`` float64 and ``faces (F, 3)`` int64."""
+    n, rows = int(round(width / h)) + 1, int(round(height / (h * np.sqrt(3) / 2))) + 1
+    i, j = np.meshgrid(np.arange(n), np.arange(rows))
+    x = i * h + 0.5 * h * (j % 2)
+    y = j * h * np.sqrt(3) / 2
+    verts = np.stack([x.ravel(), y.ravel(), np.zeros(n * rows)], 1).astype(np.float64)
+    inner = ((i > 0) & (i < n - 1) & (j > 0) & (j < rows - 1)).ravel()
+    verts[inner, :2] += np.random.default_rng(seed).uniform(-jitter, jitter, (inner.sum(), 2)) * h
+    faces = []
+    for r in range(rows - 1):
+        a, b = r * n, (r + 1) * n  # first vertex of this row and of the next
+        for k in range(n - 1):
+            if r % 2 == 0:  # the next row is shifted right
+                faces += [(a + k, a + k + 1, b + k), (b + k, a + k + 1, b + k + 1)]
+            else:  # this row is shifted right
+                faces += [(a + k, b + k + 1, b + k), (a + k, a + k + 1, b + k + 1)]
+    return verts, np.array(faces, np.int64)

@@ -1,7 +1,7 @@
 import numpy as np
 
 from loosefit.motion.motion import Motion
-from loosefit.sim.attach import garment_weights, skin_garment
+from loosefit.sim.attach import body_lbs, garment_weights, skin_garment
 
 
 def _motion(body, frames=3):
@@ -21,5 +21,6 @@ def test_skinning_follows_the_body(proxy_body):
     np.testing.assert_allclose(weights, body.skinning_weights()[picks])
     expected = body.pose(motion).verts[:, picks]
     np.testing.assert_allclose(skin_garment(verts, weights, body, motion), expected, atol=1e-5)
+    np.testing.assert_allclose(body_lbs(verts, body, motion), expected, atol=1e-5)  # the baseline in one call
     still = skin_garment(verts, weights, body, body.rest_motion(2))
     np.testing.assert_allclose(still, np.broadcast_to(verts, still.shape), atol=1e-6)

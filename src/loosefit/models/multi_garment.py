@@ -26,7 +26,7 @@ from loosefit.geometry.normals import vertex_normals
 from loosefit.models.dataset import STD_FLOOR, GarmentSequences
 from loosefit.models.layers.gat_ln import attention_table
 from loosefit.rig.fit_attribute import body_distances
-from loosefit.rig.spectral import spectral_descriptor
+from loosefit.rig.spectral import check_distance, spectral_descriptor
 
 #: Areal density of the garment fabric, kg/m^2, for the gravity term (silk-like; not in the paper).
 DEFAULT_DENSITY = 0.1
@@ -53,9 +53,12 @@ class GarmentGraph:
         faces ``(F, 3)`` int64. normals ``(V, 3)``: unit vertex normals at rest.
         fit ``(V,)``: distance from each vertex to the closest body vertex at rest, metres (the fit attribute
             ``a_i`` of SwinGar Sec. III-C, see :mod:`loosefit.models.swingar`).
-        descriptor ``(z,)``: spectral descriptor (:func:`loosefit.rig.spectral.spectral_descriptor`).
+        descriptor ``(z,)``: spectral descriptor (:func:`loosefit.rig.spectral.spectral_descriptor`) with the
+            distance the model asks for; ``(0,)`` for a model without one (SwinGar's ``none`` and ``pooling``).
         mass ``(V,)``: vertex masses, kg (lumped Voronoi area times the fabric density).
         body_shape ``(S,)``: the body's shape values. rest_joints ``(J, 3)``: its rest joint positions, metres.
+        descriptor_distance: the distance ``descriptor`` was computed with (``"geodesic"``, ``"euclidean"``), or
+            None when there is none.
     """
 
     name: str
@@ -67,6 +70,7 @@ class GarmentGraph:
     mass: np.ndarray
     body_shape: np.ndarray
     rest_joints: np.ndarray
+    descriptor_distance: str | None = "geodesic"
 
     @property
     def num_verts(self) -> int:
@@ -84,20 +88,33 @@ class GarmentGraph:
 
 
 def garment_graph(name: str, verts: np.ndarray, faces: np.ndarray, body: BodyModel, body_shape: np.ndarray,
-                  descriptor_samples: int, density: float = DEFAULT_DENSITY) -> GarmentGraph:
+                  descriptor_samples: int, density: float = DEFAULT_DENSITY,
+                  descriptor_distance: str | None = "geodesic") -> GarmentGraph:
     """Build the :class:`GarmentGraph` of a rest garment ``verts (V, 3)``, ``faces (F, 3)`` on ``body`` (posed in
-    its own shape; ``body_shape (S,)`` its shape values as the network sees them)."""
+    its own shape; ``body_shape (S,)`` its shape values as the network sees them).
+
+    ``descriptor_distance``: the distance of the spectral descriptor's affinity, ``"geodesic"`` or
+    ``"euclidean"`` (:func:`loosefit.rig.spectral.spectral_descriptor`), or None for no descriptor (an empty
+    vector; the vertex count then need not reach ``descriptor_samples``). A model reads it from its config
+    (:meth:`loosefit.models.swingar.SwinGarConfig.graph_settings`), in training and animation alike."""
     verts = np.asarray(verts, np.float32)
     faces = np.asarray(faces, np.int64)
-    if len(verts) < descriptor_samples:
-        raise InputError(f"garment {name!r} has {len(verts)} vertices, fewer than the spectral descriptor's "
-                         f"{descriptor_samples} samples: lower model.descriptor_samples")
+    if descriptor_distance is not None:
+        check_distance(descriptor_distance)
+        if len(verts) < descriptor_samples:
+            raise InputError(f"garment {name!r} has {len(verts)} vertices, fewer than the spectral descriptor's "
+                             f"{descriptor_samples} samples: lower model.descriptor_samples")
     if not density > 0:
         raise InputError(f"fabric density must be positive, got {density}")
     mass = np.asarray(mass_matrix(verts, faces).diagonal(), np.float32) * density
+    if descriptor_distance is None:
+        descriptor = np.zeros(0, np.float32)
+    else:
+        descriptor = spectral_descriptor(verts, faces, descriptor_samples, distance=descriptor_distance)
     return GarmentGraph(name, verts, faces, vertex_normals(verts[None], faces)[0].astype(np.float32),
-                        body_distances(verts, body.rest_verts()), spectral_descriptor(verts, faces, descriptor_samples),
-                        mass, np.asarray(body_shape, np.float32), body.rest_joints().astype(np.float32))
+                        body_distances(verts, body.rest_verts()), descriptor,
+                        mass, np.asarray(body_shape, np.float32), body.rest_joints().astype(np.float32),
+                        descriptor_distance)
 
 
 class MultiGarmentData:
@@ -109,10 +126,13 @@ class MultiGarmentData:
         garments: store garment names to use (None: every garment with sequences in the split).
         descriptor_samples: ``z`` of the spectral descriptor. density: fabric density, kg/m^2.
         body: load the canonical collision proxy of the posed body (for the collision loss).
+        descriptor_distance: the descriptor's distance, ``"geodesic"``, ``"euclidean"`` or None (no
+            descriptor), as :func:`garment_graph` takes it.
     """
 
     def __init__(self, store, split: str | None = "train", garments: list[str] | None = None,
-                 descriptor_samples: int = 256, density: float = DEFAULT_DENSITY, body: bool = True):
+                 descriptor_samples: int = 256, density: float = DEFAULT_DENSITY, body: bool = True,
+                 descriptor_distance: str | None = "geodesic"):
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         names = self.store.garment_names() if garments is None else list(garments)
         unknown = sorted(set(names) - set(self.store.garment_names()))
@@ -132,7 +152,8 @@ class MultiGarmentData:
             values = np.asarray(self.store.body(bodies.pop()), np.float32)
             proxy = AnnyBody(AnnyShape.from_array(values), resolution="low")
             garment = data.garment
-            self.graphs.append(garment_graph(g, garment.verts, garment.faces, proxy, values, descriptor_samples, density))
+            self.graphs.append(garment_graph(g, garment.verts, garment.faces, proxy, values, descriptor_samples, density,
+                                             descriptor_distance))
             self.sequences.append(data)
 
     @property

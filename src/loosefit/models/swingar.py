@@ -36,6 +36,14 @@ closest to the simulated vertex. Training stage ``supervised`` uses the vertex t
 every term (SwinGar switches when the vertex error falls by less than 2 % over 50 epochs; here each stage
 has its epochs).
 
+Global descriptor ablation (SwinGar Table I; ``global_descriptor``): ``spectral`` (the above, the default);
+``euclidean``, the same with straight-line instead of geodesic distances in the descriptor's affinity
+(:mod:`loosefit.rig.spectral`); ``pooling``, a fully connected layer with ReLU on ``G`` then the maximum over
+the vertices, ``a = max_i ReLU(F G_i)`` of size ``shape_mlp[-1]``, in place of the descriptor's features;
+``none``, ``a = 1`` (the skinning weights read the garment state alone). The paper concatenates the pooled
+feature to the local features of ``E_g``; here it takes the place of ``a``, so that the four variants
+differ in the global feature alone.
+
 Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather
 than axis-angles; the fit attribute ``a_i`` is each vertex's rest distance to the body (FitGar's
 quantity before its factor analysis, which describes a garment, not a vertex); heads are averaged.
@@ -60,6 +68,9 @@ from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import face_normals
 
 STAGES = ("supervised", "all")
+#: Values of :attr:`SwinGarConfig.global_descriptor` (SwinGar Table I), and the descriptor distance each reads
+#: (None: the garment graph carries no descriptor).
+GLOBAL_DESCRIPTORS = {"spectral": "geodesic", "euclidean": "euclidean", "pooling": None, "none": None}
 GRAVITY = 9.8  # m/s^2, along -Z
 #: Scale of the initial weights of the layers whose outputs are displacements (metres): the garment
 #: starts from its skinned rest shape.
@@ -83,7 +94,10 @@ class SwinGarConfig:
         corrective_layers: single-head GAT-LN sizes after it ([64, 3]; the last must be 3).
         corrective_frames: coarse meshes the LSTM-GAT-LN runs over (3).
         alpha: GAT-LN score scale (2); null: plain GAT layers (the ablation of SwinGar Fig. 8, 9).
-        descriptor_samples: spectral descriptor length ``z`` (256).
+        descriptor_samples: spectral descriptor length ``z`` (256); used by ``spectral`` and ``euclidean`` only.
+        global_descriptor: the garment's global feature ``a`` (SwinGar Table I): ``spectral`` (the paper's
+            geodesic spectral descriptor), ``euclidean`` (the descriptor with straight-line distances),
+            ``pooling`` (max-pooled fully connected layer on the graph features ``G``) or ``none`` (ones).
         k_vert, k_edge, k_bend, k_gravity, k_collision: loss weights (50, 10, 3, 0.2, 1.5).
         collision_eps: ``epsilon`` of SwinGar Eq. 14, metres (the paper: "a small positive value"; ours 2 mm).
         density: fabric density for the vertex masses of the gravity term, kg/m^2 (ours).
@@ -105,6 +119,7 @@ class SwinGarConfig:
     corrective_frames: int = 3
     alpha: Optional[float] = 2.0
     descriptor_samples: int = 256
+    global_descriptor: str = "spectral"
     k_vert: float = 50.0
     k_edge: float = 10.0
     k_bend: float = 3.0
@@ -132,6 +147,21 @@ class SwinGarConfig:
         weights = (self.k_vert, self.k_edge, self.k_bend, self.k_gravity, self.k_collision, self.collision_eps)
         if min(weights) < 0 or (self.alpha is not None and self.alpha < 0) or not self.density > 0:
             raise InputError("loss weights, collision_eps and alpha must be >= 0 and density > 0")
+        if self.global_descriptor not in GLOBAL_DESCRIPTORS:
+            raise InputError(f"model.global_descriptor must be one of {sorted(GLOBAL_DESCRIPTORS)}, "
+                             f"got {self.global_descriptor!r}")
+
+    @property
+    def descriptor_distance(self) -> str | None:
+        """The spectral descriptor's distance this model reads (``"geodesic"``, ``"euclidean"``), or None."""
+        return GLOBAL_DESCRIPTORS[self.global_descriptor]
+
+    def graph_settings(self) -> dict:
+        """Keyword arguments of :func:`~loosefit.models.multi_garment.garment_graph` and
+        :class:`~loosefit.models.multi_garment.MultiGarmentData` for this model: training and animation
+        build garments with the same descriptor."""
+        return {"descriptor_samples": self.descriptor_samples, "density": self.density,
+                "descriptor_distance": self.descriptor_distance}
 
 
 def _paper_training() -> TrainConfig:
@@ -203,7 +233,10 @@ class SwinGar(nn.Module):
         a = c.alpha
         chans = [7, *c.graph_hidden]
         self.graph_encoder = nn.ModuleList(GATLN(i, o, h, a) for i, o, h in zip(chans[:-1], chans[1:], c.graph_heads))
-        self.shape_encoder = mlp_relu([c.descriptor_samples, *c.shape_mlp])
+        if c.descriptor_distance is not None:
+            self.shape_encoder = mlp_relu([c.descriptor_samples, *c.shape_mlp])
+        elif c.global_descriptor == "pooling":
+            self.pool = nn.Sequential(nn.Linear(c.graph_hidden[-1], c.shape_mlp[-1]), nn.ReLU())
         self.motion_encoder = nn.LSTM(pose, c.motion_hidden, batch_first=True)
         self.body_encoder = mlp_relu([S + pose, *c.body_mlp])
         self.state_encoder = GATLN(c.graph_hidden[-1], c.state_hidden, c.state_heads, a)
@@ -235,6 +268,8 @@ class SwinGar(nn.Module):
 
     @classmethod
     def from_data(cls, data: MultiGarmentData, config: SwinGarConfig) -> "SwinGar":
+        for graph in data.graphs:
+            check_graph(graph, config)
         model = cls(cls.data_sizes(data), config)
         stats = data.feature_stats()
         with torch.no_grad():
@@ -249,11 +284,16 @@ class SwinGar(nn.Module):
     # ------------------------------------------------------------------ the garment, once
 
     def garment_features(self, g: dict) -> tuple[torch.Tensor, torch.Tensor]:
-        """Graph features ``G (V, graph_hidden[-1])`` and shape features ``a (shape_mlp[-1],)`` of a garment
-        (:meth:`GarmentGraph.tensors`)."""
+        """Graph features ``G (V, graph_hidden[-1])`` and global features ``a (shape_mlp[-1],)`` of a garment
+        (:meth:`GarmentGraph.tensors`); ``a`` as ``config.global_descriptor`` says (see the module doc)."""
         x = torch.cat([g["normals"], g["rest"], g["fit"][:, None]], -1)
         for layer in self.graph_encoder:
             x = layer(x, *_graph(g))
+        mode = self.config.global_descriptor
+        if mode == "none":
+            return x, x.new_ones(self.config.shape_mlp[-1])
+        if mode == "pooling":
+            return x, self.pool(x).amax(-2)  # max over the vertices
         descriptor = g["descriptor"]
         if descriptor.shape[-1] != self.config.descriptor_samples:
             raise InputError(f"the garment's spectral descriptor has {descriptor.shape[-1]} values, the model "
@@ -454,6 +494,14 @@ class SwinGar(nn.Module):
         return {"rmse_mm": (sq / frames) ** 0.5 * 1e3, "mean_vertex_error_mm": dist / frames * 1e3}
 
 
+def check_graph(graph, config: SwinGarConfig) -> None:
+    """Refuse a :class:`~loosefit.models.multi_garment.GarmentGraph` built with another global descriptor
+    than ``config`` asks for (build it with ``config.graph_settings()``)."""
+    if config.descriptor_distance is not None and graph.descriptor_distance != config.descriptor_distance:
+        raise InputError(f"garment {graph.name!r} carries a {graph.descriptor_distance} descriptor; the model's "
+                         f"global_descriptor {config.global_descriptor!r} reads a {config.descriptor_distance} one")
+
+
 class BoundSwinGar(nn.Module):
     """A trained :class:`SwinGar` bound to one garment on one body: the per-garment interface of
     :class:`~loosefit.models.base.GarmentModel` (``forward(root, joints, state) -> {"verts", "state", ...}``,
@@ -469,6 +517,7 @@ class BoundSwinGar(nn.Module):
 
     def __init__(self, model: SwinGar, graph):
         super().__init__()
+        check_graph(graph, model.config)
         self.model, self.graph_name = model, graph.name
         self.g = graph.tensors()
         self.register_buffer("faces", self.g["faces"].clone())

@@ -20,6 +20,20 @@ garment templates (0.02 m versus 0.03 m edges, sigma 0.3 m: largest distance 9.5
 5.3e-3 weighted, both for the skirt). The descriptor is the eigenvalue vector, decreasing; it sums to 1 (the trace)
 and does not depend on the vertex count (``N`` times it estimates the eigenvalues of ``A``).
 
+**Euclidean variant** (``distance="euclidean"``, the third row of SwinGar's Table I): the kernel reads the
+straight-line distance ``|x_i - x_j|`` instead of ``d(i, j)``. Everything else stays as for the geodesic
+descriptor: the same furthest point samples (geodesic) and the same geodesic Voronoi cell weights ``w``.
+The weights are the share of the surface each sample stands for, an intrinsic quantity; assigning a
+vertex to its Euclidean-nearest sample would hand surface across a fold or between the two legs of a
+jumpsuit to a sample on the other layer, so the weights themselves would start to change with bending.
+Keeping samples and weights geodesic makes the ablation change exactly one thing, the distance inside
+the kernel, as the paper's does. Two consequences: on a flat sheet the two descriptors differ only
+through Dijkstra's over-estimate of the straight-line distance (the samples and weights are identical,
+so by the Hoffman-Wielandt inequality the descriptor distance is at most ``sqrt(sum_ij w_i w_j (B_ij -
+B'_ij)^2)``, itself at most ``max_ij |d_ij - |x_i - x_j|| / (sigma sqrt(e))``, the kernel's largest slope
+being ``1 / (sigma sqrt(e))`` at ``d = sigma``); and the Gaussian of Euclidean distances is a positive
+definite kernel, so that spectrum has no negative eigenvalues (the geodesic one may have a few small ones).
+
 Properties that follow: invariant to rigid motion (geodesics are), nearly invariant to bending
 without stretch (geodesics change little) and to remeshing (what remains is Dijkstra's
 over-estimate of the surface distance, which depends on the triangulation). Garments of different
@@ -34,6 +48,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from loosefit.errors import InputError
 from loosefit.geometry.geodesic import edge_geodesics
@@ -44,6 +59,8 @@ from loosefit.geometry.sampling import furthest_point_sampling
 DEFAULT_SAMPLES = 256
 #: Width of the Gaussian affinity kernel, metres.
 DEFAULT_SIGMA = 0.3
+#: Distances the affinity kernel can read: edge geodesics (the paper's) or straight lines (its Table I ablation).
+DISTANCES = ("geodesic", "euclidean")
 
 
 @dataclass
@@ -56,6 +73,7 @@ class SpectralDecomposition:
         eigenvalues: ``(z,)`` float64 eigenvalues of ``S B S``, decreasing (sum 1).
         eigenvectors: ``(z, z)`` float64 matching orthonormal eigenvectors (columns).
         affinity_to_samples: ``(N, z)`` float64 affinities ``C`` of every vertex to every sample.
+        distance: what the kernel read, ``"geodesic"`` or ``"euclidean"`` (:data:`DISTANCES`).
     """
 
     samples: np.ndarray
@@ -63,6 +81,7 @@ class SpectralDecomposition:
     eigenvalues: np.ndarray
     eigenvectors: np.ndarray
     affinity_to_samples: np.ndarray
+    distance: str = "geodesic"
 
     def descriptor(self) -> np.ndarray:
         """``(z,)`` float32 descriptor: the eigenvalues, decreasing."""
@@ -82,13 +101,21 @@ class SpectralDecomposition:
 
 
 def affinity(distances: np.ndarray, sigma: float) -> np.ndarray:
-    """The kernel ``exp(-d^2 / (2 sigma^2))`` of geodesic distances ``d`` in metres (any shape)."""
+    """The kernel ``exp(-d^2 / (2 sigma^2))`` of distances ``d`` in metres (any shape)."""
     d = np.asarray(distances, np.float64)
     return np.exp(-(d * d) / (2.0 * sigma * sigma))
 
 
+def check_distance(distance: str) -> str:
+    """``distance`` if it is one of :data:`DISTANCES`, else an :class:`InputError` naming them."""
+    if distance not in DISTANCES:
+        raise InputError(f"spectral descriptor distance must be one of {DISTANCES}, got {distance!r}")
+    return distance
+
+
 def spectral_decomposition(
-    verts: np.ndarray, faces: np.ndarray, samples: int = DEFAULT_SAMPLES, sigma: float = DEFAULT_SIGMA, seed: int = 0
+    verts: np.ndarray, faces: np.ndarray, samples: int = DEFAULT_SAMPLES, sigma: float = DEFAULT_SIGMA, seed: int = 0,
+    distance: str = "geodesic",
 ) -> SpectralDecomposition:
     """Furthest point samples, their affinity spectrum and the Nystrom affinities of a mesh.
 
@@ -99,8 +126,11 @@ def spectral_decomposition(
         samples: ``z``; at most ``N``.
         sigma: kernel width, metres.
         seed: picks the first sample (the others follow deterministically).
+        distance: ``"geodesic"`` (edge geodesics, SwinGar Sec. III-B) or ``"euclidean"`` (straight lines, its
+            Table I ablation) inside the kernel; samples and cell weights are geodesic either way (module doc).
     """
     verts = np.asarray(verts, np.float64)
+    check_distance(distance)
     if not sigma > 0:
         raise InputError(f"affinity kernel width sigma must be positive, got {sigma}")
     if verts.ndim != 2 or not 1 <= samples <= len(verts):
@@ -110,23 +140,26 @@ def spectral_decomposition(
     area = np.asarray(mass_matrix(verts, faces).diagonal(), np.float64)
     cells = np.bincount(dist.argmin(0), weights=area, minlength=samples)
     w = cells / cells.sum()
+    if distance == "euclidean":
+        dist = cdist(verts[picked], verts)  # (z, N) straight-line distances
     C = affinity(dist.T, sigma)  # (N, z)
     B = C[picked]
     s = np.sqrt(w)
     lam, U = np.linalg.eigh(s[:, None] * (0.5 * (B + B.T)) * s[None])
     order = np.argsort(lam)[::-1]
-    return SpectralDecomposition(picked, w, lam[order], U[:, order], C)
+    return SpectralDecomposition(picked, w, lam[order], U[:, order], C, distance)
 
 
 def spectral_descriptor(
-    verts: np.ndarray, faces: np.ndarray, samples: int = DEFAULT_SAMPLES, sigma: float = DEFAULT_SIGMA, seed: int = 0
+    verts: np.ndarray, faces: np.ndarray, samples: int = DEFAULT_SAMPLES, sigma: float = DEFAULT_SIGMA, seed: int = 0,
+    distance: str = "geodesic",
 ) -> np.ndarray:
     """SwinGar's clothing spectral descriptor ``(z,)`` float32 of a garment in its rest pose.
 
-    See the module docstring for the kernel and the normalisation; arguments as for
-    :func:`spectral_decomposition`.
+    See the module docstring for the kernel, the normalisation and the ``"euclidean"`` variant; arguments
+    as for :func:`spectral_decomposition`.
     """
-    return spectral_decomposition(verts, faces, samples, sigma, seed).descriptor()
+    return spectral_decomposition(verts, faces, samples, sigma, seed, distance).descriptor()
 
 
 def descriptor_distance(a: np.ndarray, b: np.ndarray) -> float:

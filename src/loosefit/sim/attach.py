@@ -2,7 +2,8 @@
 
 Each garment vertex takes the skinning weights of its nearest rest-pose body vertex and is posed
 by linear blend skinning with the body's joint transforms. The simulator uses these positions
-as the animated targets of pinned vertices (and as the cloth's start state).
+as the animated targets of pinned vertices (and as the cloth's start state); the whole garment posed
+so is the body-LBS baseline of the benchmarks (:func:`body_lbs`).
 """
 
 from __future__ import annotations
@@ -46,3 +47,10 @@ def skin_garment(
             skinning_transforms(world, rest_joints),
         )
     return verts.numpy().astype(np.float32)
+
+
+def body_lbs(garment_verts: np.ndarray, body: BodyModel, motion: Motion, shape=None) -> np.ndarray:
+    """The body-LBS baseline: every vertex of a rest garment ``(V, 3)`` skinned along ``motion`` with the weights
+    of its nearest rest body vertex (:func:`garment_weights`, :func:`skin_garment`); ``(T, V, 3)`` float32,
+    metres, in the world. The same as a trained :class:`~loosefit.models.body_lbs.BodyLBS` run, without one."""
+    return skin_garment(garment_verts, garment_weights(garment_verts, body, shape), body, motion, shape)
