@@ -34,11 +34,14 @@ holds garments, bodies and motions the training never saw):
 
 Say which data a result is: ``--set-name dynamic`` for motions as simulated, ``quasi-static`` for a store
 of slow motions or poses held until the cloth settles (a static method is judged where it applies).
+``--also quasi-static=STATIC.zarr`` evaluates the same runs on a second store's test sequences as well (the
+quasi-static walks of ``configs/datasets/garments-static.yaml``: the same test garments and bodies, walks
+played four times slower).
 
 Run: .venv/bin/python benchmarks/accuracy_graph.py --data DATA.zarr --runs RUNS [--variants full,plain]
          [--preset cpu|paper] [--config swingar:configs/models/swingar.yaml ...]
          [--set swingar:train.stages.all.epochs=5 ...] [--vb-data VB.zarr] [--bones 80] [--set-name dynamic]
-         [--name accuracy-graph]
+         [--also quasi-static=STATIC.zarr] [--name accuracy-graph]
      SwinGar's ablations: --variants swingar-all (= swingar, swingar-no-descriptor, swingar-pooling,
          swingar-euclidean, swingar-plain-gat, swingar-alpha-1, swingar-alpha-3) --name accuracy-graph-swingar
 (writes benchmarks/results/<name>.json)
@@ -58,8 +61,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy  # noqa: E402  (benchmarks/accuracy.py: VirtualBones' CPU preset and training)
 from _common import save_results  # noqa: E402
-
-import torch  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402
 from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
@@ -364,6 +365,9 @@ def main() -> None:
                    help="a store of a test garment's own training sequences: VirtualBones against SwinGar on it")
     p.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones per garment when preparing --vb-data")
     p.add_argument("--set-name", default="dynamic", help="what the data is: dynamic or quasi-static")
+    p.add_argument("--also", action="append", default=[], metavar="NAME=STORE",
+                   help="evaluate every variant on the test sequences of another store too, e.g. "
+                        "quasi-static=DATA-STATIC.zarr (configs/datasets/garments-static.yaml): results under NAME")
     p.add_argument("--name", default="accuracy-graph")
     args = p.parse_args()
     variants = variant_list(args.variants)
@@ -372,6 +376,8 @@ def main() -> None:
         p.error("--config: one file per method")
     if args.vb_data is not None and "swingar" not in variants:
         p.error("--vb-data compares VirtualBones with the variant 'swingar': add it to --variants")
+    if any("=" not in a for a in args.also):
+        p.error("--also takes NAME=STORE")
     if args.data is not None and args.runs is None:
         p.error("--data needs --runs")
 
@@ -383,6 +389,7 @@ def main() -> None:
     if args.data is not None:
         store = DatasetStore.open(args.data)
         names = store.sequence_names(split="test")
+        also = {label: DatasetStore.open(path) for label, path in (a.split("=", 1) for a in args.also)}
         results.update(data=str(args.data.resolve()), test_sequences=names, variants={})
         for variant in variants:
             method, own = VARIANTS[variant]
@@ -401,6 +408,12 @@ def main() -> None:
                                             "rows": rows, **means(rows, metrics),
                                             "by_body": table(rows, "body", metrics),
                                             "by_garment": table(rows, "garment", metrics)}
+            for label, other in also.items():
+                print(f"== {variant}: evaluate on {label}", flush=True)
+                rows = EVALUATORS[method](run, other, other.sequence_names(split="test"))
+                results["variants"][variant][label] = {"rows": rows, **means(rows, metrics),
+                                                       "by_body": table(rows, "body", metrics),
+                                                       "by_garment": table(rows, "garment", metrics)}
         done = results["variants"]
         targets, checks = fitgar_targets(done), []
         if any(VARIANTS[v][0] == "swingar" for v in done):
