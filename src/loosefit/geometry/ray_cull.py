@@ -1,0 +1,207 @@
+"""Which points are certainly outside a closed triangle mesh, by a test cheap enough to run before a costly
+signed distance (SwinGar's neural body SDF) so that it is evaluated only where a point may be inside.
+
+A point is certified outside when one of the six axis-aligned rays from it (``+x, -x, +y, -y, +z, -z``)
+meets no triangle of the mesh. Such a ray joins the point to infinity without crossing the surface, so the
+point lies in the unbounded component of space minus the surface: its winding number is 0, it is outside.
+For a closed, consistently oriented mesh that does not cross itself this is also the sign of
+:class:`~loosefit.geometry.signed_distance.BodySDF` (libigl's pseudonormal test). A skinned body can cross
+itself in some poses; there the two signs can disagree, and the cull follows the winding number: in 6.5M
+tests of random points on, near and inside the Anny proxy (two shapes, walk, spin and mix, every seventh
+frame, three bin sizes, float32 and float64), 48 (three frames) were of points inside by the pseudonormal sign
+(7-35 mm deep) with winding number 0 and a free ray; no certified point had a nonzero winding number. The test never certifies a point that is inside; it may fail to
+certify one that is outside (a point in a pocket such as between an arm and the torso, or close to the
+surface), which then goes to the exact test.
+
+The rays are tested against bounds binned on a grid: for the ray along axis ``a``, the plane of the two other
+axes is cut into bins of sides ``cell`` (per axis); each bin keeps an upper bound ``hi`` (lower bound ``lo``) of
+the ``a`` coordinate of every triangle part that lies over it. A triangle the ``+a`` ray from ``p`` meets has
+a point with the two other coordinates of ``p`` (so over ``p``'s bin) and an ``a`` coordinate ``>= p_a``:
+hence ``p_a > hi`` proves the ray free (``p_a < lo`` for ``-a``). A point outside the mesh's own box is
+outside. Per triangle and bin overlapped by the triangle's box, the bound is the smaller of
+
+- the box's largest ``a`` (smallest for ``lo``), and
+- the largest ``a`` of the triangle's plane over the bin's rectangle, which a linear function reaches at a
+  corner (smallest for ``lo``); only for planes with ``|da/db| + |da/dc| <= STEEP``, computed in float64.
+  It makes the bound tight near a surface facing the ray: a vertex 1-2 cm off the body is certified, where
+  boxes of 3-5 cm triangles are not.
+
+Rounding: points and vertices are used in float32. The boxes are widened by ``eps``, four float32 steps at the
+mesh's largest coordinate (more than rounding a float64 vertex or point to float32 moves it); the bins'
+rectangles by ``eps`` and a millionth of a cell; the plane bound by ``eps (2 + |da/db| + |da/dc|)`` (the plane
+of the rounded vertices against the true one, the float64 sums and the final float32 rounding) plus 1e-9 m.
+Bin indices come from one monotone formula, ``floor((x - low) * (1 / cell))`` per axis, in float32, for points
+and boxes alike, so rounding never drops a triangle from a bin its point's coordinates fall in.
+
+Two implementations give the same maps: Warp kernels (compiled once and cached on disk; then 0.3-0.5 ms for
+the 2,454 triangles of the Anny proxy at 2 cm and 0.12 ms for 10k points, on this project's CPUs) and NumPy
+(the reference, 1-2 ms and 0.3 ms, used when Warp cannot load).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import torch
+
+from loosefit.errors import InputError
+
+#: The two plane axes of each ray axis.
+_PLANE = ((1, 2), (0, 2), (0, 1))
+#: A triangle steeper than this along a ray axis (``|da/db| + |da/dc|`` of its plane) bounds a bin by its box
+#: alone: the plane would hardly be tighter, and its rounding margin grows with the slope.
+STEEP = 20.0
+
+
+@functools.lru_cache(maxsize=1)
+def _warp_kernels():
+    """``(warp, rasterize, query)`` (``None`` when Warp cannot be imported); compiled on first use, then cached
+    on disk by Warp."""
+    try:
+        import warp as wp
+
+        from loosefit.geometry._ray_cull_warp import query, rasterize
+    except Exception:  # not installed or broken: the NumPy path
+        return None
+    return wp, rasterize, query
+
+
+class AxisRayCuller:
+    """Certify points outside a closed mesh by the six axis rays (see the module docstring).
+
+    Build it once for a mesh's faces and call :meth:`update` with each posed frame's vertices (the buffers are
+    reused); :meth:`outside` then answers for that frame.
+
+    Args:
+        verts: ``(V, 3)`` mesh vertices, metres (the first posed frame).
+        faces: ``(F, 3)`` int triangles of a closed mesh.
+        cell: side of the bins, metres, one for every axis or ``(x, y, z)`` (smaller: tighter near the surface,
+            more bins per triangle).
+        backend: ``"auto"`` (Warp when it loads, else NumPy), ``"warp"`` or ``"numpy"``.
+    """
+
+    def __init__(self, verts: np.ndarray, faces: np.ndarray, cell=0.02, backend: str = "auto"):
+        f = np.asarray(faces)
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or not np.issubdtype(f.dtype, np.integer):
+            raise InputError(f"AxisRayCuller needs integer faces (F, 3), got {f.dtype} {f.shape}")
+        cells = np.broadcast_to(np.asarray(cell, np.float64), (3,))
+        if not (cells > 0).all():
+            raise InputError(f"cull cell must be positive metres, got {cell}")
+        if backend not in ("auto", "warp", "numpy"):
+            raise InputError(f"cull backend must be 'auto', 'warp' or 'numpy', got {backend!r}")
+        kernels = None if backend == "numpy" else _warp_kernels()
+        if backend == "warp" and kernels is None:
+            raise InputError("the Warp cull backend needs warp (pip install warp-lang)")
+        self.backend = "numpy" if kernels is None else "warp"
+        self.faces = np.ascontiguousarray(f, np.int32)
+        self.num_verts = int(self.faces.max()) + 1
+        self.inv = np.float32(1.0) / cells.astype(np.float32)
+        if kernels is not None:
+            self._wp, self._rasterize, self._query = kernels
+            self._faces = self._wp.array(self.faces, dtype=self._wp.vec3i, device="cpu")
+            self._maps = None  # (hi, lo) Warp arrays, grown as needed
+        self.update(verts)
+
+    def update(self, verts: np.ndarray) -> "AxisRayCuller":
+        """Rebuild the maps for the mesh posed at ``verts (V, 3)`` (metres); returns ``self``."""
+        v = np.asarray(verts)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) < self.num_verts:
+            raise InputError(f"AxisRayCuller needs verts (V >= {self.num_verts}, 3), got {v.shape}")
+        v32 = np.ascontiguousarray(v, np.float32)
+        vmin, vmax = (x.numpy() for x in torch.aminmax(torch.from_numpy(v32), dim=0))
+        if not (np.isfinite(vmin).all() and np.isfinite(vmax).all()):
+            raise InputError("AxisRayCuller: the mesh has NaN or infinite vertices")
+        # widening: 4 float32 steps at the largest coordinate (rounding a vertex or a point moves it by half a step)
+        self.eps = np.float32(4.0 * np.spacing(np.float32(max(np.abs(vmin).max(), np.abs(vmax).max(), 1.0))))
+        self.low, self.high = vmin - self.eps, vmax + self.eps  # the mesh's (widened) box
+        self.bins = self._bin(self.high[None])[0] + 1
+        sizes = [int(self.bins[b] * self.bins[c]) for b, c in _PLANE]
+        self._base = np.cumsum([0] + sizes[:-1])
+        n = sum(sizes)
+        if self.backend == "warp":
+            wp = self._wp
+            if self._maps is None or self._maps[0].shape[0] < n:
+                self._maps = tuple(wp.empty(max(n, 2 * (0 if self._maps is None else self._maps[0].shape[0])),
+                                            dtype=float, device="cpu") for _ in range(2))
+            hi, lo = self._maps
+            self.hi, self.lo = hi.numpy()[:n], lo.numpy()[:n]  # views of the Warp buffers
+            self.hi.fill(-np.inf)
+            self.lo.fill(np.inf)
+            wp.launch(self._rasterize, dim=len(self.faces), device="cpu",
+                      inputs=[wp.array(v32, dtype=wp.vec3, device="cpu", copy=False), self._faces, float(self.eps),
+                              wp.vec3(*self.low), wp.vec3(*self.inv), wp.vec3i(*self.bins.tolist()), hi, lo])
+            return self
+        self.hi = np.full(n, -np.inf, np.float32)
+        self.lo = np.full(n, np.inf, np.float32)
+        tri = v32[self.faces]
+        tmin = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2]) - self.eps  # (F, 3) widened triangle boxes
+        tmax = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]) + self.eps
+        lo_bin, hi_bin = self._bin(tmin), self._bin(tmax)
+        q = tri.astype(np.float64)
+        normal = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+        eps, cells = np.float64(self.eps), 1.0 / self.inv.astype(np.float64)
+        low = self.low.astype(np.float64)
+        for a, (b, c) in enumerate(_PLANE):
+            # every (triangle, bin) pair of the triangles' boxes, flat: triangle t owns count_t consecutive slots
+            wide = hi_bin[:, c] - lo_bin[:, c] + 1
+            count = (hi_bin[:, b] - lo_bin[:, b] + 1) * wide
+            which = np.repeat(np.arange(len(self.faces)), count)
+            local = np.arange(len(which)) - np.repeat(np.cumsum(count) - count, count)
+            w = wide[which]
+            i, j = lo_bin[which, b] + local // w, lo_bin[which, c] + local % w
+            top, bottom = tmax[which, a], tmin[which, a]
+            # the plane bound of the kernels (see the module docstring), where the plane is not too steep
+            n = normal[which]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                gb, gc = -n[:, b] / n[:, a], -n[:, c] / n[:, a]
+            planar = (np.abs(n[:, a]) > 0) & (np.abs(gb) + np.abs(gc) <= STEEP)
+            gb, gc = np.where(planar, gb, 0.0), np.where(planar, gc, 0.0)
+            p0 = q[which, 0]
+            a0 = p0[:, a] - gb * p0[:, b] - gc * p0[:, c]
+            margin = eps * (2.0 + np.abs(gb) + np.abs(gc)) + 1e-9
+            pad = eps + 1e-6 * cells[b]
+            bb, cc = low[b] + i * cells[b], low[c] + j * cells[c]  # the bin's lower corner
+            # the corners maximising / minimising the plane over the (padded) bin
+            up = (a0 + gb * (bb + np.where(gb > 0, cells[b] + pad, -pad)) + margin
+                  + gc * (cc + np.where(gc > 0, cells[c] + pad, -pad))).astype(np.float32)
+            down = (a0 + gb * (bb + np.where(gb > 0, -pad, cells[b] + pad)) - margin
+                    + gc * (cc + np.where(gc > 0, -pad, cells[c] + pad))).astype(np.float32)
+            top = np.where(planar, np.minimum(top, up), top)
+            bottom = np.where(planar, np.maximum(bottom, down), bottom)
+            index = self._base[a] + i * self.bins[c] + j
+            np.maximum.at(self.hi, index, top)
+            np.minimum.at(self.lo, index, bottom)
+        return self
+
+    def _bin(self, points: np.ndarray) -> np.ndarray:
+        """Bin indices ``(N, 3)`` of float32 points (the kernels' formula, in float32)."""
+        return np.floor((points - self.low) * self.inv).astype(np.int64)
+
+    def outside(self, points: np.ndarray) -> np.ndarray:
+        """``(N,)`` bool: True where ``points (N, 3)`` (metres) are certainly outside; False: may be inside."""
+        p = np.asarray(points)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise InputError(f"points must be (N, 3), got {p.shape}")
+        p = np.ascontiguousarray(p, np.float32)
+        if self.backend == "warp":
+            out = np.empty(len(p), np.uint8)
+            if len(p):
+                wp = self._wp
+                wp.launch(self._query, dim=len(p), device="cpu",
+                          inputs=[wp.array(p, dtype=wp.vec3, device="cpu", copy=False), wp.vec3(*self.low),
+                                  wp.vec3(*self.high), wp.vec3(*self.inv), wp.vec3i(*self.bins.tolist()), *self._maps,
+                                  wp.array(out, dtype=wp.uint8, device="cpu", copy=False)])
+            return out.view(bool)
+        out = ((p < self.low) | (p > self.high)).any(1)  # outside the box of the mesh's triangles
+        near = np.flatnonzero(~out)
+        if len(near) == 0:
+            return out
+        q = p[near]
+        k = self._bin(q)
+        free = np.zeros(len(q), bool)
+        for a, (b, c) in enumerate(_PLANE):
+            index = self._base[a] + k[:, b] * self.bins[c] + k[:, c]
+            free |= (q[:, a] > self.hi[index]) | (q[:, a] < self.lo[index])
+        out[near] = free
+        return out
