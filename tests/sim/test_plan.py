@@ -136,7 +136,7 @@ def test_specs_are_typed_configs_and_yaml_exponents_are_numbers(tmp_path):
     assert plan.motion_spec("f") == FileMotion("c.bvh", None, 0, None)
     assert plan.garments["g"] == {"template": "skirt", "params": {"length": 0.5}}  # as written: hashes unchanged
     for change, message in [({"motions": {"m": {"procedural": "walk", "seconds": 1, "speed": 2}}},
-                             r"motion 'm': unknown keys \['speed'\]; allowed: \['procedural', 'seconds', 'seed'\]"),
+                             r"motion 'm': unknown keys \['speed'\]; allowed: \['procedural', 'seconds', 'seed', 'slowdown'\]"),
                             ({"garments": {"g": {"template": "skirt", "seed": "one"}}},
                              r"garment 'g': config key 'seed': expected an integer"),
                             ({"motions": {"m": {"file": "c.bvh", "frames": 0}}}, r"'frames' must be an integer >= 1")]:
