@@ -14,6 +14,7 @@ from torch_geometric.nn import GATConv
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import cotangent_laplacian, edges, mass_matrix
 from loosefit.models.layers.gat_ln import GATLN, attention_table
+from loosefit.threads import torch_threads
 from tests.rig.conftest import sheet, tube
 
 
@@ -127,7 +128,9 @@ def test_one_graph_fit_spectrum_follows_alpha():
     GAT-LN network fits a signal made of the Laplacian eigenvectors 32-63 (of 256) of a sheet; the energy
     of the fit in that band grows with alpha. Plain GAT (alpha None) reaches the most here: on a single
     graph the normalisation restrains the spectrum rather than widening it (see the SwinGar notes)."""
-    verts, faces = sheet(16, 16, 0.6, 0.6)
+    # a 0.6 x 0.5 sheet: a square one has repeated eigenvalues, whose eigenvectors (and so the signal)
+    # the LAPACK build and its thread count choose
+    verts, faces = sheet(16, 16, 0.6, 0.5)
     V = len(verts)
     L, M = -cotangent_laplacian(verts, faces).toarray(), mass_matrix(verts, faces).toarray()
     _, U = scipy.linalg.eigh(L, M)  # M-orthonormal eigenvectors, increasing frequency
@@ -154,7 +157,8 @@ def test_one_graph_fit_spectrum_follows_alpha():
         out = h.detach().numpy()[:, 0]
         return float(((U[:, band].T @ M @ out) ** 2).sum() / target.sum())
 
-    energy = {a: band_energy(a) for a in (0.0, 2.0, 8.0, None)}
+    with torch_threads(1):  # 300 Adam steps: the reduction order of more threads moves the fit
+        energy = {a: band_energy(a) for a in (0.0, 2.0, 8.0, None)}
     assert energy[0.0] < energy[2.0] < energy[8.0] < energy[None], energy
-    # measured 0.48, 0.50, 0.77, 0.81
-    assert energy[2.0] == pytest.approx(0.50, abs=0.08) and energy[8.0] == pytest.approx(0.77, abs=0.08)
+    # measured 0.415, 0.436, 0.60-0.70, 0.80-0.81 (alpha 8 depends on the BLAS threads: 0.70 with one, 0.60 with two)
+    assert energy[2.0] == pytest.approx(0.44, abs=0.06) and energy[8.0] == pytest.approx(0.65, abs=0.1)
