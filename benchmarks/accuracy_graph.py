@@ -4,7 +4,7 @@ For ``--data`` (a simulated, prepared store such as ``configs/datasets/garments.
 holds garments, bodies and motions the training never saw):
 
 1. every variant of :data:`VARIANTS` (or of a group of :data:`GROUPS`) is trained into ``--runs/<variant>``
-   (resumed when there) from its method's config file and overrides of ``--preset`` (:data:`PRESETS`:
+   (resumed when there) from its method's config file of ``--preset`` (:data:`PRESETS`:
    ``cpu``, CPU-sized networks; ``paper``, the paper's sizes in ``configs/models/<method>.yaml``), then the
    variant's overrides, then the ``--set METHOD:key=value`` ones; ``--config METHOD:PATH`` replaces the
    preset's file. Training runs without validation (the test split never picks a checkpoint) and the last
@@ -103,13 +103,13 @@ GROUPS = {
     "swingar-alpha": ["swingar", "swingar-plain-gat", "swingar-alpha-1", "swingar-alpha-3"],
     "swingar-all": [v for v, (m, _) in VARIANTS.items() if m == "swingar"],
 }
-#: ``--preset`` -> method -> (config file, overrides applied before the variant's and ``--set``'s).
+#: ``--preset`` -> method -> config file.
 #: ``cpu``: the CPU-sized networks of ``configs/models/<method>-cpu.yaml`` (SwinGar's: about 13 minutes of
 #: training on one core for ``configs/datasets/garments.yaml``, see the file); ``paper``: the paper's sizes.
 #: (The sizes are tied to each other, so they live in files: an override is checked on its own.)
 PRESETS = {
-    "cpu": {"fitgar": (CONFIGS / "fitgar-cpu.yaml", []), "swingar": (CONFIGS / "swingar-cpu.yaml", [])},
-    "paper": {"fitgar": (CONFIGS / "fitgar.yaml", []), "swingar": (CONFIGS / "swingar.yaml", [])},
+    "cpu": {"fitgar": CONFIGS / "fitgar-cpu.yaml", "swingar": CONFIGS / "swingar-cpu.yaml"},
+    "paper": {"fitgar": CONFIGS / "fitgar.yaml", "swingar": CONFIGS / "swingar.yaml"},
 }
 #: Detail error at most this times the coarse error (the project's floor; the FitGar paper reaches 0.50).
 DETAIL_OVER_COARSE = 0.6
@@ -382,7 +382,7 @@ def main() -> None:
         p.error("--data needs --runs")
 
     def config_of(method: str) -> Path:
-        return Path(configs[method][0]) if method in configs else PRESETS[args.preset][method][0]
+        return Path(configs[method][0]) if method in configs else PRESETS[args.preset][method]
 
     results: dict = {"set": args.set_name, "preset": args.preset, "load_average_at_start": os.getloadavg()}
     started = time.perf_counter()
@@ -393,7 +393,7 @@ def main() -> None:
         results.update(data=str(args.data.resolve()), test_sequences=names, variants={})
         for variant in variants:
             method, own = VARIANTS[variant]
-            overrides = [*PRESETS[args.preset][method][1], *own, *sets.get(method, [])]
+            overrides = [*own, *sets.get(method, [])]
             run = args.runs / variant
             print(f"== {variant}: train {method} -> {run}", flush=True)
             start = time.perf_counter()

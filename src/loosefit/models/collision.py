@@ -404,10 +404,8 @@ class CollisionResolver:
     """
 
     def __init__(self, faces: np.ndarray, num_verts: int, sigma: float | None = None):
-        e = edges(np.asarray(faces, np.int64))
-        self.edges = e
-        src = np.concatenate([e[:, 0], e[:, 1]])
-        dst = np.concatenate([e[:, 1], e[:, 0]])
+        src, dst = vertex_neighbours(faces, num_verts)
+        self.src, self.dst = src, dst
         order = np.argsort(src, kind="stable")
         self.neighbours = dst[order]  # CSR: the neighbours of i are neighbours[start[i]:start[i + 1]]
         self.start = np.concatenate([[0], np.cumsum(np.bincount(src, minlength=num_verts))])
@@ -416,10 +414,10 @@ class CollisionResolver:
 
     def mean_edge(self, verts: torch.Tensor) -> float:
         """Mean edge length of ``verts (V, 3)``, metres (1 for a mesh without edges)."""
-        if len(self.edges) == 0:
+        if len(self.src) == 0:
             return 1.0
-        e = torch.from_numpy(self.edges).to(verts.device)
-        return float((verts[e[:, 0]] - verts[e[:, 1]]).norm(dim=-1).mean())
+        src, dst = (torch.from_numpy(a).to(verts.device) for a in (self.src, self.dst))
+        return float((verts[src] - verts[dst]).norm(dim=-1).mean())  # each edge twice: the same mean
 
     def __call__(self, verts: torch.Tensor, sdf: SDFFunction, candidates=None):
         """Move the inside vertices of ``verts (V, 3)`` (metres, in the SDF's frame) out.

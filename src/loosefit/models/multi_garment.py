@@ -99,18 +99,17 @@ def garment_graph(name: str, verts: np.ndarray, faces: np.ndarray, body: BodyMod
     (:meth:`loosefit.models.swingar.SwinGarConfig.graph_settings`), in training and animation alike."""
     verts = np.asarray(verts, np.float32)
     faces = np.asarray(faces, np.int64)
-    if descriptor_distance is not None:
+    if not density > 0:
+        raise InputError(f"fabric density must be positive, got {density}")
+    if descriptor_distance is None:
+        descriptor = np.zeros(0, np.float32)
+    else:
         check_distance(descriptor_distance)
         if len(verts) < descriptor_samples:
             raise InputError(f"garment {name!r} has {len(verts)} vertices, fewer than the spectral descriptor's "
                              f"{descriptor_samples} samples: lower model.descriptor_samples")
-    if not density > 0:
-        raise InputError(f"fabric density must be positive, got {density}")
-    mass = np.asarray(mass_matrix(verts, faces).diagonal(), np.float32) * density
-    if descriptor_distance is None:
-        descriptor = np.zeros(0, np.float32)
-    else:
         descriptor = spectral_descriptor(verts, faces, descriptor_samples, distance=descriptor_distance)
+    mass = np.asarray(mass_matrix(verts, faces).diagonal(), np.float32) * density
     return GarmentGraph(name, verts, faces, vertex_normals(verts[None], faces)[0].astype(np.float32),
                         body_distances(verts, body.rest_verts()), descriptor,
                         mass, np.asarray(body_shape, np.float32), body.rest_joints().astype(np.float32),

@@ -94,7 +94,6 @@ def load_plan_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
 def load_plan_motion(plan: Plan, name: str):
     """Motion ``name`` of ``plan`` (procedural, or a file with its start and frame count) on the average body."""
     from loosefit.body import AnnyShape
-
     from loosefit.motion.resample import slow_down
 
     spec = plan.motion_spec(name)
