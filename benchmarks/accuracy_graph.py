@@ -69,6 +69,7 @@ from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.errors import InputError  # noqa: E402
 from loosefit.metrics.errors import rmse_mm  # noqa: E402
 from loosefit.metrics.surface import e_dist_cm, e_norm_deg  # noqa: E402
+from loosefit.motion.motion import Motion  # noqa: E402
 from loosefit.models.fitgar_data import Smoother  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
 from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
@@ -137,8 +138,15 @@ def mean_error_mm(pred: np.ndarray, gt: np.ndarray) -> float:
     return float(np.linalg.norm(pred - gt, axis=-1).mean() * 1e3)
 
 
-def fitgar_errors(run: Path, store: DatasetStore, names: list[str]) -> list[dict]:
-    """One row per sequence: coarse and detail mean per-vertex errors (mm)."""
+def every_nth_frame(motion: Motion, stride: int) -> Motion:
+    """Frames ``0, stride, 2 stride, ...`` of ``motion`` (for a static method, whose frames are independent)."""
+    return Motion(motion.rotations[::stride], motion.translation[::stride], motion.fps / stride, motion.rig,
+                  motion.joint_names, motion.name)
+
+
+def fitgar_errors(run: Path, store: DatasetStore, names: list[str], frame_stride: int = 1) -> list[dict]:
+    """One row per sequence: coarse and detail mean per-vertex errors (mm) over every ``frame_stride``-th
+    frame (FitGar is static: each frame is predicted on its own, so a stride only samples the frames)."""
     animator = AnyGarmentAnimator(run)
     rows, bodies = [], {}
     for name in names:
@@ -147,12 +155,13 @@ def fitgar_errors(run: Path, store: DatasetStore, names: list[str]) -> list[dict
             bodies[seq.body] = AnnyBody(AnnyShape.from_array(store.body(seq.body)))
         garment = store.garment(seq.garment)
         pair = animator.pair(garment.verts, garment.faces, bodies[seq.body])
-        out = animator.animate_outputs(pair, store.motion(seq.motion))
-        gt = np.asarray(seq.verts[:], np.float32)
+        out = animator.animate_outputs(pair, every_nth_frame(store.motion(seq.motion), frame_stride))
+        gt = np.asarray(seq.verts[::frame_stride], np.float32)
         smooth = Smoother(garment.faces, len(garment.verts), garment.pinned)(gt)
         rows.append({"sequence": name, "garment": seq.garment, "body": seq.body, "motion": seq.motion,
                      "coarse_mm": mean_error_mm(out["coarse"], gt), "coarse_vs_smooth_mm": mean_error_mm(out["coarse"], smooth),
-                     "detail_mm": mean_error_mm(out["verts"], gt)})
+                     "detail_mm": mean_error_mm(out["verts"], gt), "frames": int(len(gt)), "frame_stride": frame_stride})
+        print(f"   {name}: coarse {rows[-1]['coarse_mm']:.1f} mm, detail {rows[-1]['detail_mm']:.1f} mm", flush=True)
     return rows
 
 
@@ -368,8 +377,13 @@ def main() -> None:
     p.add_argument("--also", action="append", default=[], metavar="NAME=STORE",
                    help="evaluate every variant on the test sequences of another store too, e.g. "
                         "quasi-static=DATA-STATIC.zarr (configs/datasets/garments-static.yaml): results under NAME")
+    p.add_argument("--fitgar-frame-stride", type=int, default=1,
+                   help="evaluate FitGar on every n-th frame of each test sequence (a static method: frames are independent)")
     p.add_argument("--name", default="accuracy-graph")
     args = p.parse_args()
+    if args.fitgar_frame_stride < 1:
+        p.error("--fitgar-frame-stride must be >= 1")
+    options = {"fitgar": {"frame_stride": args.fitgar_frame_stride}, "swingar": {}}
     variants = variant_list(args.variants)
     sets, configs = per_method(args.set, "--set"), per_method(args.config, "--config")
     if any(len(v) > 1 for v in configs.values()):
@@ -384,7 +398,8 @@ def main() -> None:
     def config_of(method: str) -> Path:
         return Path(configs[method][0]) if method in configs else PRESETS[args.preset][method]
 
-    results: dict = {"set": args.set_name, "preset": args.preset, "load_average_at_start": os.getloadavg()}
+    results: dict = {"set": args.set_name, "preset": args.preset, "fitgar_frame_stride": args.fitgar_frame_stride,
+                     "load_average_at_start": os.getloadavg()}
     started = time.perf_counter()
     if args.data is not None:
         store = DatasetStore.open(args.data)
@@ -401,7 +416,7 @@ def main() -> None:
                         val_split=None)
             train_s = time.perf_counter() - start
             print(f"== {variant}: evaluate {len(names)} test sequences", flush=True)
-            rows = EVALUATORS[method](run, store, names)
+            rows = EVALUATORS[method](run, store, names, **options[method])
             metrics = METRICS[method]
             results["variants"][variant] = {"method": method, "config": str(config_of(method)), "overrides": overrides,
                                             "train_s": train_s, "evaluate_s": time.perf_counter() - start - train_s,
@@ -410,7 +425,7 @@ def main() -> None:
                                             "by_garment": table(rows, "garment", metrics)}
             for label, other in also.items():
                 print(f"== {variant}: evaluate on {label}", flush=True)
-                rows = EVALUATORS[method](run, other, other.sequence_names(split="test"))
+                rows = EVALUATORS[method](run, other, other.sequence_names(split="test"), **options[method])
                 results["variants"][variant][label] = {"rows": rows, **means(rows, metrics),
                                                        "by_body": table(rows, "body", metrics),
                                                        "by_garment": table(rows, "garment", metrics)}
