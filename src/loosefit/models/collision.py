@@ -578,11 +578,14 @@ class SDFTrainConfig:
 
     Attributes:
         frames: posed frames drawn from each (shape, motion) pair.
+        random_shapes: Anny shapes drawn at random (:func:`random_anny_shapes`) beside the store's bodies, so
+            that the network learns bodies no sequence has (SwinGar trains it on many bodies and poses).
         surface, near, inside: sample points per posed frame (:func:`sdf_samples`).
         near_sigma: metres. steps, lr, batch_frames: Adam steps, learning rate, frames per step. seed.
     """
 
     frames: int = 8
+    random_shapes: int = 0
     surface: int = 2048
     near: int = 2048
     inside: int = 512
@@ -591,6 +594,16 @@ class SDFTrainConfig:
     lr: float = 5e-4
     batch_frames: int = 4
     seed: int = 0
+
+
+def random_anny_shapes(count: int, seed: int) -> list:
+    """``count`` Anny shapes with every phenotype value drawn uniformly from ``[0.05, 0.95]`` (seeded)."""
+    from loosefit.body import AnnyShape
+
+    if count < 0:
+        raise InputError(f"random_shapes must be >= 0, got {count}")
+    values = np.random.default_rng(seed).uniform(0.05, 0.95, (count, len(AnnyShape.names())))
+    return [AnnyShape.from_array(v) for v in values]
 
 
 def body_sdf_samples(shapes, motions, config: SDFTrainConfig) -> dict[str, np.ndarray]:
@@ -769,12 +782,14 @@ def train_sdf_run(data, out, run_config: SDFRunConfig = SDFRunConfig(), progress
         raise InputError("no training sequences: the body SDF trains on their bodies and motions", store.path)
     config, net_config = run_config.train, run_config.net
     shapes = [AnnyShape.from_array(store.body(b)) for b in bodies]
+    shapes += random_anny_shapes(config.random_shapes, config.seed + 1)
     samples = body_sdf_samples(shapes, [store.motion(m) for m in motions], config)
     net, history = train_body_sdf(samples, config, net_config, progress)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     save_body_sdf(out / SDF_FILE, net)
-    summary = {"method": "collision", "data": str(Path(data).resolve()), "bodies": bodies, "motions": motions,
+    summary = {"method": "collision", "data": str(Path(data).resolve()), "bodies": bodies,
+               "random_shapes": [s.to_array().tolist() for s in shapes[len(bodies):]], "motions": motions,
                "frames": int(len(samples["code"])), "first_loss": history[0] if history else None,
                "final_loss": history[-1] if history else None,
                "config": dict(vars(config)), "net": dict(vars(net_config))}

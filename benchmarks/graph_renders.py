@@ -1,0 +1,84 @@
+"""Look at the multi-garment methods: frames of a test sequence, the simulation beside SwinGar and body-LBS
+(from the garment's rest mesh alone) and FitGar's coarse and detail meshes, on the sequence's body.
+
+Each row of the PNG is one frame; each column one mesh, drawn with the posed body, from the same camera.
+The per-vertex error to the simulation (mm) colours the predictions, on one scale for the whole image.
+
+Run: .venv/bin/python benchmarks/graph_renders.py --data DATA.zarr --sequence NAME [--swingar RUN]
+         [--fitgar RUN] [--frames 45,120] [--name graph-render-NAME]
+(writes benchmarks/results/<name>.png)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS  # noqa: E402
+
+from loosefit.animate import Animator  # noqa: E402
+from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
+from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
+from loosefit.data.store import DatasetStore  # noqa: E402
+from loosefit.sim.attach import body_lbs  # noqa: E402
+from loosefit.viz.render import render_frames, save_png  # noqa: E402
+from loosefit.viz.scene import BODY_COLOR, MeshTrack  # noqa: E402
+
+ERROR_RANGE_MM = (0.0, 100.0)
+
+
+def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Path | None) -> tuple[dict, object, object]:
+    """``({label: (T, V, 3)}, body, motion)``: the simulation first, then each method's meshes."""
+    seq = store.sequence(name)
+    motion = store.motion(seq.motion)
+    body = AnnyBody(AnnyShape.from_array(store.body(seq.body)), rig=motion.rig)
+    garment = store.garment(seq.garment)
+    meshes = {"simulation": np.asarray(seq.verts[:], np.float32)}
+    if swingar is not None:
+        meshes["SwinGar"] = Animator(swingar, garment=garment, body=body).animate(motion)
+    meshes["body-LBS"] = body_lbs(garment.verts, body, motion)
+    if fitgar is not None:
+        animator = AnyGarmentAnimator(fitgar)
+        out = animator.animate_outputs(animator.pair(garment.verts, garment.faces, body), motion)
+        meshes["FitGar coarse"], meshes["FitGar detail"] = out["coarse"], out["verts"]
+    return meshes, body, motion
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--data", type=Path, required=True)
+    p.add_argument("--sequence", required=True)
+    p.add_argument("--swingar", type=Path, default=None, help="a SwinGar run")
+    p.add_argument("--fitgar", type=Path, default=None, help="a FitGar run")
+    p.add_argument("--frames", default="45,120")
+    p.add_argument("--size", default="360,480", help="W,H pixels of one panel")
+    p.add_argument("--name", default=None)
+    args = p.parse_args()
+    store = DatasetStore.open(args.data)
+    meshes, body, motion = predictions(store, args.sequence, args.swingar, args.fitgar)
+    faces = store.garment(store.sequence(args.sequence).garment).faces
+    frames = [int(f) for f in args.frames.split(",")]
+    posed = body.pose(motion).verts
+    gt = meshes["simulation"]
+    panels, titles = [], []
+    for label, verts in meshes.items():
+        error = None if label == "simulation" else np.linalg.norm(verts - gt, axis=-1) * 1e3
+        garment = MeshTrack(verts, faces, scalars=error, clim=ERROR_RANGE_MM if error is not None else None,
+                            cmap="inferno", label=label, scalar_name="error (mm)" if error is not None else "")
+        panels.append([MeshTrack(posed[: len(gt)], body.faces, BODY_COLOR, label="body"), garment])
+        rmse = "" if error is None else f" {np.sqrt((error[frames] ** 2).mean()):.0f} mm"
+        titles.append(label + rmse)
+    size = tuple(int(v) for v in args.size.split(","))
+    rows = render_frames(panels, size=size, frames=frames, titles=titles)
+    name = args.name or f"graph-render-{args.sequence.replace('+', '-')}"
+    path = RESULTS / f"{name}.png"
+    save_png(path, np.concatenate(list(rows), axis=0))
+    print(path)
+
+
+if __name__ == "__main__":
+    main()
