@@ -642,16 +642,17 @@ def train_body_sdf(samples: dict[str, np.ndarray], config: SDFTrainConfig = SDFT
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     gen = torch.Generator().manual_seed(config.seed)
     history = []
-    for step in range(config.steps):
-        pick = torch.randperm(len(pts), generator=gen)[:config.batch_frames]
-        loss, terms = sdf_loss(net, pts[pick], sdf[pick], nrm[pick], code[pick])
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        history.append(float(loss.detach()))
-        if progress and step % 100 == 0:
-            print(f"step {step}: loss {history[-1]:.4g} {terms}")
+    with flushed_denormals():  # as at inference: Softplus(beta=100) makes denormals, slow on x86 (~10 % a step)
+        for step in range(config.steps):
+            pick = torch.randperm(len(pts), generator=gen)[:config.batch_frames]
+            loss, terms = sdf_loss(net, pts[pick], sdf[pick], nrm[pick], code[pick])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            history.append(float(loss.detach()))
+            if progress and step % 100 == 0:
+                print(f"step {step}: loss {history[-1]:.4g} {terms}")
     return net, history
 
 
