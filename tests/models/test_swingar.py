@@ -606,3 +606,31 @@ def test_config_files_load():
     for kind in DESCRIPTORS:
         cpu = load_config(Config, root / "swingar-cpu.yaml", [f"model.global_descriptor={kind}"])
         assert cpu.model.global_descriptor == kind and cpu.model.descriptor_samples == 256
+
+
+def test_skinning_prior_starts_at_body_lbs_and_learns_away_from_it(data, batch, body):
+    """``skinning_prior``: the graph's prior is the weights of each vertex's nearest rest body vertex (brute
+    force here), an untrained model skins with exactly those weights (floored at PRIOR_FLOOR, renormalised),
+    and a training step moves them; a prior over another joint count is refused."""
+    from loosefit.models.swingar import PRIOR_FLOOR, check_graph
+
+    graph = data.graphs[0]
+    proxy = body.collision_proxy()
+    nearest = np.linalg.norm(graph.rest[:, None] - proxy.rest_verts()[None], axis=-1).argmin(1)
+    np.testing.assert_allclose(graph.skin_prior, proxy.skinning_weights()[nearest], atol=1e-6)
+    torch.manual_seed(0)
+    model = SwinGar.from_data(data, dataclasses.replace(CONFIG, skinning_prior=True))
+    s = data.sequences[0].sequences[0]
+    out = model(graph.tensors(), torch.from_numpy(s.root[None, :4]), torch.from_numpy(s.joints[None, :4]))
+    prior = np.maximum(graph.skin_prior, PRIOR_FLOOR)
+    prior /= prior.sum(1, keepdims=True)
+    np.testing.assert_allclose(out["weights"].detach().numpy(), np.broadcast_to(prior, out["weights"].shape), atol=1e-6)
+    opt = torch.optim.Adam(model.parameters(), 1e-2)
+    loss, _ = model.training_loss(batch, "supervised")
+    loss.backward()
+    assert model.weight_out.weight.grad.abs().sum() > 0
+    opt.step()
+    moved = model(graph.tensors(), torch.from_numpy(s.root[None, :4]), torch.from_numpy(s.joints[None, :4]))["weights"]
+    assert (moved - out["weights"]).abs().max() > 1e-4
+    with pytest.raises(InputError, match="joints"):
+        check_graph(graph, model.config, data.num_joints + 1)

@@ -27,6 +27,7 @@ from loosefit.models.dataset import STD_FLOOR, GarmentSequences
 from loosefit.models.layers.gat_ln import attention_table
 from loosefit.rig.fit_attribute import body_distances
 from loosefit.rig.spectral import check_distance, spectral_descriptor
+from loosefit.sim.attach import garment_weights
 
 #: Areal density of the garment fabric, kg/m^2, for the gravity term (silk-like; not in the paper).
 DEFAULT_DENSITY = 0.1
@@ -57,6 +58,9 @@ class GarmentGraph:
             distance the model asks for; ``(0,)`` for a model without one (SwinGar's ``none`` and ``pooling``).
         mass ``(V,)``: vertex masses, kg (lumped Voronoi area times the fabric density).
         body_shape ``(S,)``: the body's shape values. rest_joints ``(J, 3)``: its rest joint positions, metres.
+        skin_prior ``(V, J)``: the skinning weights of each vertex's nearest rest body vertex (body-LBS,
+            :func:`loosefit.sim.attach.garment_weights`), which :class:`~loosefit.models.swingar.SwinGar` may
+            start its dynamic weights from (``skinning_prior``).
         descriptor_distance: the distance ``descriptor`` was computed with (``"geodesic"``, ``"euclidean"``), or
             None when there is none.
     """
@@ -70,6 +74,7 @@ class GarmentGraph:
     mass: np.ndarray
     body_shape: np.ndarray
     rest_joints: np.ndarray
+    skin_prior: np.ndarray
     descriptor_distance: str | None = "geodesic"
 
     @property
@@ -81,7 +86,8 @@ class GarmentGraph:
         ``edges (E, 2)`` and the ``face_pairs (P, 2)`` the losses use."""
         table, valid = attention_table(self.faces, self.num_verts)
         out = {k: torch.from_numpy(np.ascontiguousarray(getattr(self, k)))
-               for k in ("rest", "faces", "normals", "fit", "descriptor", "mass", "body_shape", "rest_joints")}
+               for k in ("rest", "faces", "normals", "fit", "descriptor", "mass", "body_shape", "rest_joints",
+                           "skin_prior")}
         out.update(table=torch.from_numpy(table), valid=torch.from_numpy(valid),
                    edges=torch.from_numpy(edges(self.faces)), face_pairs=torch.from_numpy(face_pairs(self.faces)))
         return out
@@ -113,7 +119,7 @@ def garment_graph(name: str, verts: np.ndarray, faces: np.ndarray, body: BodyMod
     return GarmentGraph(name, verts, faces, vertex_normals(verts[None], faces)[0].astype(np.float32),
                         body_distances(verts, body.rest_verts()), descriptor,
                         mass, np.asarray(body_shape, np.float32), body.rest_joints().astype(np.float32),
-                        descriptor_distance)
+                        np.asarray(garment_weights(verts, body), np.float32), descriptor_distance)
 
 
 class MultiGarmentData:

@@ -44,6 +44,12 @@ the vertices, ``a = max_i ReLU(F G_i)`` of size ``shape_mlp[-1]``, in place of t
 feature to the local features of ``E_g``; here it takes the place of ``a``, so that the four variants
 differ in the global feature alone.
 
+Skinning prior (``skinning_prior``, ours, off by default): the weight logits are added to the log of the
+garment's body-LBS weights (each vertex's nearest rest body vertex, ``W_t = softmax_J(P(Q(S_t) * a) + log
+W_body)``) and ``P`` starts at zero, so that an untrained network skins like body-LBS and training learns
+the departure from it; the paper learns the weights from nothing, which needs far more epochs than a CPU
+budget allows.
+
 Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather
 than axis-angles; the fit attribute ``a_i`` is each vertex's rest distance to the body (FitGar's
 quantity before its factor analysis, which describes a garment, not a vertex); heads are averaged.
@@ -75,6 +81,8 @@ GRAVITY = 9.8  # m/s^2, along -Z
 #: Scale of the initial weights of the layers whose outputs are displacements (metres): the garment
 #: starts from its skinned rest shape.
 OUTPUT_INIT = 1e-2
+#: Smallest prior weight whose log enters the skinning logits (a zero weight would be -inf for good).
+PRIOR_FLOOR = 1e-4
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,8 @@ class SwinGarConfig:
         k_vert, k_edge, k_bend, k_gravity, k_collision: loss weights (50, 10, 3, 0.2, 1.5).
         collision_eps: ``epsilon`` of SwinGar Eq. 14, metres (the paper: "a small positive value"; ours 2 mm).
         density: fabric density for the vertex masses of the gravity term, kg/m^2 (ours).
+        skinning_prior: start the dynamic skinning weights from the garment's body-LBS weights (ours; see the
+            module doc). False: the paper's predictor alone.
     """
 
     graph_hidden: list[int] = field(default_factory=lambda: [64, 128])
@@ -127,6 +137,7 @@ class SwinGarConfig:
     k_collision: float = 1.5
     collision_eps: float = 0.002
     density: float = DEFAULT_DENSITY
+    skinning_prior: bool = False
 
     def __post_init__(self):
         sizes = [*self.graph_hidden, *self.graph_heads, *self.shape_mlp, self.motion_hidden, self.motion_frames,
@@ -255,6 +266,9 @@ class SwinGar(nn.Module):
             self.blend_out.weight.mul_(OUTPUT_INIT)
             self.blend_out.bias.zero_()
             self.corrective_layers[-1].weight.mul_(OUTPUT_INIT)
+            if c.skinning_prior:  # the weights start as the prior's
+                self.weight_out.weight.zero_()
+                self.weight_out.bias.zero_()
 
     # ------------------------------------------------------------------ construction
 
@@ -268,9 +282,10 @@ class SwinGar(nn.Module):
 
     @classmethod
     def from_data(cls, data: MultiGarmentData, config: SwinGarConfig) -> "SwinGar":
+        sizes = cls.data_sizes(data)
         for graph in data.graphs:
-            check_graph(graph, config)
-        model = cls(cls.data_sizes(data), config)
+            check_graph(graph, config, sizes["num_joints"])
+        model = cls(sizes, config)
         stats = data.feature_stats()
         with torch.no_grad():
             for key in ("root", "joints"):
@@ -335,7 +350,10 @@ class SwinGar(nn.Module):
         node features ``(B, T, V, 3 + J)``: position and distance to every joint)."""
         table, valid = _graph(g)
         S = self.state_encoder(G * m[:, :, None], table, valid)  # (B, T, V, state)
-        weights = torch.softmax(self.weight_out(self.weight_state(S) * shape), -1)
+        logits = self.weight_out(self.weight_state(S) * shape)
+        if self.config.skinning_prior:
+            logits = logits + torch.log(g["skin_prior"].clamp_min(PRIOR_FLOOR))
+        weights = torch.softmax(logits, -1)
         h = S
         for layer in self.blend_layers:
             h = layer(h, table, valid)
@@ -494,9 +512,13 @@ class SwinGar(nn.Module):
         return {"rmse_mm": (sq / frames) ** 0.5 * 1e3, "mean_vertex_error_mm": dist / frames * 1e3}
 
 
-def check_graph(graph, config: SwinGarConfig) -> None:
+def check_graph(graph, config: SwinGarConfig, num_joints: int | None = None) -> None:
     """Refuse a :class:`~loosefit.models.multi_garment.GarmentGraph` built with another global descriptor
-    than ``config`` asks for (build it with ``config.graph_settings()``)."""
+    than ``config`` asks for (build it with ``config.graph_settings()``), or with a skinning prior over another
+    joint count than the model's ``num_joints``."""
+    if config.skinning_prior and num_joints is not None and graph.skin_prior.shape[1] != num_joints:
+        raise InputError(f"garment {graph.name!r} has skinning weights over {graph.skin_prior.shape[1]} joints; the "
+                         f"model's body has {num_joints}")
     if config.descriptor_distance is not None and graph.descriptor_distance != config.descriptor_distance:
         raise InputError(f"garment {graph.name!r} carries a {graph.descriptor_distance} descriptor; the model's "
                          f"global_descriptor {config.global_descriptor!r} reads a {config.descriptor_distance} one")
@@ -517,7 +539,7 @@ class BoundSwinGar(nn.Module):
 
     def __init__(self, model: SwinGar, graph):
         super().__init__()
-        check_graph(graph, model.config)
+        check_graph(graph, model.config, model.sizes()["num_joints"])
         self.model, self.graph_name = model, graph.name
         self.g = graph.tensors()
         self.register_buffer("faces", self.g["faces"].clone())
