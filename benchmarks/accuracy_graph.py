@@ -431,6 +431,8 @@ def main() -> None:
                 results["variants"][variant][label] = {"rows": rows, **means(rows, metrics),
                                                        "by_body": table(rows, "body", metrics),
                                                        "by_garment": table(rows, "garment", metrics)}
+            # what is measured so far survives an interrupted run (targets and checks come at the end)
+            save_results(args.name, results | {"partial": f"{len(results['variants'])} of {len(variants)} variants"})
         done = results["variants"]
         targets, checks = fitgar_targets(done), []
         if any(VARIANTS[v][0] == "swingar" for v in done):
