@@ -123,3 +123,17 @@ def test_bad_input_names_the_problem(report, tiny_store, tmp_path, capsys):
     with pytest.raises(InputError, match="no sequence"):
         build_report(tiny_store, [root / "lbs"], tmp_path / "r", sequences=["nope"], results_dir=None)
     assert (out / "index.html").is_file()  # an earlier report is untouched
+
+
+def test_collision_targets_read_as_the_others(tmp_path):
+    """``benchmarks/collision.py``'s targets (``KIND: text``, a value or an (ours, baseline) pair) enter the
+    claims table: the kind as the garment, a pair as its ratio."""
+    from loosefit.report.claims import claims_table
+
+    targets = [{"target": "dress: Eq. 10 (neural) removes >= 80% of the collisions left by the collision loss alone",
+                "value": 0.9, "pass": True},
+               {"target": "dress: d_cons of Eq. 10 (neural) below push-out's", "value": [0.3, 0.6], "pass": True}]
+    (tmp_path / "collision-garments.json").write_text(json.dumps({"results": {"targets": targets}}))
+    rows = {r["target"][:8]: r for r in claims_table(tmp_path) if r["source"] == "collision-garments.json"}
+    assert rows["Eq. 10 ("]["garment"] == "dress" and rows["Eq. 10 ("]["ours"] == 0.9
+    assert rows["d_cons o"]["ours"] == pytest.approx(0.5) and rows["d_cons o"]["limit"] == 1.0
