@@ -50,6 +50,7 @@ Run: .venv/bin/python benchmarks/accuracy_graph.py --data DATA.zarr --runs RUNS 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -60,7 +61,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import accuracy  # noqa: E402  (benchmarks/accuracy.py: VirtualBones' CPU preset and training)
-from _common import save_results  # noqa: E402
+from _common import RESULTS, save_results  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402
 from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
@@ -341,6 +342,35 @@ def virtualbones_comparison(vb_data: Path, store: DatasetStore, names: list[str]
 # ---------------------------------------------------------------- main
 
 
+def add_targets(results: dict, vb: tuple[dict, list[dict]] | None) -> None:
+    """Add the targets and checks of ``results["variants"]`` (and of the VirtualBones comparison ``vb``:
+    :func:`virtualbones_comparison`'s result) to ``results``, and print them."""
+    done = results["variants"]
+    targets, checks = fitgar_targets(done), []
+    if any(VARIANTS[v][0] == "swingar" for v in done):
+        results["swingar_table_i"] = swingar_table_i(done)
+        more, checks = swingar_targets(done)
+        targets += more
+    if vb is not None:
+        results["virtualbones"], more = vb
+        targets += more
+    results["targets"], results["checks"] = targets, checks
+    results["all_pass"] = all(t["pass"] for t in targets)
+    results.pop("partial", None)
+    for t in [*targets, *checks]:
+        kind = "target" if t in targets else "check "
+        print(f"{'PASS' if t['pass'] else 'FAIL'} {kind} {t['garment']}: {t['target']} = {t['measured']} "
+              f"(limit {t['limit']})")
+
+
+def variant_sets(own: list[str], sets: list[str]) -> list[str]:
+    """The method's ``--set`` overrides that apply to a variant: FitGar's one-step model has no coarse stage, so
+    settings of ``train.stages.coarse`` are left out for it (the trainer refuses stages a model lacks)."""
+    if "model.two_step=false" in own:
+        return [s for s in sets if not s.startswith("train.stages.coarse.")]
+    return list(sets)
+
+
 def variant_list(text: str) -> list[str]:
     """``--variants``: comma-separated variants and :data:`GROUPS`, expanded, in order, each once."""
     out = []
@@ -381,6 +411,9 @@ def main() -> None:
                         "quasi-static=DATA-STATIC.zarr (configs/datasets/garments-static.yaml): results under NAME")
     p.add_argument("--fitgar-frame-stride", type=int, default=1,
                    help="evaluate FitGar on every n-th frame of each test sequence (a static method: frames are independent)")
+    p.add_argument("--from-results", default=None, metavar="NAME,NAME",
+                   help="without --data: merge the variants of these result files (later ones win) and compute "
+                        "their targets, e.g. an ablation run separately from the full model")
     p.add_argument("--name", default="accuracy-graph")
     args = p.parse_args()
     if args.fitgar_frame_stride < 1:
@@ -396,6 +429,8 @@ def main() -> None:
         p.error("--also takes NAME=STORE")
     if args.data is not None and args.runs is None:
         p.error("--data needs --runs")
+    if args.data is not None and args.from_results:
+        p.error("--from-results merges earlier results: leave out --data")
 
     def config_of(method: str) -> Path:
         return Path(configs[method][0]) if method in configs else PRESETS[args.preset][method]
@@ -410,7 +445,7 @@ def main() -> None:
         results.update(data=str(args.data.resolve()), test_sequences=names, variants={})
         for variant in variants:
             method, own = VARIANTS[variant]
-            overrides = [*own, *sets.get(method, [])]
+            overrides = [*own, *variant_sets(own, sets.get(method, []))]
             run = args.runs / variant
             print(f"== {variant}: train {method} -> {run}", flush=True)
             start = time.perf_counter()
@@ -433,23 +468,21 @@ def main() -> None:
                                                        "by_garment": table(rows, "garment", metrics)}
             # what is measured so far survives an interrupted run (targets and checks come at the end)
             save_results(args.name, results | {"partial": f"{len(results['variants'])} of {len(variants)} variants"})
-        done = results["variants"]
-        targets, checks = fitgar_targets(done), []
-        if any(VARIANTS[v][0] == "swingar" for v in done):
-            results["swingar_table_i"] = swingar_table_i(done)
-            more, checks = swingar_targets(done)
-            targets += more
+        vb = None
         if args.vb_data is not None:
-            results["virtualbones"], more = virtualbones_comparison(
-                args.vb_data, store, names, done["swingar"], args.runs, args.preset,
-                [f"virtualbones:{s}" for s in sets.get("virtualbones", [])], args.bones)
-            targets += more
-        results["targets"], results["checks"] = targets, checks
-        results["all_pass"] = all(t["pass"] for t in targets)
-        for t in [*targets, *checks]:
-            kind = "target" if t in targets else "check "
-            print(f"{'PASS' if t['pass'] else 'FAIL'} {kind} {t['garment']}: {t['target']} = {t['measured']} "
-                  f"(limit {t['limit']})")
+            vb = virtualbones_comparison(args.vb_data, store, names, results["variants"]["swingar"], args.runs,
+                                         args.preset, [f"virtualbones:{s}" for s in sets.get("virtualbones", [])],
+                                         args.bones)
+        add_targets(results, vb)
+    elif args.from_results:
+        # variants measured by earlier runs (e.g. an ablation run separately): merged, then their targets
+        results["variants"], results["merged_from"] = {}, args.from_results.split(",")
+        for name in results["merged_from"]:
+            earlier = json.loads((RESULTS / f"{name}.json").read_text())["results"]
+            results["variants"].update(earlier["variants"])
+            for key in ("data", "test_sequences", "set", "preset", "fitgar_frame_stride"):
+                results.setdefault(key, earlier.get(key))
+        add_targets(results, None)
     results["wall_s"] = time.perf_counter() - started
     results["load_average_at_end"] = os.getloadavg()
     save_results(args.name, results)
