@@ -371,6 +371,20 @@ def variant_sets(own: list[str], sets: list[str]) -> list[str]:
     return list(sets)
 
 
+def variant_config(config: Path, own: list[str], out: Path) -> Path:
+    """The config file a variant trains from: ``config``, or for FitGar's one-step model a copy at ``out``
+    without the coarse stage it lacks."""
+    if "model.two_step=false" not in own:
+        return config
+    import yaml
+
+    doc = yaml.safe_load(config.read_text())
+    doc.get("train", {}).get("stages", {}).pop("coarse", None)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return out
+
+
 def variant_list(text: str) -> list[str]:
     """``--variants``: comma-separated variants and :data:`GROUPS`, expanded, in order, each once."""
     out = []
@@ -449,7 +463,8 @@ def main() -> None:
             run = args.runs / variant
             print(f"== {variant}: train {method} -> {run}", flush=True)
             start = time.perf_counter()
-            train_model(method, args.data, None, run, config=config_of(method), overrides=overrides, resume=True,
+            config = variant_config(config_of(method), own, args.runs / f"{variant}.config.yaml")
+            train_model(method, args.data, None, run, config=config, overrides=overrides, resume=True,
                         val_split=None)
             train_s = time.perf_counter() - start
             print(f"== {variant}: evaluate {len(names)} test sequences", flush=True)
