@@ -356,7 +356,6 @@ def add_targets(results: dict, vb: tuple[dict, list[dict]] | None) -> None:
         targets += more
     results["targets"], results["checks"] = targets, checks
     results["all_pass"] = all(t["pass"] for t in targets)
-    results.pop("partial", None)
     for t in [*targets, *checks]:
         kind = "target" if t in targets else "check "
         print(f"{'PASS' if t['pass'] else 'FAIL'} {kind} {t['garment']}: {t['target']} = {t['measured']} "
