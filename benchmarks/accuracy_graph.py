@@ -132,7 +132,7 @@ SPECTRAL_OVER_NONE = 0.85
 SWINGAR_OVER_VB = 1.5
 #: The metrics of each method's rows.
 METRICS = {
-    "fitgar": ("coarse_mm", "coarse_vs_smooth_mm", "detail_mm"),
+    "fitgar": ("coarse_mm", "coarse_vs_smooth_mm", "detail_mm", "body_lbs_mm"),
     "swingar": ("rmse_mm", "e_dist_cm", "e_norm_deg", "body_lbs_rmse_mm", "body_lbs_e_dist_cm", "body_lbs_e_norm_deg"),
 }
 
@@ -158,12 +158,15 @@ def fitgar_errors(run: Path, store: DatasetStore, names: list[str], frame_stride
             bodies[seq.body] = AnnyBody(AnnyShape.from_array(store.body(seq.body)))
         garment = store.garment(seq.garment)
         pair = animator.pair(garment.verts, garment.faces, bodies[seq.body])
-        out = animator.animate_outputs(pair, every_nth_frame(store.motion(seq.motion), frame_stride))
+        motion = every_nth_frame(store.motion(seq.motion), frame_stride)
+        out = animator.animate_outputs(pair, motion)
         gt = np.asarray(seq.verts[::frame_stride], np.float32)
+        lbs = body_lbs(garment.verts, bodies[seq.body], motion)
         smooth = Smoother(garment.faces, len(garment.verts), garment.pinned)(gt)
         rows.append({"sequence": name, "garment": seq.garment, "body": seq.body, "motion": seq.motion,
                      "coarse_mm": mean_error_mm(out["coarse"], gt), "coarse_vs_smooth_mm": mean_error_mm(out["coarse"], smooth),
-                     "detail_mm": mean_error_mm(out["verts"], gt), "frames": int(len(gt)), "frame_stride": frame_stride})
+                     "detail_mm": mean_error_mm(out["verts"], gt), "body_lbs_mm": mean_error_mm(lbs, gt),
+                     "frames": int(len(gt)), "frame_stride": frame_stride})
         print(f"   {name}: coarse {rows[-1]['coarse_mm']:.1f} mm, detail {rows[-1]['detail_mm']:.1f} mm", flush=True)
     return rows
 
