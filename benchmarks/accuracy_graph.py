@@ -365,26 +365,19 @@ def add_targets(results: dict, vb: tuple[dict, list[dict]] | None) -> None:
               f"(limit {t['limit']})")
 
 
-def variant_sets(own: list[str], sets: list[str]) -> list[str]:
-    """The method's ``--set`` overrides that apply to a variant: FitGar's one-step model has no coarse stage, so
-    settings of ``train.stages.coarse`` are left out for it (the trainer refuses stages a model lacks)."""
-    if "model.two_step=false" in own:
-        return [s for s in sets if not s.startswith("train.stages.coarse.")]
-    return list(sets)
-
-
-def variant_config(config: Path, own: list[str], out: Path) -> Path:
-    """The config file a variant trains from: ``config``, or for FitGar's one-step model a copy at ``out``
-    without the coarse stage it lacks."""
+def variant_training(config: Path, own: list[str], sets: list[str], out: Path) -> tuple[Path, list[str]]:
+    """The config file and overrides a variant trains with: ``config`` and ``own`` then ``sets``, except for
+    FitGar's one-step model, which has no coarse stage (the trainer refuses stages a model lacks): a copy of
+    ``config`` at ``out`` without it, and ``sets`` without its ``train.stages.coarse`` settings."""
     if "model.two_step=false" not in own:
-        return config
+        return config, [*own, *sets]
     import yaml
 
     doc = yaml.safe_load(config.read_text())
     doc.get("train", {}).get("stages", {}).pop("coarse", None)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return out
+    return out, [*own, *(s for s in sets if not s.startswith("train.stages.coarse."))]
 
 
 def variant_list(text: str) -> list[str]:
@@ -461,11 +454,11 @@ def main() -> None:
         results.update(data=str(args.data.resolve()), test_sequences=names, variants={})
         for variant in variants:
             method, own = VARIANTS[variant]
-            overrides = [*own, *variant_sets(own, sets.get(method, []))]
+            config, overrides = variant_training(config_of(method), own, sets.get(method, []),
+                                                 args.runs / f"{variant}.config.yaml")
             run = args.runs / variant
             print(f"== {variant}: train {method} -> {run}", flush=True)
             start = time.perf_counter()
-            config = variant_config(config_of(method), own, args.runs / f"{variant}.config.yaml")
             train_model(method, args.data, None, run, config=config, overrides=overrides, resume=True,
                         val_split=None)
             train_s = time.perf_counter() - start
@@ -493,12 +486,13 @@ def main() -> None:
         add_targets(results, vb)
     elif args.from_results:
         # variants measured by earlier runs (e.g. an ablation run separately): merged, then their targets
-        results["variants"], results["merged_from"] = {}, args.from_results.split(",")
-        for name in results["merged_from"]:
-            earlier = json.loads((RESULTS / f"{name}.json").read_text())["results"]
-            results["variants"].update(earlier["variants"])
-            for key in ("data", "test_sequences", "set", "preset", "fitgar_frame_stride"):
-                results.setdefault(key, earlier.get(key))
+        names = args.from_results.split(",")
+        earlier = [json.loads((RESULTS / f"{name}.json").read_text())["results"] for name in names]
+        # how the runs were made is theirs (the first file's), not this call's defaults
+        results.update({k: earlier[0].get(k) for k in ("data", "test_sequences", "set", "preset", "fitgar_frame_stride")},
+                       merged_from=names, variants={})
+        for doc in earlier:
+            results["variants"].update(doc["variants"])
         add_targets(results, None)
     results["wall_s"] = time.perf_counter() - started
     results["load_average_at_end"] = os.getloadavg()

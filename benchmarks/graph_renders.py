@@ -31,8 +31,8 @@ from loosefit.viz.scene import BODY_COLOR, MeshTrack  # noqa: E402
 ERROR_RANGE_MM = (0.0, 100.0)
 
 
-def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Path | None) -> tuple[dict, object, object]:
-    """``({label: (T, V, 3)}, body, motion)``: the simulation first, then each method's meshes."""
+def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Path | None) -> tuple[dict, object, object, np.ndarray]:
+    """``({label: (T, V, 3)}, body, motion, faces (F, 3))``: the simulation first, then each method's meshes."""
     seq = store.sequence(name)
     motion = store.motion(seq.motion)
     body = AnnyBody(AnnyShape.from_array(store.body(seq.body)), rig=motion.rig)
@@ -45,7 +45,7 @@ def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Pa
         animator = AnyGarmentAnimator(fitgar)
         out = animator.animate_outputs(animator.pair(garment.verts, garment.faces, body), motion)
         meshes["FitGar coarse"], meshes["FitGar detail"] = out["coarse"], out["verts"]
-    return meshes, body, motion
+    return meshes, body, motion, garment.faces
 
 
 def main() -> None:
@@ -59,8 +59,7 @@ def main() -> None:
     p.add_argument("--name", default=None)
     args = p.parse_args()
     store = DatasetStore.open(args.data)
-    meshes, body, motion = predictions(store, args.sequence, args.swingar, args.fitgar)
-    faces = store.garment(store.sequence(args.sequence).garment).faces
+    meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar)
     frames = [int(f) for f in args.frames.split(",")]
     posed = body.pose(motion).verts
     gt = meshes["simulation"]

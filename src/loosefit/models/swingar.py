@@ -512,11 +512,11 @@ class SwinGar(nn.Module):
         return {"rmse_mm": (sq / frames) ** 0.5 * 1e3, "mean_vertex_error_mm": dist / frames * 1e3}
 
 
-def check_graph(graph, config: SwinGarConfig, num_joints: int | None = None) -> None:
+def check_graph(graph, config: SwinGarConfig, num_joints: int) -> None:
     """Refuse a :class:`~loosefit.models.multi_garment.GarmentGraph` built with another global descriptor
     than ``config`` asks for (build it with ``config.graph_settings()``), or with a skinning prior over another
     joint count than the model's ``num_joints``."""
-    if config.skinning_prior and num_joints is not None and graph.skin_prior.shape[1] != num_joints:
+    if config.skinning_prior and graph.skin_prior.shape[1] != num_joints:
         raise InputError(f"garment {graph.name!r} has skinning weights over {graph.skin_prior.shape[1]} joints; the "
                          f"model's body has {num_joints}")
     if config.descriptor_distance is not None and graph.descriptor_distance != config.descriptor_distance:
