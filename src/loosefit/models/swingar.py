@@ -40,7 +40,9 @@ Global descriptor ablation (SwinGar Table I; ``global_descriptor``): ``spectral`
 ``euclidean``, the same with straight-line instead of geodesic distances in the descriptor's affinity
 (:mod:`loosefit.rig.spectral`); ``pooling``, a fully connected layer with ReLU on ``G`` then the maximum over
 the vertices, ``a = max_i ReLU(F G_i)`` of size ``shape_mlp[-1]``, in place of the descriptor's features;
-``none``, ``a = 1`` (the skinning weights read the garment state alone). The paper concatenates the pooled
+``none``, ``a = 1`` (the skinning weights read the garment state alone). The first three are divided by their
+root mean square (ours: the paper leaves the scale open; :func:`rms_normalized` says why), so every variant's
+``a`` has the scale of ``none``'s ones. The paper concatenates the pooled
 feature to the local features of ``E_g``; here it takes the place of ``a``, so that the four variants
 differ in the global feature alone.
 
@@ -210,6 +212,16 @@ def mlp_relu(channels: list[int]) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+def rms_normalized(a: torch.Tensor) -> torch.Tensor:
+    """``a (..., n)`` divided by its root mean square over the last axis (zeros stay zeros).
+
+    The global feature multiplies the skinning logits (``P(Q(S_t) * a)``): unnormalised, the shape encoder
+    can scale it freely, and at ``a ~ 50`` (reached in 250 Adam steps at lr 1e-3) every step moved the logits
+    by whole units, so the weights jumped between joints (sleeves skinned to the chest). At unit RMS the
+    logits' scale is ``P``'s alone, as with ``none``'s ones."""
+    return a / a.square().mean(-1, keepdim=True).sqrt().clamp_min(1e-8)
+
+
 def _graph(g: dict) -> tuple[torch.Tensor, torch.Tensor]:
     return g["table"], g["valid"]
 
@@ -308,12 +320,13 @@ class SwinGar(nn.Module):
         if mode == "none":
             return x, x.new_ones(self.config.shape_mlp[-1])
         if mode == "pooling":
-            return x, self.pool(x).amax(-2)  # max over the vertices
+            return x, rms_normalized(self.pool(x).amax(-2))  # max over the vertices
         descriptor = g["descriptor"]
         if descriptor.shape[-1] != self.config.descriptor_samples:
             raise InputError(f"the garment's spectral descriptor has {descriptor.shape[-1]} values, the model "
                              f"takes {self.config.descriptor_samples}")
-        return x, self.shape_encoder(descriptor * descriptor.shape[-1])  # mean 1: the eigenvalues sum to 1
+        # the eigenvalues sum to 1: times their count, their mean is 1
+        return x, rms_normalized(self.shape_encoder(descriptor * descriptor.shape[-1]))
 
     # ------------------------------------------------------------------ per frame
 
