@@ -257,3 +257,42 @@ def test_optimizer_first_step_matches_closed_form(data, tmp_path, optimizer, fir
     assert torch.allclose(step, torch.full_like(step, first_step * 1e-4), rtol=1e-3)
     state = load_checkpoint(tmp_path / optimizer / "checkpoints" / "last.pt")["optimizer"]["state"]
     assert ("square_avg" in state[0]) == (optimizer == "rmsprop")
+
+
+class StageStartGRU(SineGRU):
+    """Sets a buffer at each stage's start to the mean target over the training set (a statistic the
+    trainer must compute once per stage, with gradients off, and keep through a resume)."""
+
+    def __init__(self):
+        super().__init__()
+        self.register_buffer("stage_mean", torch.zeros(2))
+        self.begun: list[tuple[str, int, bool, bool]] = []
+
+    def begin_stage(self, stage, dataset, device):
+        self.begun.append((stage, len(dataset), self.training, torch.is_grad_enabled()))
+        ys = torch.stack([dataset[i]["y"] for i in range(len(dataset))])
+        self.stage_mean[self.stages().index(stage)] = ys.mean() + self.head.bias.detach()[0]
+
+
+def test_begin_stage_runs_once_at_each_stage_start_and_survives_resume(data, tmp_path):
+    train_set, val_set = data
+    torch.manual_seed(0)
+    model = StageStartGRU()
+    initial_bias = float(model.head.bias[0].detach())
+    train(model, train_set, val_set, quick_config(), tmp_path / "ref")
+    assert model.begun == [("encoder", 20, False, False), ("head", 20, False, False)]
+    # the head stage's statistic reads the head as that stage began: the encoder stage leaves it unchanged
+    expected = float(train_set.y.mean()) + initial_bias
+    assert model.stage_mean.tolist() == pytest.approx([expected, expected], rel=1e-6)
+    assert float(model.head.bias[0].detach()) != pytest.approx(initial_bias)  # the head stage trained it afterwards
+
+    torch.manual_seed(0)
+    crashed = StageStartGRU()
+    crashed.crash_at_call = 23  # in the head stage's second epoch: its first is checkpointed
+    with pytest.raises(KeyboardInterrupt):
+        train(crashed, train_set, val_set, quick_config(), tmp_path / "run")
+    torch.manual_seed(5)
+    resumed = StageStartGRU()
+    train(resumed, train_set, val_set, quick_config(), tmp_path / "run", resume=True)
+    assert resumed.begun == []  # inside stage "head": the statistics come from the checkpoint
+    _assert_same_weights(model, resumed)
