@@ -28,8 +28,7 @@ its unpooling before the last (:mod:`~loosefit.models.layers.edge_pool`), and fu
 Losses: the mean squared error of each displacement, ``Delta_coarse`` against the ``fitgar``-smoothed
 simulation minus ``I M_b`` and ``Delta_detail`` against the simulation minus the predicted coarse mesh,
 each divided by the square of its training displacements' root mean square length (a constant: the
-loss is then near 1 for a zero prediction whatever the units; the detail's is measured when its stage
-starts, on what the trained coarse generator leaves, :meth:`FitGar.begin_stage`). Trainer stages ``["coarse", "detail"]``:
+loss is then near 1 for a zero prediction whatever the units). Trainer stages ``["coarse", "detail"]``:
 the coarse generator first, then the parser and the detail generator together with the coarse
 generator frozen (FitGar Sec. 4.4).
 
@@ -59,7 +58,6 @@ from loosefit.models.fitgar_data import GarmentFrames, collate_frames
 from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput, dense_stack
 from loosefit.models.layers.edge_pool import EdgeContractionPooling
 from loosefit.models.layers.gat_block import GATBlock
-from loosefit.train.protocol import to_device
 from loosefit.rig.fit_attribute import FitAttributeModel
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import masked_errors_mm
@@ -370,23 +368,6 @@ class FitGar(nn.Module):
     @staticmethod
     def batch_size(batch: dict) -> int:
         return int(batch["counts"].shape[0])
-
-    def begin_stage(self, stage: str, dataset, device: torch.device, samples: int = 256) -> None:
-        """At the detail stage's start, set the detail output scale to the root mean square length (metres) of
-        its target, the simulation minus the trained coarse generator's mesh, over up to ``samples`` frames
-        spread over ``dataset``. The data's ``detail_scale`` (simulation minus its smoothing: wrinkles alone)
-        is far smaller where the coarse generator leaves tens of millimetres: measured 4.8x on the
-        multi-garment store, which the magnitude branch's last layer could not grow into within its epochs."""
-        if stage != "detail" or self.coarse is None:
-            return
-        picks = np.unique(np.linspace(0, len(dataset) - 1, min(samples, len(dataset))).round().astype(int))
-        squared = count = 0.0
-        for start in range(0, len(picks), 8):
-            batch = to_device(self.collate([dataset[int(k)] for k in picks[start:start + 8]]), device)
-            coarse = batch["anchor"] + self.coarse_displacement(batch)
-            squared += float(((batch["verts"] - coarse) ** 2).sum())
-            count += len(coarse)
-        self.detail.output.scale.fill_(max((squared / count) ** 0.5, 1e-4))
 
     def loss_terms(self, batch: dict, stage: str) -> dict[str, torch.Tensor]:
         """The stage's loss term, unweighted: ``coarse`` (FitGar Sec. 4.3) or ``detail`` (Sec. 4.4), each the

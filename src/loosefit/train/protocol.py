@@ -11,11 +11,6 @@ and any of these optional ones:
   ``torch.utils.data.default_collate``.
 - ``batch_size(batch) -> int``: how many samples a batch holds, used to weight per-batch averages;
   default :func:`batch_size` below.
-- ``begin_stage(stage, dataset, device)``: called once when ``stage`` starts (not when a run resumes
-  inside it), in eval mode under ``torch.no_grad()``, with the whole training set and the training
-  device: for statistics that need the earlier stages' training (e.g. FitGar's detail output scale, the
-  size of what its coarse generator left). Whatever it sets must live in the state dict (buffers), so
-  that a resumed run has it.
 - ``loss_weight(batch) -> float``: the normaliser of the loss's mean (e.g. the number of counted
   frames of a masked mean); in distributed training each process's loss is weighted by its share
   of the global sum, so that the step equals one process's on the whole global batch. Without it

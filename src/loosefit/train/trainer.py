@@ -480,10 +480,6 @@ class _Trainer:
                 first_epoch = start_epoch + 1
             else:
                 self.best, self.best_written = None, False  # best.pt is chosen within each stage
-                if hasattr(self.model, "begin_stage"):
-                    self.model.eval()
-                    with torch.no_grad():
-                        self.model.begin_stage(stage, self.train_set, self.device)
             for epoch in range(first_epoch, settings.epochs + 1):
                 self.run_epoch(stage_index, epoch, params, optimizer, scheduler, settings)
 
