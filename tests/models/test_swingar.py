@@ -522,17 +522,19 @@ def test_every_global_descriptor_builds_runs_and_trains(store, kind):
     assert not missing, f"{kind}: no gradient reaches {missing}"
     G, a = model.garment_features(data.graphs[0].tensors())
     assert a.shape == (SMALL["shape_mlp"][-1],) and (a >= 0).all()
-    torch.testing.assert_close(a.square().mean(), torch.tensor(1.0))  # unit RMS, as none's ones
     if kind == "none":
         assert torch.equal(a, torch.ones(SMALL["shape_mlp"][-1]))
-    if kind == "pooling":  # a = max over the vertices of ReLU(F G), at unit RMS
-        pooled = torch.relu(model.pool[0](G)).max(0).values
-        torch.testing.assert_close(a, pooled / pooled.square().mean().sqrt())
-    if kind == "spectral":  # the shape encoder's output at unit RMS, whatever its scale
+    if kind == "pooling":  # a = max over the vertices of ReLU(F G)
+        torch.testing.assert_close(a, torch.relu(model.pool[0](G)).max(0).values)
+    if kind != "none":  # with the skinning prior, the same feature at unit root mean square, whatever its scale
+        torch.manual_seed(0)
+        prior = SwinGar.from_data(data, SwinGarConfig(**SMALL, global_descriptor=kind, skinning_prior=True))
         with torch.no_grad():
-            model.shape_encoder[-2].weight.mul_(50.0)
-            model.shape_encoder[-2].bias.mul_(50.0)
-        torch.testing.assert_close(model.garment_features(data.graphs[0].tensors())[1], a)
+            last = prior.shape_encoder[-2] if kind != "pooling" else prior.pool[0]
+            last.weight.mul_(50.0)
+            last.bias.mul_(50.0)
+            _, scaled = prior.garment_features(data.graphs[0].tensors())
+        torch.testing.assert_close(scaled, a / a.square().mean().sqrt())
 
 
 def test_the_global_descriptor_reaches_the_output_only_where_it_is_used(data):
