@@ -305,10 +305,16 @@ def swingar_targets(variants: dict) -> tuple[list[dict], list[dict]]:
 # ---------------------------------------------------------------- VirtualBones on a test garment
 
 
-def virtualbones_comparison(vb_data: Path, store: DatasetStore, names: list[str], swingar: dict, runs: Path,
-                            preset: str, sets: list[str], bones: int) -> tuple[dict, list[dict]]:
-    """VirtualBones trained on ``vb_data``'s sequences of each test garment of ``store`` it holds, against
-    SwinGar's rows ``swingar`` (a variant's result) on that garment's test sequences of ``store``."""
+#: SwinGar variants compared with VirtualBones when ``--vb-data`` is given (each one present), and how their
+#: target reads.
+VB_COMPARED = {"swingar": "SwinGar", "swingar-prior": "SwinGar with the skinning prior"}
+
+
+def virtualbones_comparison(vb_data: Path, store: DatasetStore, names: list[str], swingar: dict[str, dict],
+                            runs: Path, preset: str, sets: list[str], bones: int) -> dict:
+    """VirtualBones trained on ``vb_data``'s sequences of each test garment of ``store`` it holds, against each
+    SwinGar variant's rows (``swingar``: variant -> its result) on that garment's test sequences of ``store``.
+    Returns the comparison, its targets under ``"targets"``."""
     prepared = prepare(vb_data, bones=bones)  # as benchmarks/accuracy.py prepares its data
     vb_store = DatasetStore.open(vb_data)
     tested = {store.sequence(n).garment for n in names}
@@ -318,7 +324,7 @@ def virtualbones_comparison(vb_data: Path, store: DatasetStore, names: list[str]
         raise InputError(f"--vb-data holds training sequences of {sorted(trained)}, none of the test garments "
                          f"{sorted(tested)}", vb_data)
     overrides = accuracy.parse_sets(sets, preset)["virtualbones"]  # accuracy.py's preset, then --set virtualbones:...
-    by_sequence = {r["sequence"]: r for r in swingar["rows"]}
+    by_sequence = {v: {r["sequence"]: r["rmse_mm"] for r in result["rows"]} for v, result in swingar.items()}
     out, targets = {"prepare": prepared, "garments": {}}, []
     for garment in garments:
         run = runs / "virtualbones" / garment
@@ -330,22 +336,25 @@ def virtualbones_comparison(vb_data: Path, store: DatasetStore, names: list[str]
             seq = store.sequence(name)
             gt = np.asarray(seq.verts[:], np.float32)
             vb = rmse_mm(animator.animate(store.motion(seq.motion)), gt)
-            rows.append({"sequence": name, "virtualbones_rmse_mm": vb, "swingar_rmse_mm": by_sequence[name]["rmse_mm"]})
-        vb_mean = float(np.mean([r["virtualbones_rmse_mm"] for r in rows]))
-        sg_mean = float(np.mean([r["swingar_rmse_mm"] for r in rows]))
-        out["garments"][garment] = {"training": training, "rows": rows, "virtualbones_rmse_mm": vb_mean,
-                                    "swingar_rmse_mm": sg_mean,
+            rows.append({"sequence": name, "virtualbones_rmse_mm": vb,
+                         **{f"{v}_rmse_mm": by_sequence[v][name] for v in swingar}})
+        means_ = {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "sequence"}
+        out["garments"][garment] = {"training": training, "rows": rows, **means_,
                                     "train_sequences": [n for n in vb_store.sequence_names(split="train")
                                                         if vb_store.sequence(n).garment == garment]}
-        targets.append(entry("SwinGar RMSE / VirtualBones RMSE (trained for the garment)", garment, sg_mean / vb_mean,
-                             SWINGAR_OVER_VB, sg_mean <= SWINGAR_OVER_VB * vb_mean))
-    return out, targets
+        vb_mean = means_["virtualbones_rmse_mm"]
+        for v in swingar:
+            ours = means_[f"{v}_rmse_mm"]
+            targets.append(entry(f"{VB_COMPARED[v]} RMSE / VirtualBones RMSE (trained for the garment)", garment,
+                                 ours / vb_mean, SWINGAR_OVER_VB, ours <= SWINGAR_OVER_VB * vb_mean))
+    out["targets"] = targets
+    return out
 
 
 # ---------------------------------------------------------------- main
 
 
-def add_targets(results: dict, vb: tuple[dict, list[dict]] | None) -> None:
+def add_targets(results: dict, vb: dict | None) -> None:
     """Add the targets and checks of ``results["variants"]`` (and of the VirtualBones comparison ``vb``:
     :func:`virtualbones_comparison`'s result) to ``results``, and print them."""
     done = results["variants"]
@@ -355,8 +364,8 @@ def add_targets(results: dict, vb: tuple[dict, list[dict]] | None) -> None:
         more, checks = swingar_targets(done)
         targets += more
     if vb is not None:
-        results["virtualbones"], more = vb
-        targets += more
+        results["virtualbones"] = vb
+        targets += vb["targets"]
     results["targets"], results["checks"] = targets, checks
     results["all_pass"] = all(t["pass"] for t in targets)
     for t in [*targets, *checks]:
@@ -432,8 +441,8 @@ def main() -> None:
     sets, configs = per_method(args.set, "--set"), per_method(args.config, "--config")
     if any(len(v) > 1 for v in configs.values()):
         p.error("--config: one file per method")
-    if args.vb_data is not None and "swingar" not in variants:
-        p.error("--vb-data compares VirtualBones with the variant 'swingar': add it to --variants")
+    if args.vb_data is not None and not set(VB_COMPARED) & set(variants):
+        p.error(f"--vb-data compares VirtualBones with the variants {sorted(VB_COMPARED)}: add one to --variants")
     if any("=" not in a for a in args.also):
         p.error("--also takes NAME=STORE")
     if args.data is not None and args.runs is None:
@@ -480,7 +489,8 @@ def main() -> None:
             save_results(args.name, results | {"partial": f"{len(results['variants'])} of {len(variants)} variants"})
         vb = None
         if args.vb_data is not None:
-            vb = virtualbones_comparison(args.vb_data, store, names, results["variants"]["swingar"], args.runs,
+            compared = {v: results["variants"][v] for v in VB_COMPARED if v in results["variants"]}
+            vb = virtualbones_comparison(args.vb_data, store, names, compared, args.runs,
                                          args.preset, [f"virtualbones:{s}" for s in sets.get("virtualbones", [])],
                                          args.bones)
         add_targets(results, vb)
@@ -491,9 +501,16 @@ def main() -> None:
         # how the runs were made is theirs (the first file's), not this call's defaults
         results.update({k: earlier[0].get(k) for k in ("data", "test_sequences", "set", "preset", "fitgar_frame_stride")},
                        merged_from=names, variants={})
+        vb, vb_targets = None, {}
         for doc in earlier:
             results["variants"].update(doc["variants"])
-        add_targets(results, None)
+            if "virtualbones" in doc:  # the last file's comparison, with every file's targets (later ones win)
+                vb = dict(doc["virtualbones"])
+                vb_targets.update({(t["target"], t["garment"]): t for t in doc.get("targets", [])
+                                   if "/ VirtualBones RMSE" in t["target"]})
+        if vb is not None:
+            vb["targets"] = list(vb_targets.values())
+        add_targets(results, vb)
     results["wall_s"] = time.perf_counter() - started
     results["load_average_at_end"] = os.getloadavg()
     save_results(args.name, results)
