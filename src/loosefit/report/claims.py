@@ -31,6 +31,8 @@ GARMENTS = (".venv/bin/python benchmarks/simulation.py --sizes \"\" --plan confi
 SWINGAR_GRAPH = (GARMENTS + " && .venv/bin/python benchmarks/accuracy_graph.py --data G.zarr --runs RUNS --variants "
                  "swingar,swingar-no-descriptor,swingar-plain-gat,swingar-pooling,swingar-euclidean --vb-data VB.zarr "
                  "--name {name}")
+SWINGAR_PRIOR = (GARMENTS + " && .venv/bin/python benchmarks/accuracy_graph.py --data G.zarr --runs RUNS --variants "
+                 "swingar-prior --vb-data VB.zarr --name {name}")
 FITGAR_GRAPH = (GARMENTS + " && .venv/bin/python benchmarks/accuracy_graph.py --data G.zarr --runs RUNS --variants "
                 "fitgar-all --also quasi-static=S.zarr --name {name}")
 COLLISION = GARMENTS + " && .venv/bin/python benchmarks/collision.py --data G.zarr --run RUNS/swingar --name {name}"
@@ -87,6 +89,9 @@ CLAIMS: tuple[Claim, ...] = (
     Claim("SwinGar", "one network for every garment, near a network trained for the garment",
           "-- (target: SwinGar / VirtualBones RMSE <= 1.5)", ("accuracy-graph-swingar",),
           "SwinGar RMSE / VirtualBones RMSE", SWINGAR_GRAPH),
+    Claim("SwinGar", "the same, with loosefit's skinning prior (the weights start as body-LBS's)",
+          "-- (target: SwinGar / VirtualBones RMSE <= 1.5)", ("accuracy-graph-swingar-prior",),
+          "SwinGar with the skinning prior RMSE / VirtualBones RMSE", SWINGAR_PRIOR),
     Claim("SwinGar", "neural collision handling removes most collisions (Table II)", "about 88 % (target >= 80 %)",
           ("collision-garments",), "Eq. 10 (neural) removes", COLLISION),
     Claim("SwinGar", "its correction keeps the mesh's local shape (Table III)",
