@@ -47,10 +47,10 @@ differ in the global feature alone.
 Skinning prior (``skinning_prior``, ours, off by default): the weight logits are added to the log of the
 garment's body-LBS weights (each vertex's nearest rest body vertex, ``W_t = softmax_J(P(Q(S_t) * a) + log
 W_body)``) and ``P`` starts at zero, so that an untrained network skins like body-LBS and training learns
-the departure from it, with ``a`` at unit root mean square (:func:`rms_normalized` says why; the paper's
-weights start from nothing and need the free scale to sharpen: normalised, the unseen garments' RMSE at
-the CPU budget rose from 122 to 136 mm); the paper learns the weights from nothing, which needs far more epochs than a CPU
-budget allows.
+the departure from it; ``a`` is then taken at unit root mean square (:func:`rms_normalized` says why). The
+paper learns the weights from nothing, which needs far more epochs than a CPU budget allows, and from a
+uniform start they need ``a``'s free scale to sharpen (normalised, the unseen garments' RMSE at the CPU
+budget rose from 122 to 136 mm), so without the prior ``a`` is left as the paper has it.
 
 Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather
 than axis-angles; the fit attribute ``a_i`` is each vertex's rest distance to the body (FitGar's
