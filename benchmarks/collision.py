@@ -387,6 +387,8 @@ def main() -> None:
     parser.add_argument("--tolerance", type=float, default=1e-3, help="collision depth tolerance, metres")
     parser.add_argument("--push-distance", type=float, default=0.004, help="push-out distance, metres")
     parser.add_argument("--skip-speed", action="store_true")
+    parser.add_argument("--speed-only", action="store_true",
+                        help="the speed part alone (no collision tables), e.g. to time on an idle machine")
     parser.add_argument("--speed-widths", default="32,64,128", help="narrower networks to time ('' for none)")
     parser.add_argument("--speed-steps", type=int, default=None, help="their training steps (default: the SDF run's)")
     parser.add_argument("--speed-frames", type=int, default=12)
@@ -394,6 +396,8 @@ def main() -> None:
     parser.add_argument("--threads", default="1,2", help="torch thread counts of the speed part")
     parser.add_argument("--name", default="collision", help="results file name")
     args = parser.parse_args()
+    if args.speed_only and args.skip_speed:
+        parser.error("--speed-only and --skip-speed leave nothing to do")
 
     from loosefit.data.store import DatasetStore
     from loosefit.report.predictions import animate_run, load_sequences
@@ -410,12 +414,12 @@ def main() -> None:
         method, predictions = animate_run(args.run, sequences)
         rows = []
         for seq in sequences:
-            if seq.name not in predictions:
+            if seq.name not in predictions or args.speed_only:
                 continue
             print(f"{seq.name}: {len(seq.gt)} frames, {seq.gt.shape[1]} vertices", flush=True)
             rows.append({"sequence": seq.name, "kind": kind_of(seq.garment), "vertices": int(seq.gt.shape[1]),
                          "methods": evaluate_sequence(seq, predictions[seq.name], net, args.tolerance, args.push_distance)})
-    table = summarise(rows)
+    table = summarise(rows) if rows else {}
     results = {"data": str(data.resolve()), "run": str(Path(args.run).resolve()), "method": method,
                "sdf_run": str(sdf_run.resolve()), "sdf": {k: sdf_summary.get(k) for k in
                                                           ("bodies", "motions", "frames", "first_loss", "final_loss",
@@ -431,7 +435,7 @@ def main() -> None:
         widths = [int(w) for w in args.speed_widths.split(",") if w.strip()]
         steps = args.speed_steps or int(sdf_summary["config"]["steps"])
         store = DatasetStore.open(data, "r")
-        kinds = sorted({r["kind"] for r in rows}) or ["dress"]
+        kinds = sorted({kind_of(s.garment) for s in sequences if s.name in predictions}) or ["dress"]
         results["speed"] = speed(net, sdf_summary, store, [s for s in sequences if s.name in predictions], kinds,
                                  widths, steps, args.speed_frames, args.speed_reps,
                                  [int(t) for t in args.threads.split(",")])
