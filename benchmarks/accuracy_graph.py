@@ -338,13 +338,13 @@ def virtualbones_comparison(vb_data: Path, store: DatasetStore, names: list[str]
             vb = rmse_mm(animator.animate(store.motion(seq.motion)), gt)
             rows.append({"sequence": name, "virtualbones_rmse_mm": vb,
                          **{f"{v}_rmse_mm": by_sequence[v][name] for v in swingar}})
-        means_ = {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "sequence"}
-        out["garments"][garment] = {"training": training, "rows": rows, **means_,
+        averages = {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "sequence"}
+        out["garments"][garment] = {"training": training, "rows": rows, **averages,
                                     "train_sequences": [n for n in vb_store.sequence_names(split="train")
                                                         if vb_store.sequence(n).garment == garment]}
-        vb_mean = means_["virtualbones_rmse_mm"]
+        vb_mean = averages["virtualbones_rmse_mm"]
         for v in swingar:
-            ours = means_[f"{v}_rmse_mm"]
+            ours = averages[f"{v}_rmse_mm"]
             targets.append(entry(f"{VB_COMPARED[v]} RMSE / VirtualBones RMSE (trained for the garment)", garment,
                                  ours / vb_mean, SWINGAR_OVER_VB, ours <= SWINGAR_OVER_VB * vb_mean))
     out["targets"] = targets
