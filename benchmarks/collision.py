@@ -265,18 +265,16 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     from loosefit.geometry.ray_cull import AxisRayCuller
     from loosefit.geometry.signed_distance import BodySDF
     from loosefit.models.collision import (CULL_CELL, BodySDFConfig, BodySDFNet, CollisionResolver, ExactSDF,
-                                           SDFTrainConfig, body_code, body_sdf_samples, correct_frame,
-                                           flushed_denormals, sdf_and_gradient, train_body_sdf)
-    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+                                           SDFTrainConfig, body_sdf_samples, correct_frame, flushed_denormals,
+                                           motion_sdf_inputs, sdf_and_gradient, train_body_sdf)
+    from loosefit.models.motion_features import to_canonical
     from loosefit.threads import torch_threads
 
     body = AnnyBody()
     proxy = body.collision_proxy()
     motion = test_seqs[0].motion
     posed = proxy.pose(motion).verts
-    feats = motion_features(motion)
-    rot, origin = heading_frames(motion)
-    code = torch.from_numpy(body_code(body.shape.to_array(), feats["root"], feats["joints"]))
+    code, rot, origin = motion_sdf_inputs(body, motion)
     picks = [int(t) for t in np.linspace(0, motion.num_frames - 1, frames).round()]
     out: dict = {"motion": test_seqs[0].motion.name, "body": "average Anny, collision proxy 1,229 vertices",
                  "cull_cell_m": CULL_CELL, "frames_timed": picks, "garments": {}}

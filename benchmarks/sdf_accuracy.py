@@ -33,9 +33,8 @@ from loosefit.animate import Animator  # noqa: E402
 from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.geometry.signed_distance import BodySDF  # noqa: E402
-from loosefit.models.collision import (SDF_FILE, ExactSDF, FramedSDF, body_code, load_body_sdf,  # noqa: E402
-                                       value_and_gradient_fn)
-from loosefit.models.motion_features import heading_frames, motion_features  # noqa: E402
+from loosefit.models.collision import (SDF_FILE, ExactSDF, FramedSDF, load_body_sdf,  # noqa: E402
+                                       motion_sdf_inputs, value_and_gradient_fn)
 
 INSIDE_M = 0.001  # the collision benchmark's tolerance
 NEAR_M = 0.02
@@ -55,9 +54,7 @@ def sequence_accuracy(store: DatasetStore, name: str, run: Path, nets: dict, eve
     verts = Animator(run, garment=store.garment(seq.garment), body=body).animate(motion)
     proxy = body.collision_proxy()
     posed = proxy.pose(motion).verts
-    feats = motion_features(motion)
-    rot, origin = heading_frames(motion)
-    code = torch.from_numpy(body_code(body.shape.to_array(), feats["root"], feats["joints"]))
+    code, rot, origin = motion_sdf_inputs(body, motion)
     per_net = {label: [] for label in nets}
     for t in range(0, len(verts), every):
         x = torch.from_numpy(np.ascontiguousarray(verts[t], np.float32))

@@ -572,6 +572,17 @@ def body_code(shape_values: np.ndarray, root: np.ndarray, joints: np.ndarray) ->
     return np.concatenate([shape, root[:, :1], root[:, 5:11], joints.reshape(T, -1)], 1).astype(np.float32)
 
 
+def motion_sdf_inputs(body, motion) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
+    """What the body SDF network reads along ``motion`` on ``body`` (an Anny body): the codes ``(T, C)``
+    (:func:`body_code`) and each frame's canonical frame ``rot (T, 3, 3)``, ``origin (T, 3)``, for
+    :class:`FramedSDF` (the network works in the canonical heading frame)."""
+    from loosefit.models.motion_features import heading_frames, motion_features
+
+    feats = motion_features(motion)
+    rot, origin = heading_frames(motion)
+    return torch.from_numpy(body_code(body.shape.to_array(), feats["root"], feats["joints"])), rot, origin
+
+
 @dataclass(frozen=True)
 class SDFTrainConfig:
     """How :func:`train_body_sdf` samples posed bodies and fits the network.
@@ -721,8 +732,6 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
     (:func:`correct_frame`); the Gaussian width is the mean edge length of the first frame.
     """
-    from loosefit.models.motion_features import heading_frames, motion_features
-
     if mode not in ("neural", "exact", "pushout"):
         raise InputError(f"collision mode must be 'neural', 'exact' or 'pushout', got {mode!r}")
     if mode == "neural" and net is None:
@@ -733,9 +742,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     culler = AxisRayCuller(posed[0], proxy.faces, CULL_CELL) if cull and mode != "pushout" else None
     resolver = CollisionResolver(faces, out.shape[1])
     if mode == "neural":
-        feats = motion_features(motion)
-        rot, origin = heading_frames(motion)
-        code = torch.from_numpy(body_code(body.shape.to_array(), feats["root"], feats["joints"]))
+        code, rot, origin = motion_sdf_inputs(body, motion)
         bound = net.eval().bind(code[0])
         for t in range(len(out)):
             out[t] = correct_frame(out[t], resolver, bound.with_code(code[t]), (rot[t], origin[t]),

@@ -28,15 +28,16 @@ SPEED = ".venv/bin/python benchmarks/speed.py --threads 1,2"
 SWINGAR = ".venv/bin/python benchmarks/swingar_small.py"
 GARMENTS = (".venv/bin/python benchmarks/simulation.py --sizes \"\" --plan configs/datasets/garments.yaml --workers 2 "
             "--out G.zarr && .venv/bin/loosefit prepare G.zarr --bones 8 --set iterations=2 --set max_solve_frames=60")
-SWINGAR_GRAPH = (GARMENTS + " && .venv/bin/python benchmarks/accuracy_graph.py --data G.zarr --runs RUNS --variants "
-                 "swingar,swingar-no-descriptor,swingar-plain-gat,swingar-pooling,swingar-euclidean --vb-data VB.zarr "
-                 "--name {name}")
-SWINGAR_PRIOR = (GARMENTS + " && .venv/bin/python benchmarks/accuracy_graph.py --data G.zarr --runs RUNS --variants "
-                 "swingar-prior --vb-data VB.zarr --name {name}")
-FITGAR_GRAPH = (GARMENTS + " && .venv/bin/python benchmarks/accuracy_graph.py --data G.zarr --runs RUNS --variants "
-                "fitgar-all --also quasi-static=S.zarr --name {name}")
+ACCURACY_GRAPH = (GARMENTS + " && .venv/bin/python benchmarks/accuracy_graph.py --data G.zarr --runs RUNS --variants "
+                  "{variants} --name {{name}}")
+SWINGAR_GRAPH = ACCURACY_GRAPH.format(variants="swingar,swingar-no-descriptor,swingar-plain-gat,swingar-pooling,"
+                                               "swingar-euclidean --vb-data VB.zarr")
+SWINGAR_PRIOR = ACCURACY_GRAPH.format(variants="swingar-prior --vb-data VB.zarr")
+FITGAR_GRAPH = ACCURACY_GRAPH.format(variants="fitgar-all --also quasi-static=S.zarr")
 COLLISION = (GARMENTS + " && .venv/bin/python benchmarks/collision.py --data G.zarr --run RUNS/swingar[-prior] "
              "--name {name}")
+#: The collision benchmark's results: on the skinning-prior SwinGar (newer), and on the paper's.
+COLLISION_FILES = ("collision-garments-prior", "collision-garments")
 
 
 @dataclass(frozen=True)
@@ -94,10 +95,9 @@ CLAIMS: tuple[Claim, ...] = (
           "-- (target: SwinGar / VirtualBones RMSE <= 1.5)", ("accuracy-graph-swingar-prior",),
           "SwinGar with the skinning prior RMSE / VirtualBones RMSE", SWINGAR_PRIOR),
     Claim("SwinGar", "neural collision handling removes most collisions (Table II)", "about 88 % (target >= 80 %)",
-          ("collision-garments-prior", "collision-garments"), "Eq. 10 (neural) removes", COLLISION),
+          COLLISION_FILES, "Eq. 10 (neural) removes", COLLISION),
     Claim("SwinGar", "its correction keeps the mesh's local shape (Table III)",
-          "d_cons 0.21-0.42 against TailorNet's 0.30-0.63 (target: below push-out)",
-          ("collision-garments-prior", "collision-garments"),
+          "d_cons 0.21-0.42 against TailorNet's 0.30-0.63 (target: below push-out)", COLLISION_FILES,
           "d_cons of Eq. 10 (neural) below push-out", COLLISION),
     Claim("FitGar", "the detail generator halves the coarse error (Tables 1, 2)",
           "1.52 against 3.01 mm (0.50; target <= 0.6)", ("accuracy-graph-fitgar",),
