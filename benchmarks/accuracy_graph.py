@@ -141,15 +141,17 @@ def mean_error_mm(pred: np.ndarray, gt: np.ndarray) -> float:
     return float(np.linalg.norm(pred - gt, axis=-1).mean() * 1e3)
 
 
-def every_nth_frame(motion: Motion, stride: int) -> Motion:
-    """Frames ``0, stride, 2 stride, ...`` of ``motion`` (for a static method, whose frames are independent)."""
-    return Motion(motion.rotations[::stride], motion.translation[::stride], motion.fps / stride, motion.rig,
-                  motion.joint_names, motion.name)
+def every_nth_frame(motion: Motion, stride: int, offset: int = 0) -> Motion:
+    """Frames ``offset, offset + stride, ...`` of ``motion`` (for a static method, whose frames are independent)."""
+    return Motion(motion.rotations[offset::stride], motion.translation[offset::stride], motion.fps / stride,
+                  motion.rig, motion.joint_names, motion.name)
 
 
-def fitgar_errors(run: Path, store: DatasetStore, names: list[str], frame_stride: int = 1) -> list[dict]:
+def fitgar_errors(run: Path, store: DatasetStore, names: list[str], frame_stride: int = 1,
+                  frame_offset: int = 0) -> list[dict]:
     """One row per sequence: coarse and detail mean per-vertex errors (mm) over every ``frame_stride``-th
-    frame (FitGar is static: each frame is predicted on its own, so a stride only samples the frames)."""
+    frame from ``frame_offset`` (FitGar is static: each frame is predicted on its own, so a stride only samples
+    the frames; a held-pose store's settled frames are stride ``transition + frames``, offset one less)."""
     animator = AnyGarmentAnimator(run)
     rows, bodies = [], {}
     for name in names:
@@ -158,15 +160,15 @@ def fitgar_errors(run: Path, store: DatasetStore, names: list[str], frame_stride
             bodies[seq.body] = AnnyBody(AnnyShape.from_array(store.body(seq.body)))
         garment = store.garment(seq.garment)
         pair = animator.pair(garment.verts, garment.faces, bodies[seq.body])
-        motion = every_nth_frame(store.motion(seq.motion), frame_stride)
+        motion = every_nth_frame(store.motion(seq.motion), frame_stride, frame_offset)
         out = animator.animate_outputs(pair, motion)
-        gt = np.asarray(seq.verts[::frame_stride], np.float32)
+        gt = np.asarray(seq.verts[frame_offset::frame_stride], np.float32)
         lbs = body_lbs(garment.verts, bodies[seq.body], motion)
         smooth = Smoother(garment.faces, len(garment.verts), garment.pinned)(gt)
         rows.append({"sequence": name, "garment": seq.garment, "body": seq.body, "motion": seq.motion,
                      "coarse_mm": mean_error_mm(out["coarse"], gt), "coarse_vs_smooth_mm": mean_error_mm(out["coarse"], smooth),
                      "detail_mm": mean_error_mm(out["verts"], gt), "body_lbs_mm": mean_error_mm(lbs, gt),
-                     "frames": int(len(gt)), "frame_stride": frame_stride})
+                     "frames": int(len(gt)), "frame_stride": frame_stride, "frame_offset": frame_offset})
         print(f"   {name}: coarse {rows[-1]['coarse_mm']:.1f} mm, detail {rows[-1]['detail_mm']:.1f} mm", flush=True)
     return rows
 
@@ -429,14 +431,18 @@ def main() -> None:
                         "quasi-static=DATA-STATIC.zarr (configs/datasets/garments-static.yaml): results under NAME")
     p.add_argument("--fitgar-frame-stride", type=int, default=1,
                    help="evaluate FitGar on every n-th frame of each test sequence (a static method: frames are independent)")
+    p.add_argument("--fitgar-frame-offset", type=int, default=0,
+                   help="the first frame of each test sequence FitGar is evaluated on (a held-pose store's settled frames: "
+                        "--fitgar-frame-stride TRANSITION+FRAMES --fitgar-frame-offset TRANSITION+FRAMES-1)")
     p.add_argument("--from-results", default=None, metavar="NAME,NAME",
                    help="without --data: merge the variants of these result files (later ones win) and compute "
                         "their targets, e.g. an ablation run separately from the full model")
     p.add_argument("--name", default="accuracy-graph")
     args = p.parse_args()
-    if args.fitgar_frame_stride < 1:
-        p.error("--fitgar-frame-stride must be >= 1")
-    options = {"fitgar": {"frame_stride": args.fitgar_frame_stride}, "swingar": {}}
+    if not 0 <= args.fitgar_frame_offset < args.fitgar_frame_stride:
+        p.error("--fitgar-frame-stride must be >= 1 and 0 <= --fitgar-frame-offset < --fitgar-frame-stride")
+    options = {"fitgar": {"frame_stride": args.fitgar_frame_stride, "frame_offset": args.fitgar_frame_offset},
+               "swingar": {}}
     variants = variant_list(args.variants)
     sets, configs = per_method(args.set, "--set"), per_method(args.config, "--config")
     if any(len(v) > 1 for v in configs.values()):
@@ -454,7 +460,7 @@ def main() -> None:
         return Path(configs[method][0]) if method in configs else PRESETS[args.preset][method]
 
     results: dict = {"set": args.set_name, "preset": args.preset, "fitgar_frame_stride": args.fitgar_frame_stride,
-                     "load_average_at_start": os.getloadavg()}
+                     "fitgar_frame_offset": args.fitgar_frame_offset, "load_average_at_start": os.getloadavg()}
     started = time.perf_counter()
     if args.data is not None:
         store = DatasetStore.open(args.data)
@@ -499,7 +505,8 @@ def main() -> None:
         names = args.from_results.split(",")
         earlier = [json.loads((RESULTS / f"{name}.json").read_text())["results"] for name in names]
         # how the runs were made is theirs (the first file's), not this call's defaults
-        results.update({k: earlier[0].get(k) for k in ("data", "test_sequences", "set", "preset", "fitgar_frame_stride")},
+        results.update({k: earlier[0].get(k) for k in ("data", "test_sequences", "set", "preset", "fitgar_frame_stride",
+                                                         "fitgar_frame_offset")},
                        merged_from=names, variants={})
         vb, vb_targets = None, {}
         for doc in earlier:

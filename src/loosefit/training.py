@@ -98,12 +98,12 @@ def _train_garment_frames(method, cls, cfg, data, run: RunDir, resume: bool, val
     from loosefit.models.fitgar_data import GarmentFrames
 
     seed_everything(cfg.train.seed)
-    stride = cfg.data.frame_stride
-    train_data = GarmentFrames(data, "train", sim_params=sim_params, frame_stride=stride)
+    frames = {"frame_stride": cfg.data.frame_stride, "frame_offset": cfg.data.frame_offset}
+    train_data = GarmentFrames(data, "train", sim_params=sim_params, **frames)
     val_data = None
     if val_split is not None:
         try:
-            val_data = GarmentFrames(data, val_split, sim_params=sim_params, frame_stride=stride)
+            val_data = GarmentFrames(data, val_split, sim_params=sim_params, **frames)
         except InputError:
             val_data = None  # no held-out sequences: train without validation
     model = cls.from_data(train_data, cfg.model)

@@ -2,7 +2,7 @@ import pytest
 import yaml
 
 from loosefit.errors import InputError
-from loosefit.sim.plan import FileMotion, ProceduralMotion, TemplateGarment, load_plan
+from loosefit.sim.plan import FileMotion, Hold, ProceduralMotion, TemplateGarment, load_plan
 
 PLAN = {
     "name": "t",
@@ -136,7 +136,7 @@ def test_specs_are_typed_configs_and_yaml_exponents_are_numbers(tmp_path):
     assert plan.motion_spec("f") == FileMotion("c.bvh", None, 0, None)
     assert plan.garments["g"] == {"template": "skirt", "params": {"length": 0.5}}  # as written: hashes unchanged
     for change, message in [({"motions": {"m": {"procedural": "walk", "seconds": 1, "speed": 2}}},
-                             r"motion 'm': unknown keys \['speed'\]; allowed: \['procedural', 'seconds', 'seed', 'slowdown'\]"),
+                             r"motion 'm': unknown keys \['speed'\]; allowed: \['hold', 'procedural', 'seconds', 'seed', 'slowdown'\]"),
                             ({"garments": {"g": {"template": "skirt", "seed": "one"}}},
                              r"garment 'g': config key 'seed': expected an integer"),
                             ({"motions": {"m": {"file": "c.bvh", "frames": 0}}}, r"'frames' must be an integer >= 1")]:
@@ -151,3 +151,16 @@ def test_slowdown_is_checked(tmp_path):
             load_plan(_write(tmp_path, {**PLAN, "motions": {"walk": {"procedural": "walk", "seconds": 2, "slowdown": value}}}))
     plan = load_plan(_write(tmp_path, {**PLAN, "motions": {"walk": {"procedural": "walk", "seconds": 2, "slowdown": 4}, "clip": PLAN["motions"]["clip"]}}))
     assert plan.motion_spec("walk").slowdown == 4 and plan.motion_spec("clip").slowdown == 1
+
+
+def test_hold_is_checked(tmp_path):
+    walk = {"procedural": "walk", "seconds": 2}
+    for hold, message in [({"every": 0}, r"'hold.every' must be an integer >= 1"),
+                          ({"transition": 5}, r"'hold.every'.*missing"),
+                          ({"every": 5, "frames": "long"}, r"'hold.frames': expected an integer"),
+                          (3, r"'hold': expected a mapping of Hold fields")]:
+        with pytest.raises(InputError, match=message):
+            load_plan(_write(tmp_path, {**PLAN, "motions": {"walk": {**walk, "hold": hold}}}))
+    plan = load_plan(_write(tmp_path, {**PLAN, "motions": {"walk": {**walk, "hold": {"every": 15}},
+                                                           "clip": PLAN["motions"]["clip"]}}))
+    assert plan.motion_spec("walk").hold == Hold(15, 10, 30, False) and plan.motion_spec("clip").hold is None

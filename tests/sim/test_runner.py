@@ -159,3 +159,21 @@ def test_slowed_plan_motions(plan_path, tmp_path):
     assert walk.num_frames == 9
     np.testing.assert_allclose(walk.translation[::2], original.translation[1:6], atol=1e-9)
 
+
+def test_held_plan_motions(plan_path, tmp_path):
+    """``hold``: a file's motion, cut, then every 3rd frame held; the settled frames are those source frames."""
+    from loosefit.motion.hold import settled_frames
+    from loosefit.motion.motion import Motion
+    from loosefit.sim.plan import load_plan
+
+    plan = {"garments": {"skirt": {"template": "skirt"}},
+            "motions": {"walk": {"file": str(plan_path.parent / "walk.npz"), "start": 2, "frames": 9,
+                                 "hold": {"every": 3, "transition": 2, "frames": 4}}}}
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    walk = runner.load_plan_motion(load_plan(path), "walk")
+    original = Motion.load(plan_path.parent / "walk.npz")
+    assert walk.num_frames == 3 * 6
+    settled = settled_frames(walk.num_frames, 2, 4)
+    np.testing.assert_allclose(walk.translation[settled], original.translation[2:11:3], atol=1e-6)
+

@@ -54,7 +54,7 @@ import torch
 from torch import nn
 
 from loosefit.errors import InputError
-from loosefit.models.fitgar_data import GarmentFrames, collate_frames
+from loosefit.models.fitgar_data import GarmentFrames, check_frame_choice, collate_frames
 from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput, dense_stack
 from loosefit.models.layers.edge_pool import EdgeContractionPooling
 from loosefit.models.layers.gat_block import GATBlock
@@ -149,13 +149,13 @@ class FitGarConfig:
 
 @dataclass(frozen=True)
 class FramesConfig:
-    """Which frames train FitGar: every ``frame_stride``-th frame of each sequence."""
+    """Which frames train FitGar: every ``frame_stride``-th frame of each sequence from ``frame_offset``."""
 
     frame_stride: int = 1
+    frame_offset: int = 0
 
     def __post_init__(self):
-        if self.frame_stride < 1:
-            raise InputError(f"frame_stride must be >= 1, got {self.frame_stride}")
+        check_frame_choice(self.frame_stride, self.frame_offset)
 
 
 def _default_train() -> TrainConfig:

@@ -60,6 +60,14 @@ class Smoother:
         return np.moveaxis(x.reshape(V, -1, 3), 0, 1).reshape(verts.shape).astype(np.float32)
 
 
+def check_frame_choice(frame_stride: int, frame_offset: int) -> None:
+    """Raise :class:`InputError` unless ``frame_stride >= 1`` and ``0 <= frame_offset < frame_stride``."""
+    if frame_stride < 1:
+        raise InputError(f"frame_stride must be >= 1, got {frame_stride}")
+    if not 0 <= frame_offset < frame_stride:
+        raise InputError(f"frame_offset must be in [0, frame_stride = {frame_stride}), got {frame_offset}")
+
+
 class GarmentFrames(Dataset):
     """Frames of every garment-body-motion sequence of ``split`` in a prepared store.
 
@@ -70,15 +78,17 @@ class GarmentFrames(Dataset):
         sim_params: keep only sequences simulated with exactly these parameters.
         names: restrict to these sequence names.
         frame_stride: keep every ``frame_stride``-th frame of each sequence (frames are taken one by one).
+        frame_offset: the first frame kept, ``0 <= frame_offset < frame_stride`` (a held-pose plan's settled
+            frames: stride ``transition + frames``, offset one less; :mod:`loosefit.motion.hold`).
         smoothing: preset of the coarse target.
     """
 
     def __init__(self, store, split: str | None = "train", body=None, sim_params: dict | None = None,
-                 names: list[str] | None = None, frame_stride: int = 1, smoothing: str = "fitgar"):
+                 names: list[str] | None = None, frame_stride: int = 1, frame_offset: int = 0,
+                 smoothing: str = "fitgar"):
         from loosefit.rig.prepare import load_fit_attribute
 
-        if frame_stride < 1:
-            raise InputError(f"frame_stride must be >= 1, got {frame_stride}")
+        check_frame_choice(frame_stride, frame_offset)
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         self.fit_model, alphas = load_fit_attribute(self.store)
         selected = [n for n in self.store.sequence_names(split=split)
@@ -112,7 +122,7 @@ class GarmentFrames(Dataset):
             i = len(self.sequences)
             self.sequences.append({"name": name, "pair": key, "pose": pose_key, "garment": seq.garment,
                                    "verts": np.asarray(seq.verts[:], np.float32)})
-            self.index += [(i, t) for t in range(0, seq.num_frames, frame_stride)]
+            self.index += [(i, t) for t in range(frame_offset, seq.num_frames, frame_stride)]
 
     def __len__(self) -> int:
         return len(self.index)

@@ -43,8 +43,14 @@ def resample_quaternions(q: np.ndarray, translation: np.ndarray, fps_in: float, 
     i0 = np.minimum(np.floor(at + 1e-6).astype(np.int64), T - 1)
     i1 = np.minimum(i0 + 1, T - 1)
     a = np.clip(at - i0, 0.0, 1.0)[:, None, None]
-    q0, q1 = q[i0], q[i1]
-    # Take the shorter arc: q and -q are the same rotation.
+    translation = (1 - a[:, 0]) * translation[i0] + a[:, 0] * translation[i1]
+    return slerp(q[i0], q[i1], a), translation
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Spherical interpolation of unit quaternions ``(..., 4)`` at fractions ``a`` (broadcast to ``(..., 1)``),
+    along the shorter arc."""
+    # q and -q are the same rotation.
     dot = (q0 * q1).sum(-1, keepdims=True)
     q1 = np.where(dot < 0, -q1, q1)
     omega = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))
@@ -53,6 +59,5 @@ def resample_quaternions(q: np.ndarray, translation: np.ndarray, fps_in: float, 
     safe = np.where(tiny, 1.0, sin)
     w0 = np.where(tiny, 1 - a, np.sin((1 - a) * omega) / safe)
     w1 = np.where(tiny, a, np.sin(a * omega) / safe)
-    a = a[:, 0]
-    return w0 * q0 + w1 * q1, (1 - a) * translation[i0] + a * translation[i1]
+    return w0 * q0 + w1 * q1
 

@@ -14,6 +14,8 @@ Plan format (paths are relative to the plan file)::
       walk: {procedural: walk, seconds: 4, seed: 1}
       clip: {file: ../mocap/005_02.bvh, joint_map: cc, start: 1, frames: 300}
       slow: {procedural: walk, seconds: 6, seed: 1, slowdown: 4}   # 1.5 s of a walk over 6 s
+      held: {procedural: walk, seconds: 6, seed: 1, hold: {every: 15, transition: 10, frames: 30, in_place: true}}
+                                   # every 15th pose, reached in 10 frames then held for 30, on the spot
     sim_params:                    # named SimParams sets (missing fields keep their defaults)
       default: {}
       stiff: {bending: 1.0e-4}
@@ -113,14 +115,32 @@ class FileGarment:
 
 
 @dataclass(frozen=True)
+class Hold:
+    """Key poses held until the cloth settles (:func:`loosefit.motion.hold.hold_poses`): every ``every``-th
+    frame, reached in ``transition`` frames, then held for ``frames`` frames; ``in_place``: on the spot."""
+
+    every: int
+    transition: int = 10
+    frames: int = 30
+    in_place: bool = False
+
+    def __post_init__(self):
+        for key in ("every", "transition", "frames"):
+            if getattr(self, key) < 1:
+                raise InputError(f"'hold.{key}' must be an integer >= 1, got {getattr(self, key)!r}")
+
+
+@dataclass(frozen=True)
 class ProceduralMotion:
     """A procedural plan motion (:func:`loosefit.motion.procedural.generate`) of ``seconds`` seconds, played
-    ``slowdown`` times slower (:func:`loosefit.motion.resample.slow_down`; the result still lasts ``seconds``)."""
+    ``slowdown`` times slower (:func:`loosefit.motion.resample.slow_down`; the result still lasts ``seconds``),
+    then, with ``hold``, as held key poses (the result is longer: ``hold.transition + hold.frames`` frames a key)."""
 
     procedural: str
     seconds: Optional[float] = None
     seed: int = 0  # generate() takes it positionally: the default is the plan's
     slowdown: float = 1.0
+    hold: Optional[Hold] = None
 
     def __post_init__(self):
         if self.seconds is None or not self.seconds > 0:
@@ -131,13 +151,14 @@ class ProceduralMotion:
 @dataclass(frozen=True)
 class FileMotion:
     """A plan motion read from a file (relative to the plan): ``frames`` frames (None: all) from ``start``,
-    counted after the motion is played ``slowdown`` times slower."""
+    counted after the motion is played ``slowdown`` times slower; then, with ``hold``, as held key poses."""
 
     file: str
     joint_map: Optional[str] = None
     start: int = 0
     frames: Optional[int] = None
     slowdown: float = 1.0
+    hold: Optional[Hold] = None
 
     def __post_init__(self):
         _check_slowdown(self.slowdown)

@@ -92,11 +92,22 @@ def load_plan_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
 
 
 def load_plan_motion(plan: Plan, name: str):
-    """Motion ``name`` of ``plan`` (procedural, or a file with its start and frame count) on the average body."""
+    """Motion ``name`` of ``plan`` (procedural, or a file with its start and frame count) on the average body,
+    slowed down and held as its entry says."""
+    from loosefit.motion.hold import hold_poses
+
+    spec = plan.motion_spec(name)
+    motion = _plan_motion_played(plan, name, spec)
+    if spec.hold is None:
+        return motion
+    return hold_poses(motion, spec.hold.every, spec.hold.transition, spec.hold.frames, spec.hold.in_place)
+
+
+def _plan_motion_played(plan: Plan, name: str, spec):
+    """Motion ``name`` as generated or read, cut and slowed down (before any hold)."""
     from loosefit.body import AnnyShape
     from loosefit.motion.resample import slow_down
 
-    spec = plan.motion_spec(name)
     body = plan_body(tuple(AnnyShape().to_array().tolist()))  # motions are made on the average body
     if isinstance(spec, ProceduralMotion):
         from loosefit.motion.procedural import DEFAULT_FPS, generate

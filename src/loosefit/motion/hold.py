@@ -1,0 +1,60 @@
+"""A quasi-static version of a motion: key poses, each reached in a short transition and then held until
+the cloth settles.
+
+Playing a motion slower (:func:`loosefit.motion.resample.slow_down`) only weakens the cloth's inertia; a
+held pose removes it: after ``hold`` frames at rest the garment is near its static equilibrium for that
+pose, which is the ground truth a static method (FitGar) is built for. The settled frame of key ``k`` is
+frame ``(k + 1) * (transition + hold) - 1`` of the result (:func:`settled_frames`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from loosefit.errors import InputError
+from loosefit.geometry.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+from loosefit.motion.motion import Motion
+from loosefit.motion.resample import slerp
+
+
+def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place: bool = False) -> Motion:
+    """Every ``every``-th frame of ``motion`` as a key pose: ``transition`` frames moving from the previous
+    key (rotations by slerp, root translation linearly; the first key is held throughout), then ``hold``
+    frames standing still at the key.
+
+    Args:
+        motion: ``T`` frames.
+        every: source frames between key poses (>= 1); keys are frames ``0, every, 2 every, ...``.
+        transition: frames moving to a key (>= 1); the last of them is the key itself.
+        hold: frames held at the key after it is reached (>= 1).
+        in_place: keep the root's horizontal (x, y) position at the first frame's: the body poses on the spot
+            instead of covering a walk's stride in each transition, which would swing the cloth for nothing
+            (a static garment shape does not depend on where the body stands).
+
+    Returns:
+        A Motion of ``K * (transition + hold)`` frames at the source's frame rate, ``K = ceil(T / every)``.
+    """
+    for name, value in (("every", every), ("transition", transition), ("hold", hold)):
+        if not (isinstance(value, (int, np.integer)) and value >= 1):
+            raise InputError(f"hold_poses: {name!r} must be an integer >= 1, got {value!r}")
+    q = axis_angle_to_quaternion(torch.from_numpy(motion.rotations[::every].astype(np.float64))).numpy()
+    t = motion.translation[::every].astype(np.float64)
+    if in_place:
+        t[:, :2] = t[0, :2]
+    previous = np.concatenate([q[:1], q[:-1]])  # (K, J, 4): the first key moves from itself
+    previous_t = np.concatenate([t[:1], t[:-1]])
+    a = np.concatenate([np.arange(1, transition + 1) / transition, np.ones(hold)])  # (B,) fraction of the way
+    quats = slerp(previous[:, None], q[:, None], a[None, :, None, None])  # (K, B, J, 4)
+    trans = previous_t[:, None] + a[None, :, None] * (t - previous_t)[:, None]  # (K, B, 3)
+    count = quats.shape[0] * quats.shape[1]
+    rotations = quaternion_to_axis_angle(torch.from_numpy(quats.reshape(count, -1, 4))).numpy()
+    name = f"{motion.name} (key every {every}, {transition} + {hold} frames{', in place' if in_place else ''})"
+    return Motion(rotations, trans.reshape(count, 3), motion.fps, motion.rig, motion.joint_names, name)
+
+
+def settled_frames(num_frames: int, transition: int, hold: int) -> np.ndarray:
+    """Indices of the settled frames (the last held frame of every key) of a :func:`hold_poses` result of
+    ``num_frames`` frames."""
+    block = transition + hold
+    return np.arange(block - 1, num_frames, block)
