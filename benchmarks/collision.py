@@ -241,11 +241,13 @@ def near_surface_set(shapes, motions, frames: int, points: int, seed: int = 0) -
     return body_sdf_samples(shapes, motions, cfg)
 
 
-def sdf_accuracy(net_or_bound_fn, test: dict) -> dict:
+def sdf_accuracy(net_or_bound_fn, test: dict, bone_frames: bool) -> dict:
     """Error of a field against libigl on ``test``: mean / p95 absolute (mm), sign agreement (%), also within
-    5 mm of the surface. ``net_or_bound_fn(code) -> SDFFunction``."""
+    5 mm of the surface. ``net_or_bound_fn(code) -> SDFFunction``; ``bone_frames``: its codes end with them."""
+    from loosefit.models.collision import samples_code
+
     err, agree, err5 = [], [], []
-    for pts, sdf, code in zip(test["points"], test["sdf"], test["code"]):
+    for pts, sdf, code in zip(test["points"], test["sdf"], samples_code(test, bone_frames)):
         with torch.no_grad():
             pred = net_or_bound_fn(torch.from_numpy(code))(torch.from_numpy(pts)).float().numpy()
         e = np.abs(pred - sdf)
@@ -274,7 +276,8 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     proxy = body.collision_proxy()
     motion = test_seqs[0].motion
     posed = proxy.pose(motion).verts
-    code, rot, origin = motion_sdf_inputs(body, motion)
+    bones = net.num_bones > 0  # the narrower networks below are trained with the same config
+    code, rot, origin = motion_sdf_inputs(body, motion, bones)
     picks = [int(t) for t in np.linspace(0, motion.num_frames - 1, frames).round()]
     out: dict = {"motion": test_seqs[0].motion.name, "body": "average Anny, collision proxy 1,229 vertices",
                  "cull_cell_m": CULL_CELL, "frames_timed": picks, "garments": {}}
@@ -298,12 +301,14 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     test_shapes = [s.body.shape for s in test_seqs]
     test = near_surface_set(list({tuple(s.to_array()): s for s in test_shapes}.values()),
                             list({s.motion.name: s.motion for s in test_seqs}.values()), frames=4, points=2000)
-    out["accuracy_near_surface"] = {name: sdf_accuracy(lambda c, n=n: n.bind(c), test) for name, n in nets.items()}
+    out["accuracy_near_surface"] = {name: sdf_accuracy(lambda c, n=n: n.bind(c), test, bones)
+                                    for name, n in nets.items()}
     main_net = nets[next(iter(nets))]
-    out["accuracy_near_surface"]["trained, bfloat16"] = sdf_accuracy(lambda c: Bf16Bound(main_net.bind(c)), test)
+    out["accuracy_near_surface"]["trained, bfloat16"] = sdf_accuracy(lambda c: Bf16Bound(main_net.bind(c)), test, bones)
     if net.config.hidden != 512:  # the paper's size for the paper-way timing (untrained weights)
         torch.manual_seed(0)
-        nets_paper = BodySDFNet(net.code_size, BodySDFConfig(**{**sdf_summary["net"], "hidden": 512})).eval()
+        nets_paper = BodySDFNet(net.code_size, BodySDFConfig(**{**sdf_summary["net"], "hidden": 512}),
+                                net.num_bones).eval()
     else:
         nets_paper = net
 

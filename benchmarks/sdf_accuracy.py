@@ -54,14 +54,15 @@ def sequence_accuracy(store: DatasetStore, name: str, run: Path, nets: dict, eve
     verts = Animator(run, garment=store.garment(seq.garment), body=body).animate(motion)
     proxy = body.collision_proxy()
     posed = proxy.pose(motion).verts
-    code, rot, origin = motion_sdf_inputs(body, motion)
+    rot, origin = motion_sdf_inputs(body, motion)[1:]
+    codes = {label: motion_sdf_inputs(body, motion, net.num_bones > 0)[0] for label, net in nets.items()}
     per_net = {label: [] for label in nets}
     for t in range(0, len(verts), every):
         x = torch.from_numpy(np.ascontiguousarray(verts[t], np.float32))
         exact, exact_grad = field(ExactSDF(BodySDF(posed[t], proxy.faces)), x)
         inside, near = exact < -INSIDE_M, np.abs(exact) < NEAR_M
         for label, net in nets.items():
-            value, grad = field(FramedSDF(net.bind(code[t]), rot[t], origin[t]), x)
+            value, grad = field(FramedSDF(net.bind(codes[label][t]), rot[t], origin[t]), x)
             cos = (grad * exact_grad).sum(-1) / np.maximum(
                 np.linalg.norm(grad, axis=-1) * np.linalg.norm(exact_grad, axis=-1), 1e-12)
             per_net[label].append({

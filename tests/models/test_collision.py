@@ -259,14 +259,16 @@ def test_bound_network_and_culled_resolution_match_the_plain_ones(posed_proxy):
     from loosefit.models.collision import CollisionResolver
 
     torch.manual_seed(0)
-    for layers in [(3, 3, 2), (1, 2, 1), (2, 1, 3)]:
-        config = BodySDFConfig(hidden=32, point_layers=layers[0], code_layers=layers[1], fusion_layers=layers[2])
-        net = BodySDFNet(code_size=5, config=config).eval()
+    for layers, bones in [((3, 3, 2), 0), ((1, 2, 1), 0), ((2, 1, 3), 0), ((3, 3, 2), 4), ((1, 1, 1), 2)]:
+        config = BodySDFConfig(hidden=32, point_layers=layers[0], code_layers=layers[1], fusion_layers=layers[2],
+                               bone_frames=bones > 0)
+        size = 5 + 12 * bones
+        net = BodySDFNet(code_size=size, config=config, num_bones=bones).eval()
         for p in net.parameters():  # away from the initialisation: every weight matters
             p.data += 0.3 * torch.randn_like(p)
-        code = torch.randn(5)
+        code = torch.randn(size)
         x = torch.randn(300, 3) * 0.3
-        bound = net.bind(torch.zeros(5)).with_code(code)
+        bound = net.bind(torch.zeros(size)).with_code(code)  # the bones folded into the first layer per code
         value, grad = bound.value_and_gradient(x)
         plain, plain_grad = sdf_and_gradient(lambda q: net(q[None], code[None])[0], x, create_graph=True)
         torch.testing.assert_close(bound(x), plain.detach())
@@ -288,3 +290,44 @@ def test_bound_network_and_culled_resolution_match_the_plain_ones(posed_proxy):
     assert inside.sum() > 20 and candidates.sum() < 0.5 * len(verts)
     assert torch.equal(inside, inside_culled)
     torch.testing.assert_close(culled, full)
+
+
+def test_bone_frames_are_the_points_in_each_bone(posed_proxy):
+    """The bone-frame code of a posed Anny skeleton (:func:`bone_frame_code`) holds each joint's canonical
+    rotation and position, and :func:`bone_local_points` maps a joint's own position to its origin and a point
+    one unit along a bone axis to that unit vector; a network with bone frames starts independent of the pose
+    (their columns start at zero, as the code's), and a code too short for its bones is refused."""
+    from loosefit.body import AnnyBody
+    from loosefit.models.collision import bone_frame_code, bone_local_points, motion_sdf_inputs, posed_joints
+    from loosefit.models.motion_features import heading_frames, to_canonical
+    from loosefit.motion.procedural import generate
+
+    body = AnnyBody()
+    motion = generate("walk", 0.5, 1, body)
+    world = posed_joints(body, motion)
+    np.testing.assert_allclose(world, body.pose(motion).joint_transforms, atol=1e-5)  # FK alone = the posed body's
+    rot, origin = heading_frames(motion)
+    code = bone_frame_code(world, rot, origin)  # (T, 12 J)
+    J = world.shape[1]
+    assert code.shape == (motion.num_frames, 12 * J)
+    t, j = 7, 5
+    frame = code[t].reshape(J, 12)
+    joint = to_canonical(world[:, :, :3, 3], rot, origin)[t]  # (J, 3) canonical joint positions
+    np.testing.assert_allclose(frame[:, 9:], joint, atol=1e-5)
+    R = frame[j, :9].reshape(3, 3)
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-5)
+    points = torch.from_numpy(np.stack([joint[j], joint[j] + R[:, 2]]).astype(np.float32))
+    local = bone_local_points(points, torch.from_numpy(code[t]), J).reshape(2, J, 3)
+    torch.testing.assert_close(local[0, j], torch.zeros(3), atol=1e-5, rtol=0)
+    torch.testing.assert_close(local[1, j], torch.tensor([0.0, 0.0, 1.0]), atol=1e-5, rtol=0)
+    full, _, _ = motion_sdf_inputs(body, motion, bone_frames=True)
+    plain, _, _ = motion_sdf_inputs(body, motion)
+    assert torch.equal(full[:, :plain.shape[1]], plain) and np.allclose(full[:, plain.shape[1]:].numpy(), code)
+    with_bones = BodySDFNet(full.shape[1], BodySDFConfig(hidden=32, bone_frames=True), J)
+    x = torch.randn(50, 3) * 0.4
+    torch.testing.assert_close(with_bones(x[None], full[:1])[0], with_bones(x[None], full[-1:])[0])  # no pose yet
+    with_bones.point[0].weight.data[:, 3:] += 0.1
+    assert not torch.allclose(with_bones(x[None], full[:1])[0], with_bones(x[None], full[-1:])[0])
+    with pytest.raises(InputError, match="cannot have 3 bones in a code of 20 values"):
+        BodySDFNet(20, BodySDFConfig(hidden=32, bone_frames=True), 3)
+

@@ -47,6 +47,12 @@ def test_frames_of_every_garment_body_and_motion(store, body):
     assert np.abs(item["smooth"] - item["verts"])[garment.pinned].max() == 0  # pinned vertices kept
     strided = GarmentFrames(store, "train", body=body, frame_stride=4)
     assert len(strided) == sum(-(-s.sequence(n).num_frames // 4) for n in names)
+    # a held-pose store's settled frames: the last of every block of 4
+    settled = GarmentFrames(store, "train", body=body, frame_stride=4, frame_offset=3)
+    assert [t for _, t in settled.index] == [t for n in names for t in range(3, s.sequence(n).num_frames, 4)]
+    for offset in (-1, 4):
+        with pytest.raises(InputError, match="frame_offset must be in"):
+            GarmentFrames(store, "train", body=body, frame_stride=4, frame_offset=offset)
 
 
 def test_unprepared_or_empty(store, body, tmp_path):

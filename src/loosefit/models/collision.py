@@ -60,13 +60,15 @@ SDFFunction = Callable[[torch.Tensor], torch.Tensor]
 
 @dataclass(frozen=True)
 class BodySDFConfig:
-    """Sizes of :class:`BodySDFNet` (SwinGar Sec. IV) and the radius of its initial sphere (ours)."""
+    """Sizes of :class:`BodySDFNet` (SwinGar Sec. IV), the radius of its initial sphere and whether the point
+    branch also reads the point in every bone's frame (``bone_frames``; both ours, off in the paper)."""
 
     hidden: int = 512
     point_layers: int = 3
     code_layers: int = 3
     fusion_layers: int = 2
     init_radius: float = 0.5
+    bone_frames: bool = False
 
     def __post_init__(self):
         if min(self.hidden, self.point_layers, self.code_layers) < 1 or self.fusion_layers < 1:
@@ -81,15 +83,27 @@ class BodySDFNet(nn.Module):
     The code is the body's shape and pose as a vector (e.g. shape values and the pose features of
     :class:`~loosefit.models.swingar.SwinGar`); points are in the frame the body was posed in without its
     translation (SwinGar Sec. IV).
+
+    With ``num_bones = B > 0`` (ours, ``config.bone_frames``) the code ends with the ``B`` posed bone frames,
+    12 values each (:func:`bone_frame_code`: rotation ``R_b`` row-major, then origin ``t_b``, in the points'
+    frame), and the point branch reads ``[x, R_1^T (x - t_1), ..., R_B^T (x - t_B)]``: where the point is
+    relative to every bone. A body part keeps its shape in its bone's frame whatever the pose, so the field a
+    narrow network must learn is far simpler than in the body's frame, where the paper's network has to undo
+    the articulation from the concatenated code alone. The features are linear in ``x``: bound to a body
+    (:class:`BoundBodySDF`) they fold into the first layer, and evaluation costs what it costs without them.
     """
 
-    def __init__(self, code_size: int, config: BodySDFConfig = BodySDFConfig()):
+    def __init__(self, code_size: int, config: BodySDFConfig = BodySDFConfig(), num_bones: int = 0):
         super().__init__()
         if code_size < 0:
             raise InputError(f"code size must be >= 0, got {code_size}")
+        if num_bones < 0 or 12 * num_bones > code_size or (num_bones > 0) != config.bone_frames:
+            raise InputError(f"a body SDF network with bone_frames={config.bone_frames} cannot have {num_bones} "
+                             f"bones in a code of {code_size} values (12 a bone, at its end)")
         H = config.hidden
-        self.code_size, self.config = code_size, config
-        self.point = nn.ModuleList(nn.Linear(3 if i == 0 else H, H) for i in range(config.point_layers))
+        self.code_size, self.config, self.num_bones = code_size, config, num_bones
+        self.point = nn.ModuleList(nn.Linear(3 + 3 * num_bones if i == 0 else H, H)
+                                   for i in range(config.point_layers))
         self.code = nn.ModuleList(nn.Linear(max(code_size, 1) if i == 0 else H, H) for i in range(config.code_layers))
         sizes = [2 * H] + [H] * (config.fusion_layers - 1) + [1]
         self.fusion = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
@@ -107,6 +121,7 @@ class BodySDFNet(nn.Module):
                 nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5))
                 nn.init.zeros_(layer.bias)
             self.fusion[0].weight[:, self.config.hidden:] = 0.0  # the code's half of the first fusion layer
+            self.point[0].weight[:, 3:] = 0.0  # the bone frames' columns: they too enter through training
             last = self.fusion[-1]
             nn.init.normal_(last.weight, math.sqrt(math.pi) / math.sqrt(last.in_features), 1e-4)
             nn.init.constant_(last.bias, -self.config.init_radius)
@@ -129,6 +144,8 @@ class BodySDFNet(nn.Module):
             code = points.new_zeros(points.shape[:-2] + (self.code_size,))
         if code.shape[-1] != self.code_size:
             raise InputError(f"SDF code must have {self.code_size} values, got {code.shape[-1]}")
+        if self.num_bones:
+            points = torch.cat([points, bone_local_points(points, code, self.num_bones)], -1)
         if self.code_size == 0:
             code = points.new_zeros(code.shape[:-1] + (1,))
         p = self._branch(self.point, points)
@@ -137,6 +154,36 @@ class BodySDFNet(nn.Module):
         for layer in self.fusion[:-1]:
             h = self.act(layer(h))
         return self.fusion[-1](h)[..., 0]
+
+
+def bone_local_points(points: torch.Tensor, code: torch.Tensor, num_bones: int) -> torch.Tensor:
+    """``points (..., N, 3)`` in the ``B = num_bones`` bone frames at the end of ``code (..., C)``
+    (:func:`bone_frame_code`) -> ``(..., N, 3 B)``: ``R_b^T (x - t_b)`` for every bone, in bone order."""
+    frames = code[..., code.shape[-1] - 12 * num_bones:].unflatten(-1, (num_bones, 12))
+    rot, origin = frames[..., :9].unflatten(-1, (3, 3)), frames[..., 9:]  # (..., B, 3, 3), (..., B, 3)
+    # row vectors: R^T (x - t) is (x - t) @ R
+    local = torch.einsum("...nbi,...bij->...nbj", points[..., :, None, :] - origin[..., None, :, :], rot)
+    return local.flatten(-2)
+
+
+def fold_bone_frames(weight: torch.Tensor, bias: torch.Tensor, code: torch.Tensor, num_bones: int):
+    """The first point layer of a network with bone frames as one layer on ``x`` alone, for one body code
+    ``(C,)``: ``W [x, R_b^T (x - t_b)] + b = (W_x + sum_b W_b R_b^T) x + (b - sum_b W_b R_b^T t_b)``.
+    ``weight (H, 3 + 3 B)``, ``bias (H,)`` -> ``(H, 3)``, ``(H,)``."""
+    frames = code[code.shape[-1] - 12 * num_bones:].reshape(num_bones, 12)
+    rot, origin = frames[:, :9].reshape(num_bones, 3, 3), frames[:, 9:]
+    blocks = weight[:, 3:].reshape(len(weight), num_bones, 3)  # W_b (H, B, 3)
+    folded = torch.einsum("hbj,bij->hbi", blocks, rot)  # W_b R_b^T
+    return weight[:, :3] + folded.sum(1), bias - torch.einsum("hbi,bi->h", folded, origin)
+
+
+def bone_frame_code(world: np.ndarray, rot: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """Posed joint transforms ``world (T, J, 4, 4)`` (:func:`~loosefit.geometry.lbs.forward_kinematics`) in
+    the canonical frame of each frame (``rot (T, 3, 3)``, ``origin (T, 3)``, points ``(p - origin) @ rot``) as
+    ``(T, 12 J)`` float32 code values: per joint its rotation ``rot^T W_j`` row-major, then its position."""
+    R = np.einsum("tki,tjkl->tjil", rot, world[..., :3, :3])  # rot^T W_j
+    t = np.einsum("tjk,tki->tji", world[..., :3, 3] - origin[:, None], rot)
+    return np.concatenate([R.reshape(*R.shape[:2], 9), t], -1).reshape(len(world), -1).astype(np.float32)
 
 
 class BoundBodySDF:
@@ -155,8 +202,9 @@ class BoundBodySDF:
     def __init__(self, net: BodySDFNet, code: torch.Tensor | None = None):
         H = net.config.hidden
         first = net.fusion[0]
-        self.code_size = net.code_size
+        self.code_size, self.num_bones = net.code_size, net.num_bones
         self.point = [(m.weight.detach(), m.bias.detach()) for m in net.point]
+        self.point_first = self.point[0]  # with bone frames, self.point[0] is this folded with the body's bones
         self.code = [(m.weight.detach(), m.bias.detach()) for m in net.code]
         self.fusion = [(first.weight.detach()[:, :H].contiguous(), first.bias.detach())]
         self.fusion += [(m.weight.detach(), m.bias.detach()) for m in net.fusion[1:]]
@@ -180,6 +228,8 @@ class BoundBodySDF:
                 h = self._act(nn.functional.linear(h, cw, cb))
             c = h + first if len(self.code) > 1 else h
             self.first_bias = b + self.code_weight @ c
+            if self.num_bones:
+                self.point = [fold_bone_frames(*self.point_first, code, self.num_bones), *self.point[1:]]
 
     def with_code(self, code: torch.Tensor | None) -> "BoundBodySDF":
         """The same network bound to another body code ``(C,)`` (the weights are shared; only the code branch
@@ -572,15 +622,31 @@ def body_code(shape_values: np.ndarray, root: np.ndarray, joints: np.ndarray) ->
     return np.concatenate([shape, root[:, :1], root[:, 5:11], joints.reshape(T, -1)], 1).astype(np.float32)
 
 
-def motion_sdf_inputs(body, motion) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
+def motion_sdf_inputs(body, motion, bone_frames: bool = False) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
     """What the body SDF network reads along ``motion`` on ``body`` (an Anny body): the codes ``(T, C)``
-    (:func:`body_code`) and each frame's canonical frame ``rot (T, 3, 3)``, ``origin (T, 3)``, for
-    :class:`FramedSDF` (the network works in the canonical heading frame)."""
+    (:func:`body_code`, then with ``bone_frames`` the :func:`bone_frame_code` of the posed skeleton) and each
+    frame's canonical frame ``rot (T, 3, 3)``, ``origin (T, 3)``, for :class:`FramedSDF` (the network works in
+    the canonical heading frame)."""
     from loosefit.models.motion_features import heading_frames, motion_features
 
     feats = motion_features(motion)
     rot, origin = heading_frames(motion)
-    return torch.from_numpy(body_code(body.shape.to_array(), feats["root"], feats["joints"])), rot, origin
+    code = body_code(body.shape.to_array(), feats["root"], feats["joints"])
+    if bone_frames:
+        code = np.concatenate([code, bone_frame_code(posed_joints(body, motion), rot, origin)], 1)
+    return torch.from_numpy(code), rot, origin
+
+
+def posed_joints(body, motion) -> np.ndarray:
+    """``(T, J, 4, 4)`` world joint transforms of ``body`` along ``motion`` (forward kinematics only)."""
+    from loosefit.geometry.lbs import forward_kinematics
+    from loosefit.geometry.rotations import axis_angle_to_matrix
+
+    with torch.no_grad():
+        world = forward_kinematics(axis_angle_to_matrix(torch.from_numpy(motion.rotations)),
+                                   torch.from_numpy(motion.translation), torch.from_numpy(body.rest_joints()),
+                                   body.parents)
+    return world.numpy()
 
 
 @dataclass(frozen=True)
@@ -619,27 +685,36 @@ def random_anny_shapes(count: int, seed: int) -> list:
 
 def body_sdf_samples(shapes, motions, config: SDFTrainConfig) -> dict[str, np.ndarray]:
     """Samples of many posed Anny bodies (the collision proxy), canonical: ``points (P, N, 3)``, ``sdf (P, N)``,
-    ``normals (P, N, 3)`` and ``code (P, C)`` for ``P`` posed frames (``config.frames`` per shape and motion)."""
+    ``normals (P, N, 3)``, ``code (P, C)`` and ``bones (P, 12 J)`` (:func:`bone_frame_code`) for ``P`` posed
+    frames (``config.frames`` per shape and motion)."""
     from loosefit.body import AnnyBody
     from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
 
     rng = np.random.default_rng(config.seed)
-    out: dict[str, list] = {"points": [], "sdf": [], "normals": [], "code": []}
+    out: dict[str, list] = {"points": [], "sdf": [], "normals": [], "code": [], "bones": []}
     for shape in shapes:
         proxy = AnnyBody(shape, resolution="low")
         for motion in motions:
             feats = motion_features(motion)
             rot, origin = heading_frames(motion)
             frames = np.sort(rng.choice(motion.num_frames, min(config.frames, motion.num_frames), replace=False))
-            posed = to_canonical(proxy.pose(motion).verts[frames], rot[frames], origin[frames])
+            posed_body = proxy.pose(motion)
+            posed = to_canonical(posed_body.verts[frames], rot[frames], origin[frames])
             code = body_code(shape.to_array(), feats["root"][frames], feats["joints"][frames])
+            bones = bone_frame_code(posed_body.joint_transforms[frames], rot[frames], origin[frames])
             for k, verts in enumerate(posed):
                 s = sdf_samples(BodySDF(verts, proxy.faces), config.surface, config.near, config.inside,
                                 config.near_sigma, seed=int(rng.integers(2**31)))
                 for key in ("points", "sdf", "normals"):
                     out[key].append(s[key])
                 out["code"].append(code[k])
+                out["bones"].append(bones[k])
     return {k: np.stack(v) for k, v in out.items()}
+
+
+def samples_code(samples: dict[str, np.ndarray], bone_frames: bool) -> np.ndarray:
+    """The network codes ``(P, C)`` of :func:`body_sdf_samples`: ``code``, then with ``bone_frames`` ``bones``."""
+    return np.concatenate([samples["code"], samples["bones"]], 1) if bone_frames else samples["code"]
 
 
 def train_body_sdf(samples: dict[str, np.ndarray], config: SDFTrainConfig = SDFTrainConfig(),
@@ -647,8 +722,10 @@ def train_body_sdf(samples: dict[str, np.ndarray], config: SDFTrainConfig = SDFT
     """Fit a :class:`BodySDFNet` to :func:`body_sdf_samples` with SwinGar Eqs. 8-9 (Adam). Returns the network
     and the loss per step."""
     torch.manual_seed(config.seed)
-    pts, sdf, nrm, code = (torch.from_numpy(samples[k]) for k in ("points", "sdf", "normals", "code"))
-    net = BodySDFNet(code.shape[1], net_config)
+    pts, sdf, nrm = (torch.from_numpy(samples[k]) for k in ("points", "sdf", "normals"))
+    code = torch.from_numpy(samples_code(samples, net_config.bone_frames))
+    num_bones = samples["bones"].shape[1] // 12 if net_config.bone_frames else 0
+    net = BodySDFNet(code.shape[1], net_config, num_bones)
     opt = torch.optim.Adam(net.parameters(), config.lr)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, config.steps)
     gen = torch.Generator().manual_seed(config.seed)
@@ -671,8 +748,8 @@ def save_body_sdf(path, net: BodySDFNet) -> None:
     """Write the network and its sizes to one file (``torch.save`` of tensors and plain values)."""
     from loosefit.paths import atomic_path
 
-    state = {"format": "loosefit-body-sdf", "code_size": net.code_size, "config": dict(vars(net.config)),
-             "model": net.state_dict()}
+    state = {"format": "loosefit-body-sdf", "code_size": net.code_size, "num_bones": net.num_bones,
+             "config": dict(vars(net.config)), "model": net.state_dict()}
     with atomic_path(path) as tmp:
         torch.save(state, tmp)
 
@@ -683,7 +760,7 @@ def load_body_sdf(path) -> BodySDFNet:
         state = torch.load(path, map_location="cpu", weights_only=True)
         if state.get("format") != "loosefit-body-sdf":
             raise ValueError("not a loosefit body SDF")
-        net = BodySDFNet(int(state["code_size"]), BodySDFConfig(**state["config"]))
+        net = BodySDFNet(int(state["code_size"]), BodySDFConfig(**state["config"]), int(state.get("num_bones", 0)))
         net.load_state_dict(state["model"])
     except Exception as e:  # missing, truncated or foreign files
         raise InputError(f"cannot read a body SDF network: {e}", path) from None
@@ -742,7 +819,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     culler = AxisRayCuller(posed[0], proxy.faces, CULL_CELL) if cull and mode != "pushout" else None
     resolver = CollisionResolver(faces, out.shape[1])
     if mode == "neural":
-        code, rot, origin = motion_sdf_inputs(body, motion)
+        code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
         bound = net.eval().bind(code[0])
         for t in range(len(out)):
             out[t] = correct_frame(out[t], resolver, bound.with_code(code[t]), (rot[t], origin[t]),
