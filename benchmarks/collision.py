@@ -9,7 +9,8 @@ Laplacian consistency of the correction (Table III) and the correction's time pe
    ``none``, ``eq10-neural`` (SwinGar Eq. 10 with the network), ``eq10-exact`` (Eq. 10 with libigl's exact
    distance) and ``pushout`` (every inside vertex moved to the surface plus ``--push-distance``, TailorNet's
    post-process), all through :func:`loosefit.models.collision.handle_motion_collisions` on the sequence's
-   posed collision proxy.
+   posed collision proxy. ``--margin`` (ours): Eq. 10 (neural) on the network's surface moved that far out
+   (:func:`~loosefit.models.collision.handle_motion_collisions`).
 3. Per method and garment kind (the garment entry's name before '-': skirt, dress, long_shirt, jumpsuit):
    the collision ratio, % of garment vertices deeper than ``--tolerance`` inside the posed collision proxy by
    the exact signed distance, averaged over frames (and the same against the full-resolution body, for
@@ -88,7 +89,7 @@ def sdf_network(data: Path, sdf_run: Path, config: str | None, overrides: list[s
 # ------------------------------------------------------------------------------------------- Tables II and III
 
 
-def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distance: float) -> dict:
+def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distance: float, margin: float = 0.0) -> dict:
     """Every method on one sequence: per-frame collision % (proxy and full body), d_cons sums, wall time."""
     from loosefit.geometry.signed_distance import BodySDF
     from loosefit.metrics.collision import collision_ratio_per_frame
@@ -106,7 +107,8 @@ def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distanc
             verts = pred
         else:
             mode = {"eq10-neural": "neural", "eq10-exact": "exact", "pushout": "pushout"}[method]
-            verts = handle_motion_collisions(pred, seq.faces, seq.body, seq.motion, mode, net, push_distance)
+            verts = handle_motion_collisions(pred, seq.faces, seq.body, seq.motion, mode, net, push_distance,
+                                             margin=margin if mode == "neural" else 0.0)
         wall = time.perf_counter() - start
         moved = np.any(verts != pred, axis=-1)  # (T, V) the corrected vertices
         row = {"collision_pct_frames": collision_ratio_per_frame(verts, proxy_sdfs, tolerance=tolerance).tolist(),
@@ -389,6 +391,8 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], help="SDF config override, e.g. train.steps=500")
     parser.add_argument("--tolerance", type=float, default=1e-3, help="collision depth tolerance, metres")
     parser.add_argument("--push-distance", type=float, default=0.004, help="push-out distance, metres")
+    parser.add_argument("--margin", type=float, default=0.0,
+                        help="Eq. 10 (neural) on the network's surface moved this many metres out (ours; the paper: 0)")
     parser.add_argument("--skip-speed", action="store_true")
     parser.add_argument("--speed-only", action="store_true",
                         help="the speed part alone (no collision tables), e.g. to time on an idle machine")
@@ -421,13 +425,14 @@ def main() -> None:
                 continue
             print(f"{seq.name}: {len(seq.gt)} frames, {seq.gt.shape[1]} vertices", flush=True)
             rows.append({"sequence": seq.name, "kind": kind_of(seq.garment), "vertices": int(seq.gt.shape[1]),
-                         "methods": evaluate_sequence(seq, predictions[seq.name], net, args.tolerance, args.push_distance)})
+                         "methods": evaluate_sequence(seq, predictions[seq.name], net, args.tolerance, args.push_distance,
+                                                      args.margin)})
     table = summarise(rows) if rows else {}
     results = {"data": str(data.resolve()), "run": str(Path(args.run).resolve()), "method": method,
                "sdf_run": str(sdf_run.resolve()), "sdf": {k: sdf_summary.get(k) for k in
                                                           ("bodies", "motions", "frames", "first_loss", "final_loss",
                                                            "config", "net", "train_wall_s")},
-               "tolerance_m": args.tolerance, "push_distance_m": args.push_distance,
+               "tolerance_m": args.tolerance, "push_distance_m": args.push_distance, "margin_m": args.margin,
                "collision_body": "the posed collision proxy (1,229-vertex Anny), the body the SDF learns and every "
                                  "correction uses; collision_full_body_pct: the 13.7k-vertex body, for reference",
                "paper_notes": PAPER_NOTES, "per_kind": table, "targets": targets(table),

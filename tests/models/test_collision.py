@@ -277,6 +277,9 @@ def test_bound_network_and_culled_resolution_match_the_plain_ones(posed_proxy):
         again, gradient_of = bound.value_and_gradient_fn(x)
         rows = torch.tensor([7, 3, 250])
         torch.testing.assert_close(gradient_of(rows), grad[rows])
+        moved_out = bound.offset(0.01).with_code(code)  # the surface 1 cm out: values 1 cm lower, same gradient
+        torch.testing.assert_close(moved_out.value_and_gradient(x)[0], value - 0.01)
+        torch.testing.assert_close(moved_out.value_and_gradient(x)[1], grad)
     # a sheet through the torso of the posed proxy
     frames, faces = posed_proxy
     mesh = BodySDF(frames[0], faces)

@@ -350,6 +350,18 @@ def test_collision_post_process_from_the_cli(trained_run, store, body, tmp_path)
     for mode in ("exact", "pushout"):
         depth = [BodySDF(posed[t], proxy.faces).query(outputs[mode][t]).min() for t in range(motion.num_frames)]
         assert min(depth) > -1e-4, (mode, min(depth))
+    # a margin moves the network's surface out: every vertex corrected without it is corrected with it (the
+    # values it corrects by are tested in test_collision.py: BoundBodySDF.offset)
+    animate = ["animate", str(trained_run), "--garment", str(tmp_path / "new.obj"), "--motion", str(tmp_path / "sway.npz")]
+    assert main([*animate, "--out", str(tmp_path / "plain.npz")]) == 0
+    assert main([*animate, "--out", str(tmp_path / "margin.npz"), "--collision", str(sdf_run),
+                 "--collision-margin", "0.02"]) == 0
+    plain = MeshSequence.load(tmp_path / "plain.npz").verts
+    moved = np.any(outputs[str(sdf_run)] != plain, axis=-1)
+    moved_margin = np.any(MeshSequence.load(tmp_path / "margin.npz").verts != plain, axis=-1)
+    assert np.all(moved_margin[moved]) and moved_margin.sum() >= moved.sum()
+    assert main([*animate, "--out", str(tmp_path / "bad.npz"), "--collision", "exact", "--collision-margin", "0.01"]) == 2
+    assert not (tmp_path / "bad.npz").exists()
 
 
 def test_cli_trains_on_a_multi_garment_store(trained_run):

@@ -231,6 +231,14 @@ class BoundBodySDF:
             if self.num_bones:
                 self.point = [fold_bone_frames(*self.point_first, code, self.num_bones), *self.point[1:]]
 
+    def offset(self, margin: float) -> "BoundBodySDF":
+        """The field of the surface moved ``margin`` metres outwards, ``S(x) - margin`` (the last layer's bias
+        lowered: no cost). The same weights otherwise; :meth:`with_code` keeps the offset."""
+        other = copy.copy(self)
+        w, b = self.fusion[-1]
+        other.fusion = [*self.fusion[:-1], (w, b - margin)]
+        return other
+
     def with_code(self, code: torch.Tensor | None) -> "BoundBodySDF":
         """The same network bound to another body code ``(C,)`` (the weights are shared; only the code branch
         runs): per frame of a motion."""
@@ -799,7 +807,7 @@ def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFuncti
 
 def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
                              net: BodySDFNet | None = None, push_distance: float = 0.004,
-                             cull: bool = True) -> np.ndarray:
+                             cull: bool = True, margin: float = 0.0) -> np.ndarray:
     """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
     Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
 
@@ -808,11 +816,19 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     fixed-distance baseline). With ``cull`` (the default) SwinGar Eq. 10 evaluates its field only at the
     vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
     (:func:`correct_frame`); the Gaussian width is the mean edge length of the first frame.
+
+    ``margin`` (metres, ``"neural"`` only; ours, 0 in the paper): Eq. 10 on the network's surface moved that far
+    outwards, ``S - margin``: a vertex the network puts less than ``margin`` outside is corrected too, and moved
+    to ``margin + delta_i``. A network that is millimetres off near the surface misses the shallow collisions
+    on the wrong side of its zero level; the margin catches them (the cull still skips every vertex it proves
+    outside the proxy, so no vertex far from the body moves).
     """
     if mode not in ("neural", "exact", "pushout"):
         raise InputError(f"collision mode must be 'neural', 'exact' or 'pushout', got {mode!r}")
     if mode == "neural" and net is None:
         raise InputError("neural collision handling needs a body SDF network")
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InputError(f"collision margin must be a non-negative number of metres, got {margin!r}")
     proxy = body.collision_proxy()
     out = np.array(verts, np.float32, copy=True)
     posed = proxy.pose(motion).verts if (cull or mode != "neural") else None
@@ -820,7 +836,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     resolver = CollisionResolver(faces, out.shape[1])
     if mode == "neural":
         code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
-        bound = net.eval().bind(code[0])
+        bound = net.eval().bind(code[0]).offset(margin)
         for t in range(len(out)):
             out[t] = correct_frame(out[t], resolver, bound.with_code(code[t]), (rot[t], origin[t]),
                                    culler.update(posed[t]) if culler else None)[0]
