@@ -108,7 +108,7 @@ def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distanc
         else:
             mode = {"eq10-neural": "neural", "eq10-exact": "exact", "pushout": "pushout"}[method]
             verts = handle_motion_collisions(pred, seq.faces, seq.body, seq.motion, mode, net, push_distance,
-                                             margin=margin if mode == "neural" else 0.0)
+                                             margin=margin)  # the neural mode's alone
         wall = time.perf_counter() - start
         moved = np.any(verts != pred, axis=-1)  # (T, V) the corrected vertices
         row = {"collision_pct_frames": collision_ratio_per_frame(verts, proxy_sdfs, tolerance=tolerance).tolist(),

@@ -54,8 +54,9 @@ def sequence_accuracy(store: DatasetStore, name: str, run: Path, nets: dict, eve
     verts = Animator(run, garment=store.garment(seq.garment), body=body).animate(motion)
     proxy = body.collision_proxy()
     posed = proxy.pose(motion).verts
-    rot, origin = motion_sdf_inputs(body, motion)[1:]
-    codes = {label: motion_sdf_inputs(body, motion, net.num_bones > 0)[0] for label, net in nets.items()}
+    inputs = {bones: motion_sdf_inputs(body, motion, bones) for bones in {net.num_bones > 0 for net in nets.values()}}
+    codes = {label: inputs[net.num_bones > 0][0] for label, net in nets.items()}
+    rot, origin = next(iter(inputs.values()))[1:]
     per_net = {label: [] for label in nets}
     for t in range(0, len(verts), every):
         x = torch.from_numpy(np.ascontiguousarray(verts[t], np.float32))

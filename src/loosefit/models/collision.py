@@ -156,11 +156,17 @@ class BodySDFNet(nn.Module):
         return self.fusion[-1](h)[..., 0]
 
 
+def _bone_frames(code: torch.Tensor, num_bones: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The ``B = num_bones`` bone frames at the end of ``code (..., C)`` (:func:`bone_frame_code`): rotations
+    ``(..., B, 3, 3)`` and origins ``(..., B, 3)``."""
+    frames = code[..., code.shape[-1] - 12 * num_bones:].unflatten(-1, (num_bones, 12))
+    return frames[..., :9].unflatten(-1, (3, 3)), frames[..., 9:]
+
+
 def bone_local_points(points: torch.Tensor, code: torch.Tensor, num_bones: int) -> torch.Tensor:
     """``points (..., N, 3)`` in the ``B = num_bones`` bone frames at the end of ``code (..., C)``
     (:func:`bone_frame_code`) -> ``(..., N, 3 B)``: ``R_b^T (x - t_b)`` for every bone, in bone order."""
-    frames = code[..., code.shape[-1] - 12 * num_bones:].unflatten(-1, (num_bones, 12))
-    rot, origin = frames[..., :9].unflatten(-1, (3, 3)), frames[..., 9:]  # (..., B, 3, 3), (..., B, 3)
+    rot, origin = _bone_frames(code, num_bones)
     # row vectors: R^T (x - t) is (x - t) @ R
     local = torch.einsum("...nbi,...bij->...nbj", points[..., :, None, :] - origin[..., None, :, :], rot)
     return local.flatten(-2)
@@ -170,8 +176,7 @@ def fold_bone_frames(weight: torch.Tensor, bias: torch.Tensor, code: torch.Tenso
     """The first point layer of a network with bone frames as one layer on ``x`` alone, for one body code
     ``(C,)``: ``W [x, R_b^T (x - t_b)] + b = (W_x + sum_b W_b R_b^T) x + (b - sum_b W_b R_b^T t_b)``.
     ``weight (H, 3 + 3 B)``, ``bias (H,)`` -> ``(H, 3)``, ``(H,)``."""
-    frames = code[code.shape[-1] - 12 * num_bones:].reshape(num_bones, 12)
-    rot, origin = frames[:, :9].reshape(num_bones, 3, 3), frames[:, 9:]
+    rot, origin = _bone_frames(code, num_bones)
     blocks = weight[:, 3:].reshape(len(weight), num_bones, 3)  # W_b (H, B, 3)
     folded = torch.einsum("hbj,bij->hbi", blocks, rot)  # W_b R_b^T
     return weight[:, :3] + folded.sum(1), bias - torch.einsum("hbi,bi->h", folded, origin)
