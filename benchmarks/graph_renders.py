@@ -4,8 +4,11 @@
 Each row of the PNG is one frame; each column one mesh, drawn with the posed body, from the same camera.
 The per-vertex error to the simulation (mm) colours the predictions, on one scale for the whole image.
 
+With ``--collision SDF_RUN`` (and ``--margin``) SwinGar's meshes are also shown after the neural collision
+correction (SwinGar Eq. 10, :func:`~loosefit.models.collision.handle_motion_collisions`).
+
 Run: .venv/bin/python benchmarks/graph_renders.py --data DATA.zarr --sequence NAME [--swingar RUN]
-         [--fitgar RUN] [--frames 45,120] [--name graph-render-NAME]
+         [--collision SDF_RUN [--margin 0.01]] [--fitgar RUN] [--frames 45,120] [--name graph-render-NAME]
 (writes benchmarks/results/<name>.png)
 """
 
@@ -24,6 +27,7 @@ from loosefit.animate import Animator  # noqa: E402
 from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
 from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
+from loosefit.models.collision import SDF_FILE, handle_motion_collisions, load_body_sdf  # noqa: E402
 from loosefit.sim.attach import body_lbs  # noqa: E402
 from loosefit.viz.render import render_frames, save_png  # noqa: E402
 from loosefit.viz.scene import BODY_COLOR, MeshTrack  # noqa: E402
@@ -31,7 +35,8 @@ from loosefit.viz.scene import BODY_COLOR, MeshTrack  # noqa: E402
 ERROR_RANGE_MM = (0.0, 100.0)
 
 
-def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Path | None) -> tuple[dict, object, object, np.ndarray]:
+def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Path | None,
+                collision: Path | None = None, margin: float = 0.0) -> tuple[dict, object, object, np.ndarray]:
     """``({label: (T, V, 3)}, body, motion, faces (F, 3))``: the simulation first, then each method's meshes."""
     seq = store.sequence(name)
     motion = store.motion(seq.motion)
@@ -40,6 +45,11 @@ def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Pa
     meshes = {"simulation": np.asarray(seq.verts[:], np.float32)}
     if swingar is not None:
         meshes["SwinGar"] = Animator(swingar, garment=garment, body=body).animate(motion)
+        if collision is not None:
+            net = load_body_sdf(collision / SDF_FILE)
+            label = "SwinGar + Eq. 10" + (f", {margin * 1e3:g} mm margin" if margin else "")
+            meshes[label] = handle_motion_collisions(meshes["SwinGar"], garment.faces, body, motion, "neural", net,
+                                                     margin=margin)
     meshes["body-LBS"] = body_lbs(garment.verts, body, motion)
     if fitgar is not None:
         animator = AnyGarmentAnimator(fitgar)
@@ -53,13 +63,18 @@ def main() -> None:
     p.add_argument("--data", type=Path, required=True)
     p.add_argument("--sequence", required=True)
     p.add_argument("--swingar", type=Path, default=None, help="a SwinGar run")
+    p.add_argument("--collision", type=Path, default=None, help="a body SDF run: SwinGar corrected by it too")
+    p.add_argument("--margin", type=float, default=0.0, help="the correction's margin, metres")
     p.add_argument("--fitgar", type=Path, default=None, help="a FitGar run")
     p.add_argument("--frames", default="45,120")
     p.add_argument("--size", default="360,480", help="W,H pixels of one panel")
     p.add_argument("--name", default=None)
     args = p.parse_args()
     store = DatasetStore.open(args.data)
-    meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar)
+    if args.collision is not None and args.swingar is None:
+        p.error("--collision corrects SwinGar's meshes: give --swingar")
+    meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar, args.collision,
+                                              args.margin)
     frames = [int(f) for f in args.frames.split(",")]
     posed = body.pose(motion).verts
     gt = meshes["simulation"]
