@@ -334,3 +334,55 @@ def test_bone_frames_are_the_points_in_each_bone(posed_proxy):
     with pytest.raises(InputError, match="cannot have 3 bones in a code of 20 values"):
         BodySDFNet(20, BodySDFConfig(hidden=32, bone_frames=True), 3)
 
+
+
+def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, monkeypatch):
+    """:class:`MotionBodySDF` (many frames in one pass, the frame folded into the first layer) gives each
+    frame's :class:`FramedSDF` values and world gradients; :func:`correct_motion` (chunks of frames, the next
+    chunk culled in a second thread or not) moves the vertices :func:`correct_frame` moves, by the same amounts."""
+    import loosefit.models.collision as collision
+    from loosefit.geometry.ray_cull import AxisRayCuller
+    from loosefit.models.collision import (CollisionResolver, FramedSDF, MotionBodySDF, correct_frame,
+                                           correct_motion)
+    from scipy.spatial.transform import Rotation
+
+    frames, faces = posed_proxy
+    T = len(frames)
+    rng = np.random.default_rng(3)
+    torch.manual_seed(3)
+    rot = Rotation.from_rotvec(rng.normal(0, 0.3, (T, 3))).as_matrix().astype(np.float32)
+    origin = frames.mean(1).astype(np.float32)  # the canonical frame at each frame's proxy centre
+    for bones in (0, 3):
+        size = 4 + 12 * bones
+        net = BodySDFNet(size, BodySDFConfig(hidden=16, bone_frames=bones > 0), bones).eval()
+        for p in net.parameters():
+            p.data += 0.05 * torch.randn_like(p)
+        codes = torch.randn(T, size) * 0.3
+        field = MotionBodySDF(net, codes, rot, origin)
+        which = torch.from_numpy(rng.integers(0, T, 400))
+        x = torch.from_numpy(origin[which.numpy()] + rng.normal(0, 0.4, (400, 3)).astype(np.float32))
+        value, grad = field.value_and_gradient(x, which)
+        for t in range(T):
+            rows = which == t
+            ref_value, ref_grad = FramedSDF(net.bind(codes[t]), rot[t], origin[t]).value_and_gradient(x[rows])
+            torch.testing.assert_close(value[rows], ref_value, rtol=0, atol=2e-6)
+            torch.testing.assert_close(grad[rows], ref_grad, rtol=0, atol=1e-4)
+        torch.testing.assert_close(field.offset(0.02)(x, which), value - 0.02)
+    # a sheet through each frame's torso, corrected with the last network (bones) and the posed proxy's cull
+    sheet_verts, sheet_faces = sheet(31, 31)
+    flat = (sheet_verts - sheet_verts.mean(0)) * [0.9, 0.9, 1.0]
+    verts = (flat[None] + frames.mean(1)[:, None]).astype(np.float32)  # (T, V, 3)
+    resolver = CollisionResolver(sheet_faces, verts.shape[1], sigma=0.03)
+    culler = AxisRayCuller(frames[0], faces)
+    by_frame = np.stack([correct_frame(verts[t], resolver, net.bind(codes[t]).offset(0.01), (rot[t], origin[t]),
+                                       culler.update(frames[t]))[0] for t in range(T)])
+    monkeypatch.setattr(collision, "FRAME_CHUNK", 4)  # several chunks
+    serial, moved = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, overlap=False)
+    overlapped, moved_too = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01)
+    assert moved.sum() > 100 and np.array_equal(moved, moved_too) and np.array_equal(serial, overlapped)
+    np.testing.assert_allclose(serial, by_frame, rtol=0, atol=1e-5)
+    assert np.array_equal(moved, np.any(by_frame != verts, axis=-1))
+    with pytest.raises(InputError, match="MotionBodySDF of 3 frames"):
+        resolver.frames(torch.from_numpy(verts[:3]), field, np.ones(verts[:3].shape[:2], bool))
+    with pytest.raises(InputError, match="frame index"):
+        field(x)

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import copy
 import math
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable
@@ -173,13 +174,13 @@ def bone_local_points(points: torch.Tensor, code: torch.Tensor, num_bones: int) 
 
 
 def fold_bone_frames(weight: torch.Tensor, bias: torch.Tensor, code: torch.Tensor, num_bones: int):
-    """The first point layer of a network with bone frames as one layer on ``x`` alone, for one body code
-    ``(C,)``: ``W [x, R_b^T (x - t_b)] + b = (W_x + sum_b W_b R_b^T) x + (b - sum_b W_b R_b^T t_b)``.
-    ``weight (H, 3 + 3 B)``, ``bias (H,)`` -> ``(H, 3)``, ``(H,)``."""
+    """The first point layer of a network with bone frames as one layer on ``x`` alone, per body code
+    ``(..., C)``: ``W [x, R_b^T (x - t_b)] + b = (W_x + sum_b W_b R_b^T) x + (b - sum_b W_b R_b^T t_b)``.
+    ``weight (H, 3 + 3 B)``, ``bias (H,)`` -> ``(..., H, 3)``, ``(..., H)``."""
     rot, origin = _bone_frames(code, num_bones)
     blocks = weight[:, 3:].reshape(len(weight), num_bones, 3)  # W_b (H, B, 3)
-    folded = torch.einsum("hbj,bij->hbi", blocks, rot)  # W_b R_b^T
-    return weight[:, :3] + folded.sum(1), bias - torch.einsum("hbi,bi->h", folded, origin)
+    folded = torch.einsum("hbj,...bij->...hbi", blocks, rot)  # W_b R_b^T
+    return weight[:, :3] + folded.sum(-2), bias - torch.einsum("...hbi,...bi->...h", folded, origin)
 
 
 def bone_frame_code(world: np.ndarray, rot: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -219,22 +220,27 @@ class BoundBodySDF:
         self._set_code(code)
 
     def _set_code(self, code: torch.Tensor | None) -> None:
-        w, b = self.fusion[0]
+        w = self.fusion[0][0]
         with torch.no_grad():
             if code is None:
                 code = w.new_zeros(self.code_size)
             code = torch.as_tensor(code, dtype=w.dtype, device=w.device)
             if code.shape != (self.code_size,):
                 raise InputError(f"SDF code must be ({self.code_size},), got {tuple(code.shape)}")
-            if self.code_size == 0:
-                code = code.new_zeros(1)
-            first = h = self._act(nn.functional.linear(code, *self.code[0]))
-            for cw, cb in self.code[1:]:
-                h = self._act(nn.functional.linear(h, cw, cb))
-            c = h + first if len(self.code) > 1 else h
-            self.first_bias = b + self.code_weight @ c
+            self.first_bias = self._code_bias(code)
             if self.num_bones:
                 self.point = [fold_bone_frames(*self.point_first, code, self.num_bones), *self.point[1:]]
+
+    def _code_bias(self, code: torch.Tensor) -> torch.Tensor:
+        """The code branch and its share of the first fusion layer, ``W_c c + b``: codes ``(..., C)`` ->
+        ``(..., H)``."""
+        if self.code_size == 0:
+            code = code.new_zeros(code.shape[:-1] + (1,))
+        first = h = self._act(nn.functional.linear(code, *self.code[0]))
+        for cw, cb in self.code[1:]:
+            h = self._act(nn.functional.linear(h, cw, cb))
+        c = h + first if len(self.code) > 1 else h
+        return self.fusion[0][1] + c @ self.code_weight.T
 
     def offset(self, margin: float) -> "BoundBodySDF":
         """The field of the surface moved ``margin`` metres outwards, ``S(x) - margin`` (the last layer's bias
@@ -254,10 +260,22 @@ class BoundBodySDF:
     def _act(self, z: torch.Tensor) -> torch.Tensor:
         return nn.functional.softplus(z, self.beta, self.threshold)
 
-    def _forward(self, points: torch.Tensor, keep: bool):
+    def _first_layer(self, points: torch.Tensor, frame) -> torch.Tensor:
+        """The first point layer's pre-activation ``(N, H)`` (``frame``: see :class:`MotionBodySDF`)."""
+        return nn.functional.linear(points, *self.point[0])
+
+    def _first_layer_gradient(self, g: torch.Tensor, frame) -> torch.Tensor:
+        """``dS/dz (N, H)`` of the first point layer -> ``dS/dx (N, 3)``."""
+        return g @ self.point[0][0]
+
+    def _fusion_bias(self, frame) -> torch.Tensor:
+        """The first fusion layer's bias with the code's share, ``(H,)`` (or per point, ``(N, H)``)."""
+        return self.first_bias
+
+    def _forward(self, points: torch.Tensor, keep: bool, frame=None):
         """Value ``(N,)`` and, with ``keep``, every pre-activation (point branch, then fusion)."""
         pre = []
-        z = nn.functional.linear(points, *self.point[0])
+        z = self._first_layer(points, frame)
         first = h = self._act(z)
         pre.append(z)
         for w, b in self.point[1:]:
@@ -266,7 +284,7 @@ class BoundBodySDF:
             pre.append(z)
         if len(self.point) > 1:
             h = h + first
-        z = nn.functional.linear(h, self.fusion[0][0], self.first_bias)
+        z = nn.functional.linear(h, self.fusion[0][0]) + self._fusion_bias(frame)
         for w, b in self.fusion[1:]:
             pre.append(z)
             z = nn.functional.linear(self._act(z), w, b)
@@ -280,18 +298,18 @@ class BoundBodySDF:
         the sigmoid is within 2e-9 of 1)."""
         return torch.sigmoid(z * self.beta)
 
-    def _backward(self, pre: list[torch.Tensor]) -> torch.Tensor:
+    def _backward(self, pre: list[torch.Tensor], frame=None) -> torch.Tensor:
         """``grad S (N, 3)`` from the pre-activations of :meth:`_forward` (rows of N points)."""
         n_point = len(self.point)
         g = self.fusion[-1][0].expand(len(pre[0]), -1)  # dS / d(input of the last fusion layer)
         for (w, _), z in zip(reversed(self.fusion[:-1]), reversed(pre[n_point:])):
             g = (g * self._slope(z)) @ w  # through the activation, then the layer before it
         residual = g  # the branch output p = h_k + h_1 passes its gradient to h_1 directly too
-        for j in range(n_point - 1, -1, -1):
+        for j in range(n_point - 1, 0, -1):
             g = (g * self._slope(pre[j])) @ self.point[j][0]
             if j == 1:
                 g = g + residual
-        return g
+        return self._first_layer_gradient(g * self._slope(pre[0]), frame)
 
     def value_and_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``S (N,)`` and ``grad S (N, 3)`` at ``points (N, 3)``, no autograd (the chain rule written out)."""
@@ -299,17 +317,84 @@ class BoundBodySDF:
             value, pre = self._forward(points, True)
             return value, self._backward(pre)
 
-    def value_and_gradient_fn(self, points: torch.Tensor):
+    def value_and_gradient_fn(self, points: torch.Tensor, frame=None):
         """``S (N,)`` at ``points (N, 3)`` and a function ``rows (M,) -> grad S (M, 3)`` at ``points[rows]`` that
         reuses this pass's activations (the gradient of a few of many points without a second forward pass)."""
         with torch.no_grad():
-            value, pre = self._forward(points, True)
+            value, pre = self._forward(points, True, frame)
 
         def gradient(rows: torch.Tensor) -> torch.Tensor:
             with torch.no_grad():
-                return self._backward([z[rows] for z in pre])
+                return self._backward([z[rows] for z in pre], None if frame is None else frame[rows])
 
         return value, gradient
+
+
+class MotionBodySDF(BoundBodySDF):
+    """:class:`BodySDFNet` bound to every frame of a motion and read in the world: for frame ``t``,
+    ``S_t(p) = S((p - origin_t) @ rot_t | code_t)``, the field :func:`correct_frame` evaluates through
+    :class:`FramedSDF` and :meth:`BodySDFNet.bind`, for the points of many frames in one pass (each point
+    with its frame index). The code branch runs once for all frames, and the world-to-canonical map (and with
+    bone frames, the bones) fold into a per-frame first layer ``A_t p + c_t``, ``A_t = W_1 rot_t^T``,
+    ``c_t = b_1 - A_t origin_t``: a point costs what it costs in one frame, and Python's overhead is paid per
+    call, not per frame (:func:`handle_motion_collisions`). Values equal the per-frame field's up to float
+    rounding.
+
+    Args:
+        net: the network (weights shared, detached).
+        codes: ``(T, C)`` body codes (:func:`motion_sdf_inputs`).
+        rot, origin: ``(T, 3, 3)``, ``(T, 3)``: each frame's canonical frame, ``p_canonical = (p - origin) @ rot``.
+
+    Points are world ``(N, 3)`` metres, ``frame`` ``(N,)`` int64 their frame indices (``__call__(points,
+    frame)``, :meth:`value_and_gradient_fn`).
+    """
+
+    def __init__(self, net: BodySDFNet, codes, rot, origin):
+        super().__init__(net, None)
+        w = self.code_weight
+        codes = torch.as_tensor(np.asarray(codes), dtype=w.dtype)
+        rot = torch.as_tensor(np.asarray(rot), dtype=w.dtype)
+        origin = torch.as_tensor(np.asarray(origin), dtype=w.dtype)
+        T = len(codes)
+        if codes.shape != (T, self.code_size) or rot.shape != (T, 3, 3) or origin.shape != (T, 3):
+            raise InputError(f"MotionBodySDF needs codes (T, {self.code_size}), rot (T, 3, 3), origin (T, 3), got "
+                             f"{tuple(codes.shape)}, {tuple(rot.shape)}, {tuple(origin.shape)}")
+        with torch.no_grad():
+            self.first_bias = self._code_bias(codes)  # (T, H)
+            if self.num_bones:
+                weight, bias = fold_bone_frames(*self.point_first, codes, self.num_bones)  # (T, H, 3), (T, H)
+            else:
+                weight, bias = self.point_first[0].expand(T, -1, -1), self.point_first[1].expand(T, -1)
+            self.world_weight = weight @ rot.transpose(1, 2)  # A_t = W rot^T: (T, H, 3)
+            self.world_bias = bias - torch.einsum("thi,ti->th", self.world_weight, origin)
+        self.num_frames = T
+
+    def with_code(self, code):
+        raise InputError("a MotionBodySDF holds its frames' codes; bind the network again for other frames")
+
+    def _first_layer(self, points: torch.Tensor, frame) -> torch.Tensor:
+        return torch.einsum("ni,nhi->nh", points, self.world_weight[frame]) + self.world_bias[frame]
+
+    def _first_layer_gradient(self, g: torch.Tensor, frame) -> torch.Tensor:
+        return torch.einsum("nh,nhi->ni", g, self.world_weight[frame])
+
+    def _fusion_bias(self, frame) -> torch.Tensor:
+        return self.first_bias[frame]
+
+    def __call__(self, points: torch.Tensor, frame=None) -> torch.Tensor:
+        if frame is None:
+            raise InputError("a MotionBodySDF needs each point's frame index")
+        with torch.no_grad():
+            return self._forward(points, False, frame)[0]
+
+    def value_and_gradient(self, points: torch.Tensor, frame=None):
+        values, gradient = self.value_and_gradient_fn(points, frame)
+        return values, gradient(torch.arange(len(points)))
+
+    def value_and_gradient_fn(self, points: torch.Tensor, frame=None):
+        if frame is None:
+            raise InputError("a MotionBodySDF needs each point's frame index")
+        return super().value_and_gradient_fn(points, frame)
 
 
 class FramedSDF:
@@ -378,12 +463,12 @@ def sdf_and_gradient(sdf: SDFFunction, points: torch.Tensor, create_graph: bool 
     return (s if create_graph else s.detach()), g
 
 
-def value_and_gradient_fn(sdf: SDFFunction, points: torch.Tensor):
+def value_and_gradient_fn(sdf: SDFFunction, points: torch.Tensor, *frame):
     """``S (N,)`` at ``points (N, 3)`` and a function ``rows (M,) -> grad S (M, 3)`` at ``points[rows]``: the
-    field's own when it has one (:meth:`BoundBodySDF.value_and_gradient_fn`), else a second evaluation of the
-    rows with :func:`sdf_and_gradient`."""
+    field's own when it has one (:meth:`BoundBodySDF.value_and_gradient_fn`; a :class:`MotionBodySDF` also
+    takes the points' frames), else a second evaluation of the rows with :func:`sdf_and_gradient`."""
     if hasattr(sdf, "value_and_gradient_fn"):
-        return sdf.value_and_gradient_fn(points)
+        return sdf.value_and_gradient_fn(points, *frame)
     with torch.no_grad():
         value = sdf(points)
     return value, lambda rows: sdf_and_gradient(sdf, points[rows])[1]
@@ -511,14 +596,43 @@ class CollisionResolver:
             moved = self._resolve(out, sdf, cand, inside)
         return moved, torch.from_numpy(inside).to(verts.device)
 
-    def _resolve(self, out: torch.Tensor, sdf: SDFFunction, cand: np.ndarray, inside: np.ndarray) -> torch.Tensor:
+    def frames(self, verts: torch.Tensor, sdf: "MotionBodySDF", candidates) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`__call__` on ``T`` frames of the garment at once: ``verts (T, V, 3)`` world metres, ``sdf`` the
+        :class:`MotionBodySDF` of those frames, ``candidates (T, V)`` bool (NumPy or torch). Returns ``(T, V, 3)``
+        and ``(T, V)`` bool, what :meth:`__call__` gives frame by frame (up to float rounding)."""
+        V = self.num_verts
+        if verts.ndim != 3 or verts.shape[1:] != (V, 3):
+            raise InputError(f"resolving frames takes a garment (T, {V}, 3), got {tuple(verts.shape)}")
+        T = len(verts)
+        mask = candidates.cpu().numpy() if isinstance(candidates, torch.Tensor) else np.asarray(candidates)
+        if mask.shape != (T, V) or mask.dtype != bool:
+            raise InputError(f"candidates must be a ({T}, {V}) bool mask, got {mask.dtype} {mask.shape}")
+        if getattr(sdf, "num_frames", None) != T:
+            raise InputError(f"resolving {T} frames needs a MotionBodySDF of {T} frames")
+        if self.sigma is None:
+            self.sigma = self.mean_edge(verts[0])
+        out = verts.detach().reshape(T * V, 3).clone()
+        inside = np.zeros(T * V, bool)
+        with flushed_denormals():
+            moved = self._resolve(out, sdf, np.flatnonzero(mask), inside, frames=True)
+        return moved.reshape(T, V, 3), torch.from_numpy(inside.reshape(T, V)).to(verts.device)
+
+    def _resolve(self, out: torch.Tensor, sdf, cand: np.ndarray, inside: np.ndarray, frames: bool = False):
         """:meth:`__call__` on a copy ``out`` of the vertices, filling ``inside``. The field runs in torch on the
-        vertices' device; the bookkeeping of a few hundred vertices runs in NumPy (cheaper per call)."""
+        vertices' device; the bookkeeping of a few hundred vertices runs in NumPy (cheaper per call). With
+        ``frames``, ``out`` is ``(T V, 3)``, flat index ``t V + i`` is vertex ``i`` of frame ``t``, and ``sdf``
+        (a :class:`MotionBodySDF`) takes each point's frame."""
         dev = out.device
+        V = self.num_verts
         if len(cand) == 0:
             return out
+
+        def at(index: np.ndarray) -> tuple:  # the field's arguments for these flat indices
+            rows = torch.from_numpy(index).to(dev)
+            return (out[rows], rows // V) if frames else (out[rows],)
+
         x = out.cpu().numpy()
-        s_cand, gradient = value_and_gradient_fn(sdf, out[torch.from_numpy(cand).to(dev)])
+        s_cand, gradient = value_and_gradient_fn(sdf, *at(cand))
         s_cand = s_cand.detach().cpu().numpy().astype(np.float64)
         hit = s_cand < 0
         ins = cand[hit]
@@ -529,9 +643,11 @@ class CollisionResolver:
         value = np.full(len(x), np.nan)
         value[cand] = s_cand
         # the neighbours of the inside vertices, flat: neighbour nbr[k] belongs to inside vertex ins[rows[k]]
-        count = self.start[ins + 1] - self.start[ins]
+        vertex = ins % V
+        count = self.start[vertex + 1] - self.start[vertex]
         total = np.cumsum(count)
-        nbr = self.neighbours[np.repeat(self.start[ins] - total + count, count) + np.arange(total[-1])]
+        nbr = self.neighbours[np.repeat(self.start[vertex] - total + count, count) + np.arange(total[-1])]
+        nbr = nbr + np.repeat(ins - vertex, count)  # the same frame's
         rows = np.repeat(np.arange(len(ins)), count)
         free = ~inside[nbr]
         need = np.zeros(len(x), bool)
@@ -540,7 +656,7 @@ class CollisionResolver:
         missing = np.flatnonzero(need)  # free neighbours not evaluated yet: their |S| enters delta
         if len(missing):
             with torch.no_grad():
-                value[missing] = sdf(out[torch.from_numpy(missing).to(dev)]).cpu().numpy()
+                value[missing] = sdf(*at(missing)).cpu().numpy()
         x_in = x[ins].astype(np.float64)
         d2 = ((x_in[rows] - x[nbr]) ** 2).sum(-1)
         w = np.exp(-d2 / (2 * self.sigma**2)) * free
@@ -810,6 +926,65 @@ def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFuncti
     return out.numpy(), inside.numpy()
 
 
+#: Frames corrected in one pass of the network by :func:`correct_motion`: enough that Python's per-call overhead
+#: is paid rarely, few enough that the per-point first layers (``(N, H, 3)`` floats) stay small.
+FRAME_CHUNK = 32
+
+
+def cull_candidates(verts: np.ndarray, posed: np.ndarray, culler: AxisRayCuller) -> np.ndarray:
+    """``(T, V)`` bool: the garment vertices ``verts (T, V, 3)`` that ``culler`` cannot prove outside the
+    collision proxy posed at ``posed (T, Vb, 3)`` (updated frame by frame)."""
+    return np.stack([~culler.update(p).outside(w) for p, w in zip(posed, np.asarray(verts, np.float32))])
+
+
+def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDFNet", code, rot, origin,
+                   posed: np.ndarray | None = None, culler: AxisRayCuller | None = None, margin: float = 0.0,
+                   overlap: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """SwinGar Eq. 10 with the network on every frame of an animated garment, :data:`FRAME_CHUNK` frames a
+    pass (:class:`MotionBodySDF`, :meth:`CollisionResolver.frames`): what :func:`correct_frame` gives frame by
+    frame, up to float rounding.
+
+    Args:
+        verts: ``(T, V, 3)`` world garment vertices, metres.
+        resolver: the garment's :class:`CollisionResolver`.
+        net: the body SDF network; ``code (T, C)``, ``rot (T, 3, 3)``, ``origin (T, 3)``: its inputs per frame
+            (:func:`motion_sdf_inputs`).
+        posed, culler: the posed collision proxy ``(T, Vb, 3)`` and its
+            :class:`~loosefit.geometry.ray_cull.AxisRayCuller`: only the vertices it cannot prove outside reach
+            the network; None: every vertex does.
+        margin: metres, the network's surface moved outwards (:meth:`BoundBodySDF.offset`).
+        overlap: cull the next chunk in a second thread while the network corrects this one (Warp's kernels run
+            without Python's lock, so the two use two cores).
+
+    Returns:
+        ``(T, V, 3)`` float32 corrected vertices and the ``(T, V)`` bool mask of the vertices moved.
+    """
+    world = np.array(verts, np.float32, copy=True)
+    T = len(world)
+    inside = np.zeros(world.shape[:2], bool)
+    chunks = [slice(s, min(s + FRAME_CHUNK, T)) for s in range(0, T, FRAME_CHUNK)]
+
+    def candidates(chunk: slice) -> np.ndarray:
+        if culler is None:
+            return np.ones((chunk.stop - chunk.start, world.shape[1]), bool)
+        return cull_candidates(world[chunk], posed[chunk], culler)
+
+    pool = ThreadPoolExecutor(1) if overlap and culler is not None and len(chunks) > 1 else None
+    try:
+        pending = pool.submit(candidates, chunks[0]) if pool else None
+        for k, chunk in enumerate(chunks):
+            cand = pending.result() if pool else candidates(chunk)
+            if pool and k + 1 < len(chunks):  # the next chunk's cull reads frames this loop does not write
+                pending = pool.submit(candidates, chunks[k + 1])
+            field = MotionBodySDF(net, code[chunk], rot[chunk], origin[chunk]).offset(margin)
+            moved, hit = resolver.frames(torch.from_numpy(world[chunk]), field, cand)
+            world[chunk], inside[chunk] = moved.numpy(), hit.numpy()
+    finally:
+        if pool:
+            pool.shutdown()
+    return world, inside
+
+
 def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
                              net: BodySDFNet | None = None, push_distance: float = 0.004,
                              cull: bool = True, margin: float = 0.0) -> np.ndarray:
@@ -820,7 +995,8 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     ``"exact"`` (SwinGar Eq. 10 with libigl's distance to the posed collision proxy) or ``"pushout"`` (the
     fixed-distance baseline). With ``cull`` (the default) SwinGar Eq. 10 evaluates its field only at the
     vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
-    (:func:`correct_frame`); the Gaussian width is the mean edge length of the first frame.
+    (:func:`correct_frame`); the network runs on :data:`FRAME_CHUNK` frames a pass (:func:`correct_motion`); the
+    Gaussian width is the mean edge length of the first frame.
 
     ``margin`` (metres, ``"neural"`` only; ours, 0 in the paper): Eq. 10 on the network's surface moved that far
     outwards, ``S - margin``: a vertex the network puts less than ``margin`` outside is corrected too, and moved
@@ -841,11 +1017,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     resolver = CollisionResolver(faces, out.shape[1])
     if mode == "neural":
         code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
-        bound = net.eval().bind(code[0]).offset(margin)
-        for t in range(len(out)):
-            out[t] = correct_frame(out[t], resolver, bound.with_code(code[t]), (rot[t], origin[t]),
-                                   culler.update(posed[t]) if culler else None)[0]
-        return out
+        return correct_motion(out, resolver, net.eval(), code, rot, origin, posed, culler, margin)[0]
     for t in range(len(out)):
         mesh = BodySDF(posed[t], proxy.faces)
         if mode == "pushout":
