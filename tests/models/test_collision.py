@@ -244,6 +244,16 @@ def test_cull_backends_agree_and_bad_input(posed_proxy):
     np.testing.assert_allclose(a.lo, b.lo, rtol=0, atol=1e-6)
     assert (a.outside(points) == b.outside(points)).mean() > 0.999
     assert b.outside(np.zeros((0, 3))).shape == (0,)
+    # many frames at once: each frame's answers, from one launch of each kernel
+    picks = [0, len(frames) // 2, len(frames) - 1]
+    per_frame = {c: np.stack([c.update(frames[t]).outside(points) for t in picks]) for c in (a, b)}
+    batch = np.stack([points + 0.01 * k for k in range(3)])  # other points per frame
+    for c in (a, b):
+        assert np.array_equal(c.update(frames[picks]).outside(np.stack([points] * 3)), per_frame[c])
+        again = np.stack([c.update(frames[t]).outside(batch[k]) for k, t in enumerate(picks)])
+        assert np.array_equal(c.update(frames[picks]).outside(batch), again)
+        with pytest.raises(InputError, match=r"\(3, N, 3\)"):
+            c.outside(points)  # after a 3-frame update, points must come per frame
     with pytest.raises(InputError, match="cell"):
         AxisRayCuller(frames[0], faces, 0.0)
     with pytest.raises(InputError, match="verts"):
@@ -338,8 +348,8 @@ def test_bone_frames_are_the_points_in_each_bone(posed_proxy):
 
 def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, monkeypatch):
     """:class:`MotionBodySDF` (many frames in one pass, the frame folded into the first layer) gives each
-    frame's :class:`FramedSDF` values and world gradients; :func:`correct_motion` (chunks of frames, the next
-    chunk culled in a second thread or not) moves the vertices :func:`correct_frame` moves, by the same amounts."""
+    frame's :class:`FramedSDF` values and world gradients; :func:`correct_motion` (chunks of frames, one after
+    another or in three threads) moves the vertices :func:`correct_frame` moves, by the same amounts."""
     import loosefit.models.collision as collision
     from loosefit.geometry.ray_cull import AxisRayCuller
     from loosefit.models.collision import (CollisionResolver, FramedSDF, MotionBodySDF, correct_frame,
@@ -359,7 +369,7 @@ def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, m
             p.data += 0.05 * torch.randn_like(p)
         codes = torch.randn(T, size) * 0.3
         field = MotionBodySDF(net, codes, rot, origin)
-        which = torch.from_numpy(rng.integers(0, T, 400))
+        which = torch.from_numpy(np.sort(rng.integers(0, T, 400)))
         x = torch.from_numpy(origin[which.numpy()] + rng.normal(0, 0.4, (400, 3)).astype(np.float32))
         value, grad = field.value_and_gradient(x, which)
         for t in range(T):
@@ -377,8 +387,8 @@ def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, m
     by_frame = np.stack([correct_frame(verts[t], resolver, net.bind(codes[t]).offset(0.01), (rot[t], origin[t]),
                                        culler.update(frames[t]))[0] for t in range(T)])
     monkeypatch.setattr(collision, "FRAME_CHUNK", 4)  # several chunks
-    serial, moved = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, overlap=False)
-    overlapped, moved_too = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01)
+    serial, moved = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, workers=1)
+    overlapped, moved_too = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, workers=3)
     assert moved.sum() > 100 and np.array_equal(moved, moved_too) and np.array_equal(serial, overlapped)
     np.testing.assert_allclose(serial, by_frame, rtol=0, atol=1e-5)
     assert np.array_equal(moved, np.any(by_frame != verts, axis=-1))
@@ -386,3 +396,5 @@ def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, m
         resolver.frames(torch.from_numpy(verts[:3]), field, np.ones(verts[:3].shape[:2], bool))
     with pytest.raises(InputError, match="frame index"):
         field(x)
+    with pytest.raises(InputError, match="sorted by frame"):
+        field(x, which.flip(0))

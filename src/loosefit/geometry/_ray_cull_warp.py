@@ -58,44 +58,52 @@ def splat(hi: wp.array(dtype=float), lo: wp.array(dtype=float), base: int, strid
 
 
 @wp.kernel
-def rasterize(verts: wp.array(dtype=wp.vec3), faces: wp.array(dtype=wp.vec3i), eps: float, low: wp.vec3,
-              inv: wp.vec3, bins: wp.vec3i, hi: wp.array(dtype=float), lo: wp.array(dtype=float)):
-    t = wp.tid()
-    f = faces[t]
-    p0, p1, p2 = verts[f[0]], verts[f[1]], verts[f[2]]
-    widen = wp.vec3(eps, eps, eps)
+def rasterize(verts: wp.array2d(dtype=wp.vec3), faces: wp.array(dtype=wp.vec3i), eps: wp.array(dtype=float),
+              low: wp.array(dtype=wp.vec3), inv: wp.vec3, bins: wp.array(dtype=wp.vec3i),
+              base: wp.array(dtype=wp.vec3i), hi: wp.array(dtype=float), lo: wp.array(dtype=float)):
+    """Launched on ``(T, F)``: triangle ``k`` of frame ``t`` into that frame's three maps (starting at ``base[t]``)."""
+    t, k = wp.tid()
+    f = faces[k]
+    p0, p1, p2 = verts[t, f[0]], verts[t, f[1]], verts[t, f[2]]
+    e32 = eps[t]
+    widen = wp.vec3(e32, e32, e32)
     mn = wp.min(wp.min(p0, p1), p2) - widen
     mx = wp.max(wp.max(p0, p1), p2) + widen
-    x0, x1 = bin_of(mn[0], low[0], inv[0]), bin_of(mx[0], low[0], inv[0])
-    y0, y1 = bin_of(mn[1], low[1], inv[1]), bin_of(mx[1], low[1], inv[1])
-    z0, z1 = bin_of(mn[2], low[2], inv[2]), bin_of(mx[2], low[2], inv[2])
+    lw = low[t]
+    x0, x1 = bin_of(mn[0], lw[0], inv[0]), bin_of(mx[0], lw[0], inv[0])
+    y0, y1 = bin_of(mn[1], lw[1], inv[1]), bin_of(mx[1], lw[1], inv[1])
+    z0, z1 = bin_of(mn[2], lw[2], inv[2]), bin_of(mx[2], lw[2], inv[2])
     q0 = wp.vec3d(wp.float64(p0[0]), wp.float64(p0[1]), wp.float64(p0[2]))
     q1 = wp.vec3d(wp.float64(p1[0]), wp.float64(p1[1]), wp.float64(p1[2]))
     q2 = wp.vec3d(wp.float64(p2[0]), wp.float64(p2[1]), wp.float64(p2[2]))
     n = wp.cross(q1 - q0, q2 - q0)
-    e = wp.float64(eps)
-    lx, ly, lz = wp.float64(low[0]), wp.float64(low[1]), wp.float64(low[2])
+    e = wp.float64(e32)
+    lx, ly, lz = wp.float64(lw[0]), wp.float64(lw[1]), wp.float64(lw[2])
     cx = wp.float64(1.0) / wp.float64(inv[0])
     cy = wp.float64(1.0) / wp.float64(inv[1])
     cz = wp.float64(1.0) / wp.float64(inv[2])
-    base_y = bins[1] * bins[2]
-    base_z = base_y + bins[0] * bins[2]
-    splat(hi, lo, 0, bins[2], y0, y1, z0, z1, mx[0], mn[0], n, 0, 1, 2, q0, e, ly, lz, cy, cz)  # x rays: (y, z)
-    splat(hi, lo, base_y, bins[2], x0, x1, z0, z1, mx[1], mn[1], n, 1, 0, 2, q0, e, lx, lz, cx, cz)  # y rays: (x, z)
-    splat(hi, lo, base_z, bins[1], x0, x1, y0, y1, mx[2], mn[2], n, 2, 0, 1, q0, e, lx, ly, cx, cy)  # z rays: (x, y)
+    nb = bins[t]
+    b = base[t]
+    splat(hi, lo, b[0], nb[2], y0, y1, z0, z1, mx[0], mn[0], n, 0, 1, 2, q0, e, ly, lz, cy, cz)  # x rays: (y, z)
+    splat(hi, lo, b[1], nb[2], x0, x1, z0, z1, mx[1], mn[1], n, 1, 0, 2, q0, e, lx, lz, cx, cz)  # y rays: (x, z)
+    splat(hi, lo, b[2], nb[1], x0, x1, y0, y1, mx[2], mn[2], n, 2, 0, 1, q0, e, lx, ly, cx, cy)  # z rays: (x, y)
 
 
 @wp.kernel
-def query(points: wp.array(dtype=wp.vec3), low: wp.vec3, high: wp.vec3, inv: wp.vec3, bins: wp.vec3i,
-          hi: wp.array(dtype=float), lo: wp.array(dtype=float), out: wp.array(dtype=wp.uint8)):
-    n = wp.tid()
-    p = points[n]
+def query(points: wp.array2d(dtype=wp.vec3), low: wp.array(dtype=wp.vec3), high: wp.array(dtype=wp.vec3),
+          inv: wp.vec3, bins: wp.array(dtype=wp.vec3i), base: wp.array(dtype=wp.vec3i),
+          hi: wp.array(dtype=float), lo: wp.array(dtype=float), out: wp.array2d(dtype=wp.uint8)):
+    """Launched on ``(T, N)``: point ``n`` of frame ``t`` against that frame's maps."""
+    t, n = wp.tid()
+    p = points[t, n]
+    lw = low[t]
+    hg = high[t]
+    nb = bins[t]
     free = int(0)
     for a in range(3):
-        if p[a] < low[a] or p[a] > high[a]:
+        if p[a] < lw[a] or p[a] > hg[a]:
             free = 1
     if free == 0:
-        base = int(0)
         for a in range(3):
             b = int(1)
             c = int(2)
@@ -104,8 +112,7 @@ def query(points: wp.array(dtype=wp.vec3), low: wp.vec3, high: wp.vec3, inv: wp.
             if a == 2:
                 b = 0
                 c = 1
-            k = base + bin_of(p[b], low[b], inv[b]) * bins[c] + bin_of(p[c], low[c], inv[c])
+            k = base[t][a] + bin_of(p[b], lw[b], inv[b]) * nb[c] + bin_of(p[c], lw[c], inv[c])
             if p[a] > hi[k] or p[a] < lo[k]:
                 free = 1
-            base = base + bins[b] * bins[c]
-    out[n] = wp.uint8(free)
+    out[t, n] = wp.uint8(free)

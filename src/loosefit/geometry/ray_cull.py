@@ -71,7 +71,9 @@ class AxisRayCuller:
     """Certify points outside a closed mesh by the six axis rays (see the module docstring).
 
     Build it once for a mesh's faces and call :meth:`update` with each posed frame's vertices (the buffers are
-    reused); :meth:`outside` then answers for that frame.
+    reused); :meth:`outside` then answers for that frame. Both also take many frames at once (``(T, V, 3)``
+    vertices, then ``(T, N, 3)`` points, frame ``t``'s points against frame ``t``'s mesh): the same answers,
+    with the kernels launched once for all of them.
 
     Args:
         verts: ``(V, 3)`` mesh vertices, metres (the first posed frame).
@@ -94,6 +96,7 @@ class AxisRayCuller:
         if backend == "warp" and kernels is None:
             raise InputError("the Warp cull backend needs warp (pip install warp-lang)")
         self.backend = "numpy" if kernels is None else "warp"
+        self.cell = cells.copy()
         self.faces = np.ascontiguousarray(f, np.int32)
         self.num_verts = int(self.faces.max()) + 1
         self.inv = np.float32(1.0) / cells.astype(np.float32)
@@ -103,22 +106,31 @@ class AxisRayCuller:
             self._maps = None  # (hi, lo) Warp arrays, grown as needed
         self.update(verts)
 
+    def twin(self) -> "AxisRayCuller":
+        """Another culler of the same mesh, bins and backend, with buffers of its own (one per thread), at the
+        pose of this one's first frame."""
+        return AxisRayCuller(self._first, self.faces, self.cell, self.backend)
+
     def update(self, verts: np.ndarray) -> "AxisRayCuller":
-        """Rebuild the maps for the mesh posed at ``verts (V, 3)`` (metres); returns ``self``."""
+        """Rebuild the maps for the mesh posed at ``verts (V, 3)``, or at each of ``T`` frames ``(T, V, 3)``
+        (metres); returns ``self``."""
         v = np.asarray(verts)
-        if v.ndim != 2 or v.shape[1] != 3 or len(v) < self.num_verts:
-            raise InputError(f"AxisRayCuller needs verts (V >= {self.num_verts}, 3), got {v.shape}")
-        v32 = np.ascontiguousarray(v, np.float32)
-        vmin, vmax = (x.numpy() for x in torch.aminmax(torch.from_numpy(v32), dim=0))
+        if v.ndim not in (2, 3) or v.shape[-1] != 3 or v.shape[-2] < self.num_verts or (v.ndim == 3 and not len(v)):
+            raise InputError(f"AxisRayCuller needs verts (V >= {self.num_verts}, 3) or (T, V, 3), got {v.shape}")
+        self._frames = v.ndim == 3
+        v32 = np.ascontiguousarray(v.reshape(-1, *v.shape[-2:]), np.float32)  # (T, V, 3)
+        self._first = v32[0]
+        vmin, vmax = (x.numpy() for x in torch.aminmax(torch.from_numpy(v32), dim=1))
         if not (np.isfinite(vmin).all() and np.isfinite(vmax).all()):
             raise InputError("AxisRayCuller: the mesh has NaN or infinite vertices")
         # widening: 4 float32 steps at the largest coordinate (rounding a vertex or a point moves it by half a step)
-        self.eps = np.float32(4.0 * np.spacing(np.float32(max(np.abs(vmin).max(), np.abs(vmax).max(), 1.0))))
-        self.low, self.high = vmin - self.eps, vmax + self.eps  # the mesh's (widened) box
-        self.bins = self._bin(self.high[None])[0] + 1
-        sizes = [int(self.bins[b] * self.bins[c]) for b, c in _PLANE]
-        self._base = np.cumsum([0] + sizes[:-1])
-        n = sum(sizes)
+        largest = np.maximum(np.maximum(np.abs(vmin).max(1), np.abs(vmax).max(1)), np.float32(1.0))
+        self.eps = (np.float32(4.0) * np.spacing(largest)).astype(np.float32)  # (T,)
+        self.low, self.high = vmin - self.eps[:, None], vmax + self.eps[:, None]  # each frame's (widened) box
+        self.bins = np.floor((self.high - self.low) * self.inv).astype(np.int64) + 1  # (T, 3)
+        sizes = np.stack([self.bins[:, b] * self.bins[:, c] for b, c in _PLANE], 1)  # (T, 3)
+        self._base = (np.cumsum(sizes) - sizes.ravel()).reshape(sizes.shape)  # where each frame's map starts
+        n = int(sizes.sum())
         if self.backend == "warp":
             wp = self._wp
             if self._maps is None or self._maps[0].shape[0] < n:
@@ -128,22 +140,34 @@ class AxisRayCuller:
             self.hi, self.lo = hi.numpy()[:n], lo.numpy()[:n]  # views of the Warp buffers
             self.hi.fill(-np.inf)
             self.lo.fill(np.inf)
-            wp.launch(self._rasterize, dim=len(self.faces), device="cpu",
-                      inputs=[wp.array(v32, dtype=wp.vec3, device="cpu", copy=False), self._faces, float(self.eps),
-                              wp.vec3(*self.low), wp.vec3(*self.inv), wp.vec3i(*self.bins.tolist()), hi, lo])
+            self._frame_args = [wp.array(a, dtype=d, device="cpu") for a, d in
+                                ((self.low, wp.vec3), (self.high, wp.vec3), (self.bins.astype(np.int32), wp.vec3i),
+                                 (self._base.astype(np.int32), wp.vec3i))]
+            low, high, bins, base = self._frame_args
+            wp.launch(self._rasterize, dim=(len(v32), len(self.faces)), device="cpu",
+                      inputs=[wp.array(v32, dtype=wp.vec3, device="cpu", copy=False), self._faces,
+                              wp.array(self.eps, dtype=float, device="cpu", copy=False), low, wp.vec3(*self.inv),
+                              bins, base, hi, lo])
             return self
         self.hi = np.full(n, -np.inf, np.float32)
         self.lo = np.full(n, np.inf, np.float32)
+        for t in range(len(v32)):
+            self._rasterize_numpy(v32[t], t)
+        return self
+
+    def _rasterize_numpy(self, v32: np.ndarray, t: int) -> None:
+        """Frame ``t``'s maps from its vertices ``(V, 3)`` float32 (the reference of the Warp kernel)."""
         tri = v32[self.faces]
-        tmin = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2]) - self.eps  # (F, 3) widened triangle boxes
-        tmax = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]) + self.eps
-        lo_bin, hi_bin = self._bin(tmin), self._bin(tmax)
+        eps = self.eps[t]
+        tmin = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2]) - eps  # (F, 3) widened triangle boxes
+        tmax = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2]) + eps
+        lo_bin, hi_bin = self._bin(tmin, t), self._bin(tmax, t)
         q = tri.astype(np.float64)
         normal = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
-        eps, cells = np.float64(self.eps), 1.0 / self.inv.astype(np.float64)
-        low = self.low.astype(np.float64)
+        eps, cells = np.float64(eps), 1.0 / self.inv.astype(np.float64)
+        low = self.low[t].astype(np.float64)
         for a, (b, c) in enumerate(_PLANE):
-            # every (triangle, bin) pair of the triangles' boxes, flat: triangle t owns count_t consecutive slots
+            # every (triangle, bin) pair of the triangles' boxes, flat: triangle k owns count_k consecutive slots
             wide = hi_bin[:, c] - lo_bin[:, c] + 1
             count = (hi_bin[:, b] - lo_bin[:, b] + 1) * wide
             which = np.repeat(np.arange(len(self.faces)), count)
@@ -169,39 +193,48 @@ class AxisRayCuller:
                     + gc * (cc + np.where(gc > 0, -pad, cells[c] + pad))).astype(np.float32)
             top = np.where(planar, np.minimum(top, up), top)
             bottom = np.where(planar, np.maximum(bottom, down), bottom)
-            index = self._base[a] + i * self.bins[c] + j
+            index = self._base[t, a] + i * self.bins[t, c] + j
             np.maximum.at(self.hi, index, top)
             np.minimum.at(self.lo, index, bottom)
-        return self
 
-    def _bin(self, points: np.ndarray) -> np.ndarray:
-        """Bin indices ``(N, 3)`` of float32 points (the kernels' formula, in float32)."""
-        return np.floor((points - self.low) * self.inv).astype(np.int64)
+    def _bin(self, points: np.ndarray, t: int) -> np.ndarray:
+        """Frame ``t``'s bin indices ``(N, 3)`` of float32 points (the kernels' formula, in float32)."""
+        return np.floor((points - self.low[t]) * self.inv).astype(np.int64)
 
     def outside(self, points: np.ndarray) -> np.ndarray:
-        """``(N,)`` bool: True where ``points (N, 3)`` (metres) are certainly outside; False: may be inside."""
+        """``(N,)`` bool: True where ``points (N, 3)`` (metres) are certainly outside; False: may be inside. After
+        an update with ``T`` frames: ``points (T, N, 3)`` -> ``(T, N)``, each frame's points against its mesh."""
         p = np.asarray(points)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise InputError(f"points must be (N, 3), got {p.shape}")
-        p = np.ascontiguousarray(p, np.float32)
+        T = len(self.low)
+        if p.shape[-1:] != (3,) or p.ndim != (3 if self._frames else 2) or (self._frames and len(p) != T):
+            want = f"({T}, N, 3), the frames of the last update" if self._frames else "(N, 3)"
+            raise InputError(f"points must be {want}, got {p.shape}")
+        p = np.ascontiguousarray(p.reshape(T, -1, 3), np.float32)
         if self.backend == "warp":
-            out = np.empty(len(p), np.uint8)
-            if len(p):
+            out = np.empty(p.shape[:2], np.uint8)
+            if out.size:
                 wp = self._wp
-                wp.launch(self._query, dim=len(p), device="cpu",
-                          inputs=[wp.array(p, dtype=wp.vec3, device="cpu", copy=False), wp.vec3(*self.low),
-                                  wp.vec3(*self.high), wp.vec3(*self.inv), wp.vec3i(*self.bins.tolist()), *self._maps,
+                low, high, bins, base = self._frame_args
+                wp.launch(self._query, dim=out.shape, device="cpu",
+                          inputs=[wp.array(p, dtype=wp.vec3, device="cpu", copy=False), low, high,
+                                  wp.vec3(*self.inv), bins, base, *self._maps,
                                   wp.array(out, dtype=wp.uint8, device="cpu", copy=False)])
-            return out.view(bool)
-        out = ((p < self.low) | (p > self.high)).any(1)  # outside the box of the mesh's triangles
+            out = out.view(bool)
+        else:
+            out = np.stack([self._outside_numpy(q, t) for t, q in enumerate(p)])
+        return out if self._frames else out[0]
+
+    def _outside_numpy(self, p: np.ndarray, t: int) -> np.ndarray:
+        """Frame ``t``'s answer for float32 ``p (N, 3)`` (the reference of the Warp kernel)."""
+        out = ((p < self.low[t]) | (p > self.high[t])).any(1)  # outside the box of the mesh's triangles
         near = np.flatnonzero(~out)
         if len(near) == 0:
             return out
         q = p[near]
-        k = self._bin(q)
+        k = self._bin(q, t)
         free = np.zeros(len(q), bool)
         for a, (b, c) in enumerate(_PLANE):
-            index = self._base[a] + k[:, b] * self.bins[c] + k[:, c]
+            index = self._base[t, a] + k[:, b] * self.bins[t, c] + k[:, c]
             free |= (q[:, a] > self.hi[index]) | (q[:, a] < self.lo[index])
         out[near] = free
         return out

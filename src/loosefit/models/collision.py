@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import copy
 import math
+import queue
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -345,7 +346,7 @@ class MotionBodySDF(BoundBodySDF):
         codes: ``(T, C)`` body codes (:func:`motion_sdf_inputs`).
         rot, origin: ``(T, 3, 3)``, ``(T, 3)``: each frame's canonical frame, ``p_canonical = (p - origin) @ rot``.
 
-    Points are world ``(N, 3)`` metres, ``frame`` ``(N,)`` int64 their frame indices (``__call__(points,
+    Points are world ``(N, 3)`` metres, ``frame`` ``(N,)`` int64 their frame indices, sorted (``__call__(points,
     frame)``, :meth:`value_and_gradient_fn`).
     """
 
@@ -372,11 +373,26 @@ class MotionBodySDF(BoundBodySDF):
     def with_code(self, code):
         raise InputError("a MotionBodySDF holds its frames' codes; bind the network again for other frames")
 
+    def _by_frame(self, rows: torch.Tensor, frame: torch.Tensor, layer) -> torch.Tensor:
+        """``layer(t, rows of frame t)`` for every frame, in order: one small matrix product a frame instead of a
+        per-point copy of the weights. ``frame (N,)`` must be sorted (flat indices ``t V + i`` in increasing order
+        are, as :class:`CollisionResolver` passes them)."""
+        if len(frame) > 1 and not bool((frame[1:] >= frame[:-1]).all()):
+            raise InputError("MotionBodySDF takes points sorted by frame")
+        counts = torch.bincount(frame, minlength=self.num_frames).tolist()
+        return torch.cat([layer(t, part) for t, part in enumerate(rows.split(counts))])
+
+    def _frame_layer(self, t: int, points: torch.Tensor) -> torch.Tensor:
+        return torch.addmm(self.world_bias[t], points, self.world_weight[t].T)
+
+    def _frame_gradient(self, t: int, g: torch.Tensor) -> torch.Tensor:
+        return g @ self.world_weight[t]
+
     def _first_layer(self, points: torch.Tensor, frame) -> torch.Tensor:
-        return torch.einsum("ni,nhi->nh", points, self.world_weight[frame]) + self.world_bias[frame]
+        return self._by_frame(points, frame, self._frame_layer)
 
     def _first_layer_gradient(self, g: torch.Tensor, frame) -> torch.Tensor:
-        return torch.einsum("nh,nhi->ni", g, self.world_weight[frame])
+        return self._by_frame(g, frame, self._frame_gradient)
 
     def _fusion_bias(self, frame) -> torch.Tensor:
         return self.first_bias[frame]
@@ -933,13 +949,13 @@ FRAME_CHUNK = 32
 
 def cull_candidates(verts: np.ndarray, posed: np.ndarray, culler: AxisRayCuller) -> np.ndarray:
     """``(T, V)`` bool: the garment vertices ``verts (T, V, 3)`` that ``culler`` cannot prove outside the
-    collision proxy posed at ``posed (T, Vb, 3)`` (updated frame by frame)."""
-    return np.stack([~culler.update(p).outside(w) for p, w in zip(posed, np.asarray(verts, np.float32))])
+    collision proxy posed at ``posed (T, Vb, 3)`` (updated with every frame at once)."""
+    return ~culler.update(posed).outside(verts)
 
 
 def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDFNet", code, rot, origin,
                    posed: np.ndarray | None = None, culler: AxisRayCuller | None = None, margin: float = 0.0,
-                   overlap: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                   workers: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """SwinGar Eq. 10 with the network on every frame of an animated garment, :data:`FRAME_CHUNK` frames a
     pass (:class:`MotionBodySDF`, :meth:`CollisionResolver.frames`): what :func:`correct_frame` gives frame by
     frame, up to float rounding.
@@ -953,35 +969,44 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
             :class:`~loosefit.geometry.ray_cull.AxisRayCuller`: only the vertices it cannot prove outside reach
             the network; None: every vertex does.
         margin: metres, the network's surface moved outwards (:meth:`BoundBodySDF.offset`).
-        overlap: cull the next chunk in a second thread while the network corrects this one (Warp's kernels run
-            without Python's lock, so the two use two cores).
+        workers: threads correcting chunks side by side (Warp's kernels, torch and NumPy's large operations run
+            without Python's lock, so two use two cores; each has its own culler); 1: one chunk after another.
 
     Returns:
         ``(T, V, 3)`` float32 corrected vertices and the ``(T, V)`` bool mask of the vertices moved.
     """
+    if workers < 1:
+        raise InputError(f"collision workers must be >= 1, got {workers}")
     world = np.array(verts, np.float32, copy=True)
     T = len(world)
     inside = np.zeros(world.shape[:2], bool)
+    if resolver.sigma is None and T:  # set before the threads share the resolver
+        resolver.sigma = resolver.mean_edge(torch.from_numpy(world[0]))
     chunks = [slice(s, min(s + FRAME_CHUNK, T)) for s in range(0, T, FRAME_CHUNK)]
+    workers = min(workers, len(chunks)) or 1
+    cullers = queue.SimpleQueue()  # one culler (its map buffers) per running chunk
+    for k in range(workers if culler is not None else 0):
+        cullers.put(culler if k == 0 else culler.twin())
 
-    def candidates(chunk: slice) -> np.ndarray:
+    def correct(chunk: slice) -> None:  # frames of one chunk, written in place (chunks do not overlap)
         if culler is None:
-            return np.ones((chunk.stop - chunk.start, world.shape[1]), bool)
-        return cull_candidates(world[chunk], posed[chunk], culler)
+            cand = np.ones((chunk.stop - chunk.start, world.shape[1]), bool)
+        else:
+            mine = cullers.get()
+            try:
+                cand = cull_candidates(world[chunk], posed[chunk], mine)
+            finally:
+                cullers.put(mine)
+        field = MotionBodySDF(net, code[chunk], rot[chunk], origin[chunk]).offset(margin)
+        moved, hit = resolver.frames(torch.from_numpy(world[chunk]), field, cand)
+        world[chunk], inside[chunk] = moved.numpy(), hit.numpy()
 
-    pool = ThreadPoolExecutor(1) if overlap and culler is not None and len(chunks) > 1 else None
-    try:
-        pending = pool.submit(candidates, chunks[0]) if pool else None
-        for k, chunk in enumerate(chunks):
-            cand = pending.result() if pool else candidates(chunk)
-            if pool and k + 1 < len(chunks):  # the next chunk's cull reads frames this loop does not write
-                pending = pool.submit(candidates, chunks[k + 1])
-            field = MotionBodySDF(net, code[chunk], rot[chunk], origin[chunk]).offset(margin)
-            moved, hit = resolver.frames(torch.from_numpy(world[chunk]), field, cand)
-            world[chunk], inside[chunk] = moved.numpy(), hit.numpy()
-    finally:
-        if pool:
-            pool.shutdown()
+    if workers == 1:
+        for chunk in chunks:
+            correct(chunk)
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(correct, chunks))  # list(): an exception in a chunk is raised here
     return world, inside
 
 
