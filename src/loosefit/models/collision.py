@@ -14,22 +14,28 @@ move a vertex further in; the displacement here is along the outward gradient, a
   :class:`ExactSDF` from libigl, or a closed-form one), and :func:`push_out` the fixed-distance baseline
   (TailorNet) the paper compares with.
 
-Speed (per frame, :func:`correct_frame`, used by :func:`handle_motion_collisions` and ``loosefit animate
---collision``). Evaluating the network's value and autograd gradient at every vertex of a 10k-vertex garment
-took 300-450 ms a frame on this project's CPUs at the paper's size; these changes bring it to 1.2-1.5 ms with a
-32-wide network and 3.6-7 ms at the paper's width (benchmarks/collision.py). With the exact field they change
-nothing (beyond float rounding); with the network, a vertex it wrongly calls inside but that the cull proves
-outside is no longer moved:
+Speed. Evaluating the network's value and autograd gradient at every vertex of a 10k-vertex garment took
+300-450 ms a frame on this project's CPUs at the paper's size. Frame by frame (:func:`correct_frame`, for
+streaming) these changes bring it to about 3 ms with a 32- or 64-wide network; over a whole motion
+(:func:`correct_motion`, used by :func:`handle_motion_collisions` and ``loosefit animate --collision``) to
+0.75-1.2 ms a frame with a 32-wide network in two worker threads (benchmarks/collision.py). With the exact
+field they change nothing (beyond float rounding); with the network, a vertex it wrongly calls inside but
+that the cull proves outside is no longer moved:
 
 - the posed collision proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` proves most vertices outside
-  (a free axis-aligned ray), and only the others (1-5 % of a garment) reach the network;
+  (a free axis-aligned ray), and only the others (2-6 % of a garment) reach the network;
 - :class:`BoundBodySDF` runs the body-code branch once per frame and differentiates by hand; the gradient is
   taken only at the vertices found inside, the value of their other neighbours only where ``delta_i`` needs it;
 - denormal floats are flushed while the network runs (:func:`flushed_denormals`): Softplus(beta=100) makes
-  many, and the CPU computed with them several times slower.
+  many, and the CPU computed with them several times slower;
+- over a motion, :data:`FRAME_CHUNK` frames go through each step at once (the cull's kernels launched once,
+  :class:`MotionBodySDF` with the frame folded into its first layer, :meth:`CollisionResolver.frames`), so
+  Python's overhead is paid per chunk, and chunks run in two threads (the kernels, torch and NumPy release
+  Python's lock).
 
-What remains is the network on the candidates: narrower networks (``net.hidden``) are faster and less exact,
-the paper's width the slowest; the benchmark reports both sides.
+What remains is the cull (about 0.8 ms of one core a frame, most of it rasterising the proxy's 2,454
+triangles) and the network on the candidates: narrower networks (``net.hidden``) are faster and less exact, the
+paper's width the slowest; the benchmark reports both sides.
 """
 
 from __future__ import annotations
