@@ -56,6 +56,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
 from loosefit.geometry.ray_cull import AxisRayCuller
 from loosefit.geometry.signed_distance import BodySDF
+from loosefit.threads import torch_threads
 
 #: Softplus sharpness of the SDF network (SwinGar Sec. IV).
 SOFTPLUS_BETA = 100.0
@@ -976,7 +977,8 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
             the network; None: every vertex does.
         margin: metres, the network's surface moved outwards (:meth:`BoundBodySDF.offset`).
         workers: threads correcting chunks side by side (Warp's kernels, torch and NumPy's large operations run
-            without Python's lock, so two use two cores; each has its own culler); 1: one chunk after another.
+            without Python's lock, so two use two cores; each has its own culler and one torch thread); 1: one
+            chunk after another, with torch's thread count as it is.
 
     Returns:
         ``(T, V, 3)`` float32 corrected vertices and the ``(T, V)`` bool mask of the vertices moved.
@@ -1010,8 +1012,8 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
     if workers == 1:
         for chunk in chunks:
             correct(chunk)
-    else:
-        with ThreadPoolExecutor(workers) as pool:
+    else:  # one torch thread a worker: measured faster than two each on two cores (benchmarks/collision.py)
+        with torch_threads(1), ThreadPoolExecutor(workers) as pool:
             list(pool.map(correct, chunks))  # list(): an exception in a chunk is raised here
     return world, inside
 
