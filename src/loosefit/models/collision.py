@@ -950,7 +950,8 @@ def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFuncti
 
 
 #: Frames corrected in one pass of the network by :func:`correct_motion`: enough that Python's per-call overhead
-#: is paid rarely, few enough that the per-point first layers (``(N, H, 3)`` floats) stay small.
+#: is paid rarely, few enough that a chunk's ``(T V, 3)`` arrays stay small and a short motion still gives both
+#: workers a chunk.
 FRAME_CHUNK = 32
 
 
