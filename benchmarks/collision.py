@@ -24,7 +24,8 @@ Laplacian consistency of the correction (Table III) and the correction's time pe
    denormals flushed, with the cull (:class:`~loosefit.geometry.ray_cull.AxisRayCuller`), smaller networks
    trained on the same samples for the same steps (``--speed-widths``) or read from other runs
    (``--speed-sdf-runs``), bfloat16, the exact SDF, and a whole motion in chunks of frames in one or two threads
-   (:func:`~loosefit.models.collision.correct_motion`, what ``loosefit animate --collision`` runs). The
+   (:func:`~loosefit.models.collision.correct_motion`, what ``loosefit animate --collision`` runs), also with
+   other cull bins (``--cull-cells``). The
    accuracy of each network against libigl on near-surface points of the test bodies goes beside its time.
 
 Run: .venv/bin/python benchmarks/collision.py --data STORE --run RUN [--sdf-run DIR] [--set train.steps=N]
@@ -279,7 +280,8 @@ def sdf_accuracy(net_or_bound_fn, test: dict, bone_frames: bool) -> dict:
 
 
 def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: list[int], width_steps: int,
-          frames: int, reps: int, threads_list: list[int], other_nets: dict | None = None) -> dict:
+          frames: int, reps: int, threads_list: list[int], other_nets: dict | None = None,
+          cull_cells: list | None = None) -> dict:
     """Time per frame of the correction of ~10k vertices, each design tried (see the module docstring)."""
     from loosefit.body import AnnyBody, AnnyShape
     from loosefit.geometry.ray_cull import AxisRayCuller
@@ -341,6 +343,9 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                "candidates_per_frame": float(np.mean([(~culler.update(posed[t]).outside(verts[t])).sum() for t in picks]))}
         resolver = CollisionResolver(garment.faces, garment.num_verts)
         resolver.sigma = resolver.mean_edge(torch.from_numpy(verts[0]))
+        cell_cullers = {str(c): AxisRayCuller(posed[0], proxy.faces, c) for c in cull_cells or []}
+        row["candidates_per_frame_by_cull_bins"] = {
+            cell: float((~c.update(posed).outside(verts)).sum() / len(verts)) for cell, c in cell_cullers.items()}
         for threads in threads_list:
             timing = {}
             with torch_threads(threads):
@@ -367,6 +372,10 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                         timing[f"6 {name}: + a motion's frames a pass, {workers} worker(s)"] = time_motion(
                             lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, culler,
                                                    workers=workers), motion.num_frames, reps)
+                    for cell, other in cell_cullers.items():  # the same with other bins
+                        timing[f"7 {name}: a motion, 2 workers, cull bins {cell} m"] = time_motion(
+                            lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, other),
+                            motion.num_frames, reps)
                 b32 = main_net.bind(code[0])
                 bf = Bf16Bound(b32)
                 cand = {t: ~culler.update(posed[t]).outside(verts[t]) for t in picks}
@@ -428,6 +437,8 @@ def main() -> None:
     parser.add_argument("--speed-widths", default="32,64,128", help="narrower networks to time ('' for none)")
     parser.add_argument("--speed-steps", type=int, default=None, help="their training steps (default: the SDF run's)")
     parser.add_argument("--speed-sdf-runs", default="", help="other trained SDF run folders to time beside it (comma)")
+    parser.add_argument("--cull-cells", default="", help="other cull bin sizes to time over a motion, metres: "
+                        "';'-separated, each one size or 'x,y,z' (e.g. '0.015,0.015,0.03;0.02,0.02,0.04')")
     parser.add_argument("--speed-frames", type=int, default=12)
     parser.add_argument("--speed-reps", type=int, default=5)
     parser.add_argument("--threads", default="1,2", help="torch thread counts of the speed part")
@@ -482,7 +493,9 @@ def main() -> None:
             others[f"{Path(folder).name} (hidden {other.config.hidden})"] = other
         results["speed"] = speed(net, sdf_summary, store, [s for s in sequences if s.name in predictions], kinds,
                                  widths, steps, args.speed_frames, args.speed_reps,
-                                 [int(t) for t in args.threads.split(",")], others)
+                                 [int(t) for t in args.threads.split(",")], others,
+                                 [[float(v) for v in c.split(",")] if "," in c else float(c)
+                                  for c in filter(None, (c.strip() for c in args.cull_cells.split(";")))])
         results["targets"] += speed_targets(results["speed"])
     save_results(args.name, results)
 
