@@ -36,12 +36,13 @@ Say which data a result is: ``--set-name dynamic`` for motions as simulated, ``q
 of slow motions or poses held until the cloth settles (a static method is judged where it applies).
 ``--also quasi-static=STATIC.zarr`` evaluates the same runs on a second store's test sequences as well (the
 quasi-static walks of ``configs/datasets/garments-static.yaml``: the same test garments and bodies, walks
-played four times slower).
+played four times slower). ``--also-train`` evaluates them on their own training sequences too
+(``train_split``): an error as high there as on the test set is under-fitting, not a failure to generalise.
 
 Run: .venv/bin/python benchmarks/accuracy_graph.py --data DATA.zarr --runs RUNS [--variants full,plain]
          [--preset cpu|paper] [--config swingar:configs/models/swingar.yaml ...]
          [--set swingar:train.stages.all.epochs=5 ...] [--vb-data VB.zarr] [--bones 80] [--set-name dynamic]
-         [--also quasi-static=STATIC.zarr] [--name accuracy-graph]
+         [--also quasi-static=STATIC.zarr] [--also-train] [--name accuracy-graph]
      SwinGar's ablations: --variants swingar-all (= swingar, swingar-no-descriptor, swingar-pooling,
          swingar-euclidean, swingar-plain-gat, swingar-alpha-1, swingar-alpha-3) --name accuracy-graph-swingar
 (writes benchmarks/results/<name>.json)
@@ -437,6 +438,8 @@ def main() -> None:
     p.add_argument("--from-results", default=None, metavar="NAME,NAME",
                    help="without --data: merge the variants of these result files (later ones win) and compute "
                         "their targets, e.g. an ablation run separately from the full model")
+    p.add_argument("--also-train", action="store_true",
+                   help="also evaluate each variant on its own training sequences (under- or over-fitting?)")
     p.add_argument("--name", default="accuracy-graph")
     args = p.parse_args()
     if not 0 <= args.fitgar_frame_offset < args.fitgar_frame_stride:
@@ -485,9 +488,10 @@ def main() -> None:
                                             "rows": rows, **means(rows, metrics),
                                             "by_body": table(rows, "body", metrics),
                                             "by_garment": table(rows, "garment", metrics)}
-            for label, other in also.items():
+            for label, other, split in [*((label, other, "test") for label, other in also.items()),
+                                        *((("train_split", store, "train"),) if args.also_train else ())]:
                 print(f"== {variant}: evaluate on {label}", flush=True)
-                rows = EVALUATORS[method](run, other, other.sequence_names(split="test"), **options[method])
+                rows = EVALUATORS[method](run, other, other.sequence_names(split=split), **options[method])
                 results["variants"][variant][label] = {"rows": rows, **means(rows, metrics),
                                                        "by_body": table(rows, "body", metrics),
                                                        "by_garment": table(rows, "garment", metrics)}
