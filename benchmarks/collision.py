@@ -297,8 +297,8 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     motion = test_seqs[0].motion
     posed = proxy.pose(motion).verts
     bones = net.num_bones > 0  # the narrower networks below are trained with the same config
-    inputs = {b: motion_sdf_inputs(body, motion, b) for b in {bones, *(n.num_bones > 0 for n in (other_nets or {}).values())}}
-    code, rot, origin = inputs[bones]
+    codes, rot, origin = motion_sdf_inputs(body, motion, bone_frames=True)  # the bone frames follow the plain code
+    code = codes[:, :net.code_size]
     picks = [int(t) for t in np.linspace(0, motion.num_frames - 1, frames).round()]
     out: dict = {"motion": test_seqs[0].motion.name, "body": "average Anny, collision proxy 1,229 vertices",
                  "cull_cell_m": CULL_CELL, "frames_timed": picks, "garments": {}}
@@ -360,7 +360,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                 with flushed_denormals():
                     timing[f"1b before ({size}), denormals flushed"] = time_frames(value_grad_all, slow, 1)
                 for name, n in nets.items():
-                    n_code = inputs[n.num_bones > 0][0]
+                    n_code = codes[:, :n.code_size]
                     bound = n.bind(n_code[0])
                     timing[f"2 {name}: bound code, hand gradient, denormals flushed, every vertex"] = time_frames(
                         lambda t: correct_frame(verts[t], resolver, bound.with_code(n_code[t]), (rot[t], origin[t])),

@@ -54,9 +54,8 @@ def sequence_accuracy(store: DatasetStore, name: str, run: Path, nets: dict, eve
     verts = Animator(run, garment=store.garment(seq.garment), body=body).animate(motion)
     proxy = body.collision_proxy()
     posed = proxy.pose(motion).verts
-    inputs = {bones: motion_sdf_inputs(body, motion, bones) for bones in {net.num_bones > 0 for net in nets.values()}}
-    codes = {label: inputs[net.num_bones > 0][0] for label, net in nets.items()}
-    rot, origin = next(iter(inputs.values()))[1:]
+    code, rot, origin = motion_sdf_inputs(body, motion, bone_frames=True)  # the bone frames follow the plain code
+    codes = {label: code[:, :net.code_size] for label, net in nets.items()}
     per_net = {label: [] for label in nets}
     for t in range(0, len(verts), every):
         x = torch.from_numpy(np.ascontiguousarray(verts[t], np.float32))

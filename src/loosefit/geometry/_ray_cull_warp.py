@@ -28,9 +28,8 @@ def splat(hi: wp.array(dtype=float), lo: wp.array(dtype=float), base: int, strid
     a0 = wp.float64(0.0)
     margin = wp.float64(0.0)
     if wp.abs(n[a]) > wp.float64(0.0):
-        along = wp.float64(-1.0) / n[a]
-        gb = n[b] * along
-        gc = n[c] * along
+        gb = -n[b] / n[a]
+        gc = -n[c] / n[a]
         if wp.abs(gb) + wp.abs(gc) <= STEEP:
             planar = 1
             a0 = p[a] - gb * p[b] - gc * p[c]
@@ -60,7 +59,7 @@ def splat(hi: wp.array(dtype=float), lo: wp.array(dtype=float), base: int, strid
 
 @wp.kernel
 def rasterize(verts: wp.array2d(dtype=wp.vec3), faces: wp.array(dtype=wp.vec3i), eps: wp.array(dtype=float),
-              low: wp.array(dtype=wp.vec3), inv: wp.vec3, cell: wp.vec3d, bins: wp.array(dtype=wp.vec3i),
+              low: wp.array(dtype=wp.vec3), inv: wp.vec3, bins: wp.array(dtype=wp.vec3i),
               base: wp.array(dtype=wp.vec3i), hi: wp.array(dtype=float), lo: wp.array(dtype=float)):
     """Launched on ``(T, F)``: triangle ``k`` of frame ``t`` into that frame's three maps (starting at ``base[t]``)."""
     t, k = wp.tid()
@@ -80,7 +79,9 @@ def rasterize(verts: wp.array2d(dtype=wp.vec3), faces: wp.array(dtype=wp.vec3i),
     n = wp.cross(q1 - q0, q2 - q0)
     e = wp.float64(e32)
     lx, ly, lz = wp.float64(lw[0]), wp.float64(lw[1]), wp.float64(lw[2])
-    cx, cy, cz = cell[0], cell[1], cell[2]
+    cx = wp.float64(1.0) / wp.float64(inv[0])
+    cy = wp.float64(1.0) / wp.float64(inv[1])
+    cz = wp.float64(1.0) / wp.float64(inv[2])
     nb = bins[t]
     b = base[t]
     splat(hi, lo, b[0], nb[2], y0, y1, z0, z1, mx[0], mn[0], n, 0, 1, 2, q0, e, ly, lz, cy, cz)  # x rays: (y, z)

@@ -148,7 +148,7 @@ class AxisRayCuller:
             wp.launch(self._rasterize, dim=(len(v32), len(self.faces)), device="cpu",
                       inputs=[wp.array(v32, dtype=wp.vec3, device="cpu", copy=False), self._faces,
                               wp.array(self.eps, dtype=float, device="cpu", copy=False), low, wp.vec3(*self.inv),
-                              wp.vec3d(*(1.0 / self.inv.astype(np.float64))), bins, base, hi, lo])
+                              bins, base, hi, lo])
             return self
         self.hi = np.full(n, -np.inf, np.float32)
         self.lo = np.full(n, np.inf, np.float32)

@@ -298,8 +298,8 @@ class BoundBodySDF:
             z = nn.functional.linear(self._act(z), w, b)
         return z[..., 0], (pre if keep else None)
 
-    def __call__(self, points: torch.Tensor) -> torch.Tensor:
-        return self._forward(points, False)[0]
+    def __call__(self, points: torch.Tensor, frame=None) -> torch.Tensor:
+        return self._forward(points, False, frame)[0]
 
     def _slope(self, z: torch.Tensor) -> torch.Tensor:
         """Softplus' derivative ``sigmoid(beta z)`` (torch uses 1 above its threshold, ``beta z > 20``, where
@@ -319,11 +319,11 @@ class BoundBodySDF:
                 g = g + residual
         return self._first_layer_gradient(g * self._slope(pre[0]), frame)
 
-    def value_and_gradient(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def value_and_gradient(self, points: torch.Tensor, frame=None) -> tuple[torch.Tensor, torch.Tensor]:
         """``S (N,)`` and ``grad S (N, 3)`` at ``points (N, 3)``, no autograd (the chain rule written out)."""
         with torch.no_grad():
-            value, pre = self._forward(points, True)
-            return value, self._backward(pre)
+            value, pre = self._forward(points, True, frame)
+            return value, self._backward(pre, frame)
 
     def value_and_gradient_fn(self, points: torch.Tensor, frame=None):
         """``S (N,)`` at ``points (N, 3)`` and a function ``rows (M,) -> grad S (M, 3)`` at ``points[rows]`` that
@@ -384,6 +384,8 @@ class MotionBodySDF(BoundBodySDF):
         """``layer(t, rows of frame t)`` for every frame, in order: one small matrix product a frame instead of a
         per-point copy of the weights. ``frame (N,)`` must be sorted (flat indices ``t V + i`` in increasing order
         are, as :class:`CollisionResolver` passes them)."""
+        if frame is None:
+            raise InputError("a MotionBodySDF needs each point's frame index")
         if len(frame) > 1 and not bool((frame[1:] >= frame[:-1]).all()):
             raise InputError("MotionBodySDF takes points sorted by frame")
         counts = torch.bincount(frame, minlength=self.num_frames).tolist()
@@ -403,21 +405,6 @@ class MotionBodySDF(BoundBodySDF):
 
     def _fusion_bias(self, frame) -> torch.Tensor:
         return self.first_bias[frame]
-
-    def __call__(self, points: torch.Tensor, frame=None) -> torch.Tensor:
-        if frame is None:
-            raise InputError("a MotionBodySDF needs each point's frame index")
-        with torch.no_grad():
-            return self._forward(points, False, frame)[0]
-
-    def value_and_gradient(self, points: torch.Tensor, frame=None):
-        values, gradient = self.value_and_gradient_fn(points, frame)
-        return values, gradient(torch.arange(len(points)))
-
-    def value_and_gradient_fn(self, points: torch.Tensor, frame=None):
-        if frame is None:
-            raise InputError("a MotionBodySDF needs each point's frame index")
-        return super().value_and_gradient_fn(points, frame)
 
 
 class FramedSDF:
@@ -552,6 +539,14 @@ def vertex_neighbours(faces: np.ndarray, num_verts: int) -> tuple[np.ndarray, np
     return np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
 
 
+def _bool_mask(mask, shape: tuple) -> np.ndarray:
+    """``mask`` (NumPy or torch) as a NumPy bool array of ``shape``, or a clear error."""
+    mask = mask.cpu().numpy() if isinstance(mask, torch.Tensor) else np.asarray(mask)
+    if mask.shape != shape or mask.dtype != bool:
+        raise InputError(f"candidates must be a {shape} bool mask, got {mask.dtype} {mask.shape}")
+    return mask
+
+
 class CollisionResolver:
     """SwinGar Eq. 10 on one garment mesh: its neighbour lists are built once, then each call moves the
     vertices a field says are inside out of the body.
@@ -604,19 +599,8 @@ class CollisionResolver:
         V = self.num_verts
         if verts.ndim != 2 or verts.shape != (V, 3):
             raise InputError(f"resolve_collisions takes one garment ({V}, 3), got {tuple(verts.shape)}")
-        if self.sigma is None:
-            self.sigma = self.mean_edge(verts)
-        if candidates is None:
-            cand = np.arange(V)
-        else:
-            mask = candidates.cpu().numpy() if isinstance(candidates, torch.Tensor) else np.asarray(candidates)
-            if mask.shape != (V,) or mask.dtype != bool:
-                raise InputError(f"candidates must be a ({V},) bool mask, got {mask.dtype} {mask.shape}")
-            cand = np.flatnonzero(mask)
-        out = verts.detach().clone()
-        inside = np.zeros(V, bool)
-        with flushed_denormals():
-            moved = self._resolve(out, sdf, cand, inside)
+        cand = np.arange(V) if candidates is None else np.flatnonzero(_bool_mask(candidates, (V,)))
+        moved, inside = self._resolve(verts, sdf, cand)
         return moved, torch.from_numpy(inside).to(verts.device)
 
     def frames(self, verts: torch.Tensor, sdf: "MotionBodySDF", candidates) -> tuple[torch.Tensor, torch.Tensor]:
@@ -627,28 +611,33 @@ class CollisionResolver:
         if verts.ndim != 3 or verts.shape[1:] != (V, 3):
             raise InputError(f"resolving frames takes a garment (T, {V}, 3), got {tuple(verts.shape)}")
         T = len(verts)
-        mask = candidates.cpu().numpy() if isinstance(candidates, torch.Tensor) else np.asarray(candidates)
-        if mask.shape != (T, V) or mask.dtype != bool:
-            raise InputError(f"candidates must be a ({T}, {V}) bool mask, got {mask.dtype} {mask.shape}")
+        cand = np.flatnonzero(_bool_mask(candidates, (T, V)))
         if getattr(sdf, "num_frames", None) != T:
             raise InputError(f"resolving {T} frames needs a MotionBodySDF of {T} frames")
-        if self.sigma is None:
-            self.sigma = self.mean_edge(verts[0])
-        out = verts.detach().reshape(T * V, 3).clone()
-        inside = np.zeros(T * V, bool)
-        with flushed_denormals():
-            moved = self._resolve(out, sdf, np.flatnonzero(mask), inside, frames=True)
+        moved, inside = self._resolve(verts.reshape(T * V, 3), sdf, cand, frames=True)
         return moved.reshape(T, V, 3), torch.from_numpy(inside.reshape(T, V)).to(verts.device)
 
-    def _resolve(self, out: torch.Tensor, sdf, cand: np.ndarray, inside: np.ndarray, frames: bool = False):
-        """:meth:`__call__` on a copy ``out`` of the vertices, filling ``inside``. The field runs in torch on the
-        vertices' device; the bookkeeping of a few hundred vertices runs in NumPy (cheaper per call). With
-        ``frames``, ``out`` is ``(T V, 3)``, flat index ``t V + i`` is vertex ``i`` of frame ``t``, and ``sdf``
-        (a :class:`MotionBodySDF`) takes each point's frame."""
+    def _resolve(self, verts: torch.Tensor, sdf, cand: np.ndarray, frames: bool = False):
+        """The moved copy of ``verts`` and the NumPy mask of the vertices found inside, evaluating ``sdf`` at the
+        flat indices ``cand`` (and where ``delta_i`` needs it). The field runs in torch on the vertices' device;
+        the bookkeeping of a few hundred vertices runs in NumPy (cheaper per call). With ``frames``, ``verts``
+        is ``(T V, 3)``, flat index ``t V + i`` is vertex ``i`` of frame ``t``, and ``sdf`` (a
+        :class:`MotionBodySDF`) takes each point's frame. The Gaussian width, if not set, is the mean edge of
+        the first frame."""
+        if self.sigma is None:
+            self.sigma = self.mean_edge(verts[:self.num_verts])
+        out = verts.detach().clone()
+        inside = np.zeros(len(out), bool)
+        with flushed_denormals():
+            self._move_out(out, sdf, cand, inside, frames)
+        return out, inside
+
+    def _move_out(self, out: torch.Tensor, sdf, cand: np.ndarray, inside: np.ndarray, frames: bool) -> None:
+        """:meth:`_resolve`'s work, in place on ``out``, filling ``inside``."""
         dev = out.device
         V = self.num_verts
         if len(cand) == 0:
-            return out
+            return
 
         def at(index: np.ndarray) -> tuple:  # the field's arguments for these flat indices
             rows = torch.from_numpy(index).to(dev)
@@ -661,7 +650,7 @@ class CollisionResolver:
         ins = cand[hit]
         inside[ins] = True
         if len(ins) == 0:
-            return out
+            return
         g = gradient(torch.from_numpy(np.flatnonzero(hit)).to(dev)).detach().cpu().numpy().astype(np.float64)
         value = np.full(len(x), np.nan)
         value[cand] = s_cand
@@ -689,7 +678,6 @@ class CollisionResolver:
         direction = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
         moved = x_in + direction * (np.abs(s_cand[hit]) + delta)[:, None]
         out[torch.from_numpy(ins).to(dev)] = torch.from_numpy(moved).to(out)
-        return out
 
 
 def resolve_collisions(verts: torch.Tensor, faces: np.ndarray, sdf: SDFFunction, sigma: float | None = None,
@@ -955,12 +943,6 @@ def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFuncti
 FRAME_CHUNK = 32
 
 
-def cull_candidates(verts: np.ndarray, posed: np.ndarray, culler: AxisRayCuller) -> np.ndarray:
-    """``(T, V)`` bool: the garment vertices ``verts (T, V, 3)`` that ``culler`` cannot prove outside the
-    collision proxy posed at ``posed (T, Vb, 3)`` (updated with every frame at once)."""
-    return ~culler.update(posed).outside(verts)
-
-
 def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDFNet", code, rot, origin,
                    posed: np.ndarray | None = None, culler: AxisRayCuller | None = None, margin: float = 0.0,
                    workers: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -1003,7 +985,7 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
         else:
             mine = cullers.get()
             try:
-                cand = cull_candidates(world[chunk], posed[chunk], mine)
+                cand = ~mine.update(posed[chunk]).outside(world[chunk])  # every frame of the chunk at once
             finally:
                 cullers.put(mine)
         field = MotionBodySDF(net, code[chunk], rot[chunk], origin[chunk]).offset(margin)
