@@ -340,12 +340,12 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
         culler = AxisRayCuller(posed[0], proxy.faces, CULL_CELL)
         inside = [int((BodySDF(posed[t], proxy.faces).query(verts[t]) < 0).sum()) for t in picks]
         row = {"vertices": garment.num_verts, "inside_per_frame_exact": float(np.mean(inside)),
-               "candidates_per_frame": float(np.mean([(~culler.update(posed[t]).outside(verts[t])).sum() for t in picks]))}
+               "candidates_per_frame": float(np.mean([(~culler.update(posed[t], verts[t]).outside(verts[t])).sum() for t in picks]))}
         resolver = CollisionResolver(garment.faces, garment.num_verts)
         resolver.sigma = resolver.mean_edge(torch.from_numpy(verts[0]))
         cell_cullers = {str(c): AxisRayCuller(posed[0], proxy.faces, c) for c in cull_cells or []}
         row["candidates_per_frame_by_cull_bins"] = {
-            cell: float((~c.update(posed).outside(verts)).sum() / len(verts)) for cell, c in cell_cullers.items()}
+            cell: float((~c.update(posed, verts).outside(verts)).sum() / len(verts)) for cell, c in cell_cullers.items()}
         for threads in threads_list:
             timing = {}
             with torch_threads(threads):
@@ -367,7 +367,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                         slow, 1)
                     timing[f"3 {name}: + axis-ray cull"] = time_frames(
                         lambda t: correct_frame(verts[t], resolver, bound.with_code(n_code[t]), (rot[t], origin[t]),
-                                                culler.update(posed[t])), picks, reps)
+                                                culler.update(posed[t], verts[t])), picks, reps)
                     for workers in (1, 2):  # the whole motion, chunks of frames (what loosefit animate runs)
                         timing[f"6 {name}: + a motion's frames a pass, {workers} worker(s)"] = time_motion(
                             lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, culler,
@@ -378,7 +378,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                             motion.num_frames, reps)
                 b32 = main_net.bind(code[0])
                 bf = Bf16Bound(b32)
-                cand = {t: ~culler.update(posed[t]).outside(verts[t]) for t in picks}
+                cand = {t: ~culler.update(posed[t], verts[t]).outside(verts[t]) for t in picks}
                 with flushed_denormals():
                     timing["4 trained, bfloat16 forward on the cull's candidates (value only)"] = time_frames(
                         lambda t: bf(torch.from_numpy(canonical[t][cand[t]])), picks, reps)
@@ -386,11 +386,11 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                         lambda t: b32(torch.from_numpy(canonical[t][cand[t]])), picks, reps)
                 timing["5 exact SDF (libigl tree per frame) + axis-ray cull"] = time_frames(
                     lambda t: correct_frame(verts[t], resolver, ExactSDF(BodySDF(posed[t], proxy.faces)), None,
-                                            culler.update(posed[t])), picks, reps)
+                                            culler.update(posed[t], verts[t])), picks, reps)
                 timing["5b exact SDF (libigl tree per frame), every vertex"] = time_frames(
                     lambda t: correct_frame(verts[t], resolver, ExactSDF(BodySDF(posed[t], proxy.faces))), picks[:3], 1)
                 timing["cull alone: update + query"] = time_frames(
-                    lambda t: culler.update(posed[t]).outside(verts[t]), picks, reps)
+                    lambda t: culler.update(posed[t], verts[t]).outside(verts[t]), picks, reps)
             row[f"threads_{threads}"] = timing
         out["garments"][kind] = row
     pose_start = time.perf_counter()

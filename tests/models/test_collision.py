@@ -222,14 +222,26 @@ def test_cull_never_skips_an_inside_point(posed_proxy, backend):
         points = np.concatenate([box, near, near + rng.normal(0, 1e-6, near.shape)])
         exact = mesh.query(points)
         winding = igl.winding_number(frames[t].astype(np.float64), faces, points)
-        for cell in (0.01, 0.02, 0.05, (0.02, 0.03, 0.04)):
-            cull = AxisRayCuller(frames[0], faces, cell, backend=backend).update(frames[t])
-            assert cull.backend == backend
+        # inward normals too (the faces turned): the cull reads the orientation from the mesh's volume
+        for cell, tris in [(0.01, faces), (0.02, faces), (0.05, faces), ((0.02, 0.03, 0.04), faces),
+                           (0.02, faces[:, ::-1])]:
+            cull = AxisRayCuller(frames[0], tris, cell, backend=backend).update(frames[t])
+            assert cull.backend == backend and cull.orient == (1.0 if tris is faces else -1.0)
             for p in (points, points.astype(np.float32)):
                 out = cull.outside(p)
                 assert not (out & (exact < 0)).any()
                 assert not (out & (np.abs(winding) > 0.5)).any()
             assert out[exact > 0.05].mean() > 0.9
+            # the query window of a part of the points: the same answers for them, none certified elsewhere
+            # but outside the mesh's box
+            part = points[np.abs(points[:, 2] - points[:, 2].mean()) < 0.2]
+            windowed = cull.update(frames[t], within=part)
+            assert np.array_equal(windowed.outside(part), out[np.abs(points[:, 2] - points[:, 2].mean()) < 0.2])
+            lo, hi = frames[t].min(0), frames[t].max(0)
+            far = np.abs(points[:, 2] - points[:, 2].mean()) > 0.3  # bins outside the window
+            in_box = ((points >= lo) & (points <= hi)).all(1)
+            assert not windowed.outside(points)[far & in_box].any()
+            assert windowed.outside(points)[~in_box].all()
 
 
 def test_cull_backends_agree_and_bad_input(posed_proxy):
@@ -254,8 +266,21 @@ def test_cull_backends_agree_and_bad_input(posed_proxy):
         assert np.array_equal(c.update(frames[picks]).outside(batch), again)
         with pytest.raises(InputError, match=r"\(3, N, 3\)"):
             c.outside(points)  # after a 3-frame update, points must come per frame
+    # the query window: both backends fill the same bins, and only those
+    part = points[points[:, 2] < np.median(points[:, 2])]
+    a.update(frames[0], part)
+    b.update(frames[0], part)
+    np.testing.assert_allclose(a.hi, b.hi, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(a.lo, b.lo, rtol=0, atol=1e-6)
+    assert np.isfinite(a.hi).sum() < np.isfinite(AxisRayCuller(frames[0], faces, 0.02, "numpy").hi).sum()
+    with pytest.raises(InputError, match="within"):
+        a.update(frames[0], part[:, :2])
+    with pytest.raises(InputError, match="within"):
+        a.update(frames[0], np.full((3, 3), np.nan))
     with pytest.raises(InputError, match="cell"):
         AxisRayCuller(frames[0], faces, 0.0)
+    with pytest.raises(InputError, match="closed mesh"):  # a flat square: no volume, no inside
+        AxisRayCuller(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]))
     with pytest.raises(InputError, match="verts"):
         a.update(frames[0][:10])
     with pytest.raises(InputError, match="points"):

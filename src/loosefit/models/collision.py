@@ -333,7 +333,7 @@ class BoundBodySDF:
 
         def gradient(rows: torch.Tensor) -> torch.Tensor:
             with torch.no_grad():
-                return self._backward([z[rows] for z in pre], None if frame is None else frame[rows])
+                return self._backward([z.index_select(0, rows) for z in pre], None if frame is None else frame[rows])
 
         return value, gradient
 
@@ -670,7 +670,8 @@ class CollisionResolver:
             with torch.no_grad():
                 value[missing] = sdf(*at(missing)).cpu().numpy()
         x_in = x[ins].astype(np.float64)
-        d2 = ((x_in[rows] - x[nbr]) ** 2).sum(-1)
+        diff = x_in[rows] - x[nbr]
+        d2 = np.einsum("ij,ij->i", diff, diff)
         w = np.exp(-d2 / (2 * self.sigma**2)) * free
         wsum = np.bincount(rows, w, len(ins))
         weighted = np.bincount(rows, w * np.abs(np.where(free, value[nbr], 0.0)), len(ins))
@@ -985,7 +986,7 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
         else:
             mine = cullers.get()
             try:
-                cand = ~mine.update(posed[chunk]).outside(world[chunk])  # every frame of the chunk at once
+                cand = ~mine.update(posed[chunk], world[chunk]).outside(world[chunk])  # the chunk's frames at once
             finally:
                 cullers.put(mine)
         field = MotionBodySDF(net, code[chunk], rot[chunk], origin[chunk]).offset(margin)
@@ -1040,7 +1041,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
             out[t] = push_out(out[t], mesh, push_distance)[0]
         else:
             out[t] = correct_frame(out[t], resolver, ExactSDF(mesh), None,
-                                   culler.update(posed[t]) if culler else None)[0]
+                                   culler.update(posed[t], out[t]) if culler else None)[0]
     return out
 
 
