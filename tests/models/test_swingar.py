@@ -324,12 +324,17 @@ def test_collision_post_process_from_the_cli(trained_run, store, body, tmp_path)
 
     sdf_run = tmp_path / "sdf"
     settings = ["train.frames=2", "train.surface=128", "train.near=128", "train.inside=32", "train.steps=15",
-                "train.batch_frames=2", "net.hidden=32", "train.random_shapes=1"]
+                "train.batch_frames=2", "net.hidden=32", "train.random_shapes=1", "train.random_motions=1",
+                "train.random_motion_seconds=0.5"]
     assert main(["train", "--method", "collision", "--data", str(store), "--out", str(sdf_run),
                  *[a for s in settings for a in ("--set", s)]]) == 0
     summary = json.loads((sdf_run / SDF_META).read_text())
-    # 2 frames of each of the store's 2 training motions, on its one body and one random Anny shape
-    assert summary["bodies"] == ["average"] and summary["frames"] == 2 * 2 * 2
+    # 2 frames of each of the store's 2 training motions and one procedural motion, on its one body and one
+    # random Anny shape
+    assert summary["bodies"] == ["average"] and summary["frames"] == 2 * 3 * 2
+    (extra,) = summary["random_motions"]
+    assert extra.split(":")[0] in ("walk", "run", "turn", "spin", "jump", "kick", "squat", "bow", "arm_raise",
+                                   "wave", "sway", "mix") and extra.endswith("seed=1002")
     (random_shape,) = summary["random_shapes"]
     assert len(random_shape) == 6 and all(0.05 <= v <= 0.95 for v in random_shape)
     assert summary["final_loss"] < summary["first_loss"]

@@ -798,12 +798,17 @@ class SDFTrainConfig:
         frames: posed frames drawn from each (shape, motion) pair.
         random_shapes: Anny shapes drawn at random (:func:`random_anny_shapes`) beside the store's bodies, so
             that the network learns bodies no sequence has (SwinGar trains it on many bodies and poses).
+        random_motions: procedural motions (:func:`random_procedural_motions`, ``random_motion_seconds`` long)
+            beside the store's training motions (ours): poses no training sequence has, for a network that meets
+            the poses of unseen motions.
         surface, near, inside: sample points per posed frame (:func:`sdf_samples`).
         near_sigma: metres. steps, lr, batch_frames: Adam steps, learning rate, frames per step. seed.
     """
 
     frames: int = 8
     random_shapes: int = 0
+    random_motions: int = 0
+    random_motion_seconds: float = 4.0
     surface: int = 2048
     near: int = 2048
     inside: int = 512
@@ -822,6 +827,17 @@ def random_anny_shapes(count: int, seed: int) -> list:
         raise InputError(f"random_shapes must be >= 0, got {count}")
     values = np.random.default_rng(seed).uniform(0.05, 0.95, (count, len(AnnyShape.names())))
     return [AnnyShape.from_array(v) for v in values]
+
+
+def random_procedural_motions(count: int, seed: int, body, seconds: float = 4.0) -> list:
+    """``count`` procedural motions of ``body`` (:func:`~loosefit.motion.procedural.generate`), every kind in
+    turn from one picked by ``seed``, each with its own seed from ``1000 + seed`` on (far from the seeds of the
+    dataset plans' motions)."""
+    from loosefit.motion.procedural import KINDS, generate
+
+    if count < 0:
+        raise InputError(f"random_motions must be >= 0, got {count}")
+    return [generate(KINDS[(seed + k) % len(KINDS)], seconds, 1000 + seed + k, body) for k in range(count)]
 
 
 def body_sdf_samples(shapes, motions, config: SDFTrainConfig) -> dict[str, np.ndarray]:
@@ -1065,7 +1081,7 @@ def train_sdf_run(data, out, run_config: SDFRunConfig = SDFRunConfig(), progress
     import json
     from pathlib import Path
 
-    from loosefit.body import AnnyShape
+    from loosefit.body import AnnyBody, AnnyShape
     from loosefit.data.store import DatasetStore
     from loosefit.paths import atomic_path
 
@@ -1078,13 +1094,16 @@ def train_sdf_run(data, out, run_config: SDFRunConfig = SDFRunConfig(), progress
     config, net_config = run_config.train, run_config.net
     shapes = [AnnyShape.from_array(store.body(b)) for b in bodies]
     shapes += random_anny_shapes(config.random_shapes, config.seed + 1)
-    samples = body_sdf_samples(shapes, [store.motion(m) for m in motions], config)
+    extra = random_procedural_motions(config.random_motions, config.seed + 2, AnnyBody(),
+                                      config.random_motion_seconds) if config.random_motions else []
+    samples = body_sdf_samples(shapes, [store.motion(m) for m in motions] + extra, config)
     net, history = train_body_sdf(samples, config, net_config, progress)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     save_body_sdf(out / SDF_FILE, net)
     summary = {"method": "collision", "data": str(Path(data).resolve()), "bodies": bodies,
                "random_shapes": [s.to_array().tolist() for s in shapes[len(bodies):]], "motions": motions,
+               "random_motions": [m.name for m in extra],
                "frames": int(len(samples["code"])), "first_loss": history[0] if history else None,
                "final_loss": history[-1] if history else None,
                "config": dict(vars(config)), "net": dict(vars(net_config))}
