@@ -18,12 +18,14 @@ Speed. Evaluating the network's value and autograd gradient at every vertex of a
 300-450 ms a frame on this project's CPUs at the paper's size. Frame by frame (:func:`correct_frame`, for
 streaming) these changes bring it to about 3 ms with a 32- or 64-wide network; over a whole motion
 (:func:`correct_motion`, used by :func:`handle_motion_collisions` and ``loosefit animate --collision``) to
-0.75-1.2 ms a frame with a 32-wide network in two worker threads (benchmarks/collision.py). With the exact
+0.58-0.72 ms a frame with a 32-wide network and 0.65-0.92 ms with a 64-wide one, in two worker threads
+(benchmarks/collision.py, ``collision-speed-window.json``). With the exact
 field they change nothing (beyond float rounding); with the network, a vertex it wrongly calls inside but
 that the cull proves outside is no longer moved:
 
 - the posed collision proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` proves most vertices outside
-  (a free axis-aligned ray), and only the others (2-6 % of a garment) reach the network;
+  (an axis-aligned ray that meets no triangle facing back along it), filling only the bins of the garment's box,
+  and only the others (1.6-4.7 % of a garment) reach the network;
 - :class:`BoundBodySDF` runs the body-code branch once per frame and differentiates by hand; the gradient is
   taken only at the vertices found inside, the value of their other neighbours only where ``delta_i`` needs it;
 - denormal floats are flushed while the network runs (:func:`flushed_denormals`): Softplus(beta=100) makes
@@ -33,8 +35,8 @@ that the cull proves outside is no longer moved:
   Python's overhead is paid per chunk, and chunks run in two threads (the kernels, torch and NumPy release
   Python's lock).
 
-What remains is the cull (about 0.8 ms of one core a frame, most of it rasterising the proxy's 2,454
-triangles) and the network on the candidates: narrower networks (``net.hidden``) are faster and less exact, the
+What remains is the cull (about 0.5 ms of one core a frame, most of it rasterising the proxy's 2,454
+triangles) and the network on the candidates (Softplus, which torch computes element by element, is most of it): narrower networks (``net.hidden``) are faster and less exact, the
 paper's width the slowest; the benchmark reports both sides.
 """
 
