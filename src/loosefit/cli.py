@@ -228,14 +228,15 @@ def cmd_animate(args):
                             body=body if args.garment else None, device=args.device)
         results, faces = animator.animate_batch(motions), animator.faces
     if args.collision:
-        from loosefit.models.collision import SDF_FILE, handle_motion_collisions, load_body_sdf
+        from loosefit.models.collision import SDF_FILE, collision_margin, handle_motion_collisions, load_body_sdf
 
         mode, net = args.collision, None
         if mode not in ("exact", "pushout"):
             mode, net = "neural", load_body_sdf(Path(args.collision) / SDF_FILE)
-        if args.collision_margin and net is None:
+        if args.collision_margin not in ("0", "0.0") and net is None:
             raise InputError("--collision-margin applies to a body SDF network, not to --collision " + mode)
-        results = [handle_motion_collisions(v, faces, body, m, mode, net, margin=args.collision_margin)
+        margin = collision_margin(args.collision, args.collision_margin) if net is not None else 0.0
+        results = [handle_motion_collisions(v, faces, body, m, mode, net, margin=margin)
                    for v, m in zip(results, motions)]
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
     for motion, verts, out in zip(motions, results, outs):
@@ -458,9 +459,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the model runs")
     sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
                     "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
-    sp.add_argument("--collision-margin", type=float, default=0.0,
+    sp.add_argument("--collision-margin", default="0",
                     help="with a body SDF network: correct where the network puts a vertex less than this many "
-                         "metres outside the body too (its surface moved out; default 0, as in SwinGar)")
+                         "metres outside the body too (its surface moved out; default 0, as in SwinGar); 'auto': "
+                         "the margin measured for the network when it was trained (its model.json)")
     sp.set_defaults(func=cmd_animate)
 
     sp = sub.add_parser("export-rig", help="a virtualbones / jointnet garment as an engine-ready skinned rig "

@@ -325,7 +325,7 @@ def test_collision_post_process_from_the_cli(trained_run, store, body, tmp_path)
     sdf_run = tmp_path / "sdf"
     settings = ["train.frames=2", "train.surface=128", "train.near=128", "train.inside=32", "train.steps=15",
                 "train.batch_frames=2", "net.hidden=32", "train.random_shapes=1", "train.random_motions=1",
-                "train.random_motion_seconds=0.5"]
+                "train.random_motion_seconds=0.5", "train.calibration_motions=1"]
     assert main(["train", "--method", "collision", "--data", str(store), "--out", str(sdf_run),
                  *[a for s in settings for a in ("--set", s)]]) == 0
     summary = json.loads((sdf_run / SDF_META).read_text())
@@ -338,6 +338,9 @@ def test_collision_post_process_from_the_cli(trained_run, store, body, tmp_path)
     (random_shape,) = summary["random_shapes"]
     assert len(random_shape) == 6 and all(0.05 <= v <= 0.95 for v in random_shape)
     assert summary["final_loss"] < summary["first_loss"]
+    # the margin measured on a validation set (unseen poses): what the network misses there without it
+    calibration = summary["calibration"]
+    assert calibration["quantile"] == 0.8 and calibration["inside_points"] > 100 and calibration["margin_m"] >= 0
     s = DatasetStore.open(store)
     garment = make_garment("skirt", body, seed=7, edge_length=0.05)
     garment.save(tmp_path / "new.obj")
@@ -366,6 +369,21 @@ def test_collision_post_process_from_the_cli(trained_run, store, body, tmp_path)
     moved_margin = np.any(MeshSequence.load(tmp_path / "margin.npz").verts != plain, axis=-1)
     assert np.all(moved_margin[moved]) and moved_margin.sum() >= moved.sum()
     assert main([*animate, "--out", str(tmp_path / "bad.npz"), "--collision", "exact", "--collision-margin", "0.01"]) == 2
+    assert not (tmp_path / "bad.npz").exists()
+    # 'auto': the calibrated margin, the same result as giving it in metres
+    assert main([*animate, "--out", str(tmp_path / "auto.npz"), "--collision", str(sdf_run),
+                 "--collision-margin", "auto"]) == 0
+    assert main([*animate, "--out", str(tmp_path / "metres.npz"), "--collision", str(sdf_run),
+                 "--collision-margin", repr(calibration["margin_m"])]) == 0
+    np.testing.assert_array_equal(MeshSequence.load(tmp_path / "auto.npz").verts,
+                                  MeshSequence.load(tmp_path / "metres.npz").verts)
+    for bad in ("soon", "-0.01"):
+        assert main([*animate, "--out", str(tmp_path / "bad.npz"), "--collision", str(sdf_run),
+                     "--collision-margin", bad]) == 2
+    meta = sdf_run / SDF_META
+    meta.write_text(json.dumps({**summary, "calibration": None}))
+    assert main([*animate, "--out", str(tmp_path / "bad.npz"), "--collision", str(sdf_run),
+                 "--collision-margin", "auto"]) == 2
     assert not (tmp_path / "bad.npz").exists()
 
 

@@ -803,6 +803,9 @@ class SDFTrainConfig:
         random_motions: procedural motions (:func:`random_procedural_motions`, ``random_motion_seconds`` long)
             beside the store's training motions (ours): poses no training sequence has, for a network that meets
             the poses of unseen motions.
+        calibration_motions: procedural motions of a validation set (:func:`calibrate_margin`: the training
+            bodies and 4 random ones, in poses no training sample has) on which ``loosefit train`` measures the
+            margin the network needs (``--collision-margin auto``); 0: none.
         surface, near, inside: sample points per posed frame (:func:`sdf_samples`).
         near_sigma: metres. steps, lr, batch_frames: Adam steps, learning rate, frames per step. seed.
     """
@@ -811,6 +814,7 @@ class SDFTrainConfig:
     random_shapes: int = 0
     random_motions: int = 0
     random_motion_seconds: float = 4.0
+    calibration_motions: int = 6
     surface: int = 2048
     near: int = 2048
     inside: int = 512
@@ -1067,6 +1071,62 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
 SDF_FILE, SDF_META = "body_sdf.pt", "model.json"
 
 
+#: The share of inside points of a validation set that the calibrated margin catches (:func:`calibrate_margin`).
+CALIBRATION_QUANTILE = 0.8
+
+
+def calibrate_margin(net: BodySDFNet, shapes, motions, quantile: float = CALIBRATION_QUANTILE, depth: float = 0.02,
+                     frames: int = 4, points: int = 2000, seed: int = 11) -> dict:
+    """The margin (metres) the network needs on poses it never saw: posed Anny bodies of ``shapes`` along
+    ``motions`` (``frames`` each), points within ``depth`` inside them (libigl's distance), and the value below
+    which the network puts ``quantile`` of those points. With that margin (:meth:`BoundBodySDF.offset`),
+    SwinGar Eq. 10 corrects that share of the shallow collisions on such poses; without one, only those the
+    network calls inside (``caught_without_margin``).
+
+    Returns ``{"margin_m", "quantile", "depth_m", "inside_points", "caught_without_margin", "caught_at_10mm"}``.
+    """
+    if not 0 < quantile < 1:
+        raise InputError(f"the calibration quantile must be in (0, 1), got {quantile}")
+    config = SDFTrainConfig(frames=frames, surface=0, near=points, inside=0, near_sigma=depth / 2, seed=seed)
+    samples = body_sdf_samples(shapes, motions, config)
+    values = []
+    for pts, sdf, code in zip(samples["points"], samples["sdf"], samples_code(samples, net.num_bones > 0)):
+        inside = (sdf < 0) & (sdf > -depth)
+        with torch.no_grad():
+            values.append(net.bind(torch.from_numpy(code))(torch.from_numpy(pts[inside])).numpy())
+    v = np.concatenate(values).astype(np.float64)
+    if not len(v):
+        raise InputError("margin calibration found no point inside the bodies")
+    return {"margin_m": float(max(np.quantile(v, quantile), 0.0)), "quantile": quantile, "depth_m": depth,
+            "inside_points": int(len(v)), "caught_without_margin": float((v < 0).mean()),
+            "caught_at_10mm": float((v < 0.01).mean())}
+
+
+def collision_margin(sdf_run, value: str | float) -> float:
+    """The margin of ``loosefit animate --collision-margin``: metres, or ``"auto"``: the one
+    :func:`calibrate_margin` measured when the network of run folder ``sdf_run`` was trained."""
+    import json
+    from pathlib import Path
+
+    if str(value).strip().lower() == "auto":
+        meta = Path(sdf_run) / SDF_META
+        try:
+            calibration = json.loads(meta.read_text()).get("calibration")
+        except (OSError, ValueError) as e:
+            raise InputError(f"cannot read the body SDF run's summary: {e}", meta) from None
+        if not calibration or "margin_m" not in calibration:
+            raise InputError("this body SDF run has no calibrated margin (trained with train.calibration_motions=0 "
+                             "or by an older loosefit): give the margin in metres", meta)
+        return float(calibration["margin_m"])
+    try:
+        margin = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"--collision-margin must be metres or 'auto', got {value!r}") from None
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InputError(f"--collision-margin must be a non-negative number of metres, got {value!r}")
+    return margin
+
+
 @dataclass(frozen=True)
 class SDFRunConfig:
     """What ``loosefit train --method collision`` reads: ``train`` (:class:`SDFTrainConfig`) and ``net``
@@ -1100,12 +1160,18 @@ def train_sdf_run(data, out, run_config: SDFRunConfig = SDFRunConfig(), progress
                                       config.random_motion_seconds) if config.random_motions else []
     samples = body_sdf_samples(shapes, [store.motion(m) for m in motions] + extra, config)
     net, history = train_body_sdf(samples, config, net_config, progress)
+    calibration = None
+    if config.calibration_motions:  # a validation set: no sequence's pose, no test body
+        calibration = calibrate_margin(
+            net.eval(), shapes[:len(bodies)] + random_anny_shapes(4, config.seed + 99),
+            random_procedural_motions(config.calibration_motions, config.seed + 4000, AnnyBody(),
+                                      config.random_motion_seconds))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     save_body_sdf(out / SDF_FILE, net)
     summary = {"method": "collision", "data": str(Path(data).resolve()), "bodies": bodies,
                "random_shapes": [s.to_array().tolist() for s in shapes[len(bodies):]], "motions": motions,
-               "random_motions": [m.name for m in extra],
+               "random_motions": [m.name for m in extra], "calibration": calibration,
                "frames": int(len(samples["code"])), "first_loss": history[0] if history else None,
                "final_loss": history[-1] if history else None,
                "config": dict(vars(config)), "net": dict(vars(net_config))}
