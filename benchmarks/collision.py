@@ -92,6 +92,20 @@ def sdf_network(data: Path, sdf_run: Path, config: str | None, overrides: list[s
 # ------------------------------------------------------------------------------------------- Tables II and III
 
 
+def margin_of(sdf_run: Path, value: str) -> float:
+    """``--margin`` in metres: the number, or with ``auto`` the run's calibrated margin (measured now and added to
+    its ``model.json`` when a run trained before runs measured it)."""
+    from loosefit.errors import InputError
+    from loosefit.models.collision import SDF_META, calibrate_sdf_run, collision_margin
+
+    try:
+        if value.strip().lower() == "auto" and not json.loads((sdf_run / SDF_META).read_text()).get("calibration"):
+            calibrate_sdf_run(sdf_run)
+        return collision_margin(sdf_run, value)
+    except InputError as e:
+        sys.exit(f"collision.py: {e}")
+
+
 def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distance: float, margin: float = 0.0) -> dict:
     """Every method on one sequence: per-frame collision % (proxy and full body), d_cons sums, wall time."""
     from loosefit.geometry.signed_distance import BodySDF
@@ -429,8 +443,9 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], help="SDF config override, e.g. train.steps=500")
     parser.add_argument("--tolerance", type=float, default=1e-3, help="collision depth tolerance, metres")
     parser.add_argument("--push-distance", type=float, default=0.004, help="push-out distance, metres")
-    parser.add_argument("--margin", type=float, default=0.0,
-                        help="Eq. 10 (neural) on the network's surface moved this many metres out (ours; the paper: 0)")
+    parser.add_argument("--margin", default="0",
+                        help="Eq. 10 (neural) on the network's surface moved this many metres out (ours; the paper: 0); "
+                             "'auto': the margin calibrated for the network (measured first if its run has none)")
     parser.add_argument("--skip-speed", action="store_true")
     parser.add_argument("--speed-only", action="store_true",
                         help="the speed part alone (no collision tables), e.g. to time on an idle machine")
@@ -458,6 +473,7 @@ def main() -> None:
     with torch_threads(1):
         net, sdf_summary = sdf_network(data, sdf_run, args.config, args.set)
         net.eval()
+        args.margin = margin_of(sdf_run, args.margin)
         sequences = load_sequences(data, split="test")
         method, predictions = animate_run(args.run, sequences)
         rows = []

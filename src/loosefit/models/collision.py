@@ -1102,6 +1102,42 @@ def calibrate_margin(net: BodySDFNet, shapes, motions, quantile: float = CALIBRA
             "caught_at_10mm": float((v < 0.01).mean())}
 
 
+def calibration_set(shapes, config: SDFTrainConfig) -> tuple[list, list]:
+    """The validation set of :func:`calibrate_margin` for a network trained on ``shapes`` (the store's bodies):
+    those and 4 random Anny shapes, in ``config.calibration_motions`` procedural motions whose seeds no training
+    motion has (:func:`random_procedural_motions`)."""
+    from loosefit.body import AnnyBody
+
+    return (list(shapes) + random_anny_shapes(4, config.seed + 99),
+            random_procedural_motions(config.calibration_motions, config.seed + 4000, AnnyBody(),
+                                      config.random_motion_seconds))
+
+
+def calibrate_sdf_run(sdf_run) -> dict:
+    """:func:`calibrate_margin` for a trained run folder (one trained before runs measured it): its network on
+    the validation set of its config and store bodies; the result is added to its ``model.json``."""
+    import json
+    from pathlib import Path
+
+    from loosefit.body import AnnyShape
+    from loosefit.data.store import DatasetStore
+    from loosefit.paths import atomic_path
+
+    meta = Path(sdf_run) / SDF_META
+    try:
+        summary = json.loads(meta.read_text())
+        config = SDFTrainConfig(**{k: v for k, v in summary["config"].items() if k in SDFTrainConfig.__dataclass_fields__})
+        store = DatasetStore.open(summary["data"], mode="r")
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise InputError(f"cannot read the body SDF run's summary: {e}", meta) from None
+    config = SDFTrainConfig(**{**vars(config), "calibration_motions": config.calibration_motions or 6})
+    shapes = [AnnyShape.from_array(store.body(b)) for b in summary["bodies"]]
+    summary["calibration"] = calibrate_margin(load_body_sdf(Path(sdf_run) / SDF_FILE), *calibration_set(shapes, config))
+    with atomic_path(meta) as tmp:
+        tmp.write_text(json.dumps(summary, indent=2))
+    return summary["calibration"]
+
+
 def collision_margin(sdf_run, value: str | float) -> float:
     """The margin of ``loosefit animate --collision-margin``: metres, or ``"auto"``: the one
     :func:`calibrate_margin` measured when the network of run folder ``sdf_run`` was trained."""
@@ -1160,12 +1196,8 @@ def train_sdf_run(data, out, run_config: SDFRunConfig = SDFRunConfig(), progress
                                       config.random_motion_seconds) if config.random_motions else []
     samples = body_sdf_samples(shapes, [store.motion(m) for m in motions] + extra, config)
     net, history = train_body_sdf(samples, config, net_config, progress)
-    calibration = None
-    if config.calibration_motions:  # a validation set: no sequence's pose, no test body
-        calibration = calibrate_margin(
-            net.eval(), shapes[:len(bodies)] + random_anny_shapes(4, config.seed + 99),
-            random_procedural_motions(config.calibration_motions, config.seed + 4000, AnnyBody(),
-                                      config.random_motion_seconds))
+    calibration = calibrate_margin(net.eval(), *calibration_set(shapes[:len(bodies)], config)) \
+        if config.calibration_motions else None
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     save_body_sdf(out / SDF_FILE, net)
