@@ -120,7 +120,7 @@ CLAIMS: tuple[Claim, ...] = (
           ("collision-garments-bones-margin22-window",), "Eq. 10 (neural) removes", COLLISION_BONES_AUTO),
     Claim("SwinGar", "the collision correction is fast: a whole animation, 10k vertices, two CPU threads",
           "about 0.2 ms a frame (hardware not stated; target < 1 ms on a CPU)",
-          ("collision-speed-window", "collision-speed-motion", "collision-speed-cells"),
+          ("collision-speed-window", "collision-speed-margin-auto", "collision-speed-motion", "collision-speed-cells"),
           "correction under 1.0 ms a frame, neural SDF, 1 torch thread, a whole motion", COLLISION_SPEED),
     Claim("SwinGar", "the collision correction is fast: frame by frame (streaming), 10k vertices, one CPU thread",
           "about 0.2 ms a frame (hardware not stated; target < 1 ms on a CPU)",
