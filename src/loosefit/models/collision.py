@@ -36,8 +36,10 @@ that the cull proves outside is no longer moved:
   Python's lock).
 
 What remains is the cull (about 0.5 ms of one core a frame, most of it rasterising the proxy's 2,454
-triangles) and the network on the candidates (Softplus, which torch computes element by element, is most of it): narrower networks (``net.hidden``) are faster and less exact, the
-paper's width the slowest; the benchmark reports both sides.
+triangles) and the network on the candidates (most of it Softplus, which torch computes element by element):
+narrower networks (``net.hidden``) are faster and less exact, the paper's width the slowest; the benchmark
+reports both sides. A margin (``--collision-margin``) finds more vertices inside, and each costs a gradient and
+its neighbours' values.
 """
 
 from __future__ import annotations
@@ -1126,7 +1128,8 @@ def calibrate_sdf_run(sdf_run) -> dict:
     meta = Path(sdf_run) / SDF_META
     try:
         summary = json.loads(meta.read_text())
-        config = SDFTrainConfig(**{k: v for k, v in summary["config"].items() if k in SDFTrainConfig.__dataclass_fields__})
+        fields = SDFTrainConfig.__dataclass_fields__
+        config = SDFTrainConfig(**{k: v for k, v in summary["config"].items() if k in fields})
         store = DatasetStore.open(summary["data"], mode="r")
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise InputError(f"cannot read the body SDF run's summary: {e}", meta) from None
