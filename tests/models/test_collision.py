@@ -423,3 +423,28 @@ def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, m
         field(x)
     with pytest.raises(InputError, match="sorted by frame"):
         field(x, which.flip(0))
+
+
+def test_calibrated_margin_catches_its_share_of_the_inside_points(body):
+    """:func:`calibrate_margin`: with the margin it returns, the network's surface moved out (as Eq. 10 uses it,
+    :meth:`BoundBodySDF.offset`) puts that share of the shallow inside points of its validation poses inside;
+    a larger share needs a larger margin."""
+    from loosefit.models.collision import SDFTrainConfig, body_sdf_samples, calibrate_margin, random_procedural_motions
+
+    torch.manual_seed(0)
+    motions = random_procedural_motions(1, 3, body, seconds=0.5)
+    samples = body_sdf_samples([body.shape], motions, SDFTrainConfig(frames=2, surface=0, near=400, inside=0,
+                                                                      near_sigma=0.01, seed=5))
+    net = BodySDFNet(samples["code"].shape[1], BodySDFConfig(hidden=32, init_radius=0.3)).eval()
+    low = calibrate_margin(net, [body.shape], motions, quantile=0.5, frames=2, points=400, seed=5)
+    high = calibrate_margin(net, [body.shape], motions, quantile=0.8, frames=2, points=400, seed=5)
+    assert high["margin_m"] > low["margin_m"] > 0 and high["inside_points"] == low["inside_points"] > 50
+    caught = []
+    for pts, sdf, code in zip(samples["points"], samples["sdf"], samples["code"]):
+        inside = (sdf < 0) & (sdf > -0.02)
+        with torch.no_grad():
+            caught.append(net.bind(torch.from_numpy(code)).offset(high["margin_m"])(torch.from_numpy(pts[inside])) < 0)
+    share = torch.cat(caught).float().mean().item()
+    assert abs(share - 0.8) <= 2.0 / high["inside_points"]
+    with pytest.raises(InputError, match="quantile"):
+        calibrate_margin(net, [body.shape], motions, quantile=1.0)
