@@ -233,9 +233,9 @@ def cmd_animate(args):
         mode, net = args.collision, None
         if mode not in ("exact", "pushout"):
             mode, net = "neural", load_body_sdf(Path(args.collision) / SDF_FILE)
-        if args.collision_margin not in ("0", "0.0") and net is None:
+        margin = collision_margin(args.collision if net is not None else None, args.collision_margin)
+        if margin and net is None:
             raise InputError("--collision-margin applies to a body SDF network, not to --collision " + mode)
-        margin = collision_margin(args.collision, args.collision_margin) if net is not None else 0.0
         results = [handle_motion_collisions(v, faces, body, m, mode, net, margin=margin)
                    for v, m in zip(results, motions)]
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]

@@ -293,8 +293,7 @@ class AxisRayCuller:
         free = np.zeros(len(q), bool)
         mapped = ((k >= self.window[0][t]) & (k <= self.window[1][t])).all(1)  # bins the maps cover
         for a, (b, c) in enumerate(_PLANE):
-            index = self._base[t, a] + k[:, b] * self.bins[t, c] + k[:, c]
-            index = np.where(mapped, index, 0)
+            index = self._base[t, a] + k[:, b] * self.bins[t, c] + k[:, c]  # a point in the box has a bin
             free |= mapped & ((q[:, a] > self.hi[index]) | (q[:, a] < self.lo[index]))
         out[near] = free
         return out

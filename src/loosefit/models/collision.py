@@ -1125,9 +1125,8 @@ def calibrate_sdf_run(sdf_run) -> dict:
     from loosefit.data.store import DatasetStore
     from loosefit.paths import atomic_path
 
-    meta = Path(sdf_run) / SDF_META
+    meta, summary = _sdf_summary(sdf_run)
     try:
-        summary = json.loads(meta.read_text())
         fields = SDFTrainConfig.__dataclass_fields__
         config = SDFTrainConfig(**{k: v for k, v in summary["config"].items() if k in fields})
         store = DatasetStore.open(summary["data"], mode="r")
@@ -1141,18 +1140,29 @@ def calibrate_sdf_run(sdf_run) -> dict:
     return summary["calibration"]
 
 
-def collision_margin(sdf_run, value: str | float) -> float:
-    """The margin of ``loosefit animate --collision-margin``: metres, or ``"auto"``: the one
-    :func:`calibrate_margin` measured when the network of run folder ``sdf_run`` was trained."""
+def _sdf_summary(sdf_run) -> tuple:
+    """``(path, dict)`` of a body SDF run folder's ``model.json``; an unreadable one is an :class:`InputError`."""
     import json
     from pathlib import Path
 
+    meta = Path(sdf_run) / SDF_META
+    try:
+        summary = json.loads(meta.read_text())
+        if not isinstance(summary, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as e:
+        raise InputError(f"cannot read the body SDF run's summary: {e}", meta) from None
+    return meta, summary
+
+
+def collision_margin(sdf_run, value: str | float) -> float:
+    """The margin of ``loosefit animate --collision-margin``: metres, or ``"auto"``: the one
+    :func:`calibrate_margin` measured when the network of run folder ``sdf_run`` was trained."""
     if str(value).strip().lower() == "auto":
-        meta = Path(sdf_run) / SDF_META
-        try:
-            calibration = json.loads(meta.read_text()).get("calibration")
-        except (OSError, ValueError) as e:
-            raise InputError(f"cannot read the body SDF run's summary: {e}", meta) from None
+        if sdf_run is None:
+            raise InputError("--collision-margin auto needs a body SDF run")
+        meta, summary = _sdf_summary(sdf_run)
+        calibration = summary.get("calibration")
         if not calibration or "margin_m" not in calibration:
             raise InputError("this body SDF run has no calibrated margin (trained with train.calibration_motions=0 "
                              "or by an older loosefit): give the margin in metres", meta)
