@@ -106,7 +106,8 @@ def margin_of(sdf_run: Path, value: str) -> float:
         sys.exit(f"collision.py: {e}")
 
 
-def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distance: float, margin: float = 0.0) -> dict:
+def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distance: float, margin: float,
+                      cull_cell: float) -> dict:
     """Every method on one sequence: per-frame collision % (proxy and full body), d_cons sums, wall time."""
     from loosefit.geometry.signed_distance import BodySDF
     from loosefit.metrics.collision import collision_ratio_per_frame
@@ -125,7 +126,7 @@ def evaluate_sequence(seq, pred: np.ndarray, net, tolerance: float, push_distanc
         else:
             mode = {"eq10-neural": "neural", "eq10-exact": "exact", "pushout": "pushout"}[method]
             verts = handle_motion_collisions(pred, seq.faces, seq.body, seq.motion, mode, net, push_distance,
-                                             margin=margin)  # the neural mode's alone
+                                             margin=margin, cull_cell=cull_cell)  # margin: neural only
         wall = time.perf_counter() - start
         moved = np.any(verts != pred, axis=-1)  # (T, V) the corrected vertices
         row = {"collision_pct_frames": collision_ratio_per_frame(verts, proxy_sdfs, tolerance=tolerance).tolist(),
@@ -295,13 +296,14 @@ def sdf_accuracy(net_or_bound_fn, test: dict, bone_frames: bool) -> dict:
 
 def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: list[int], width_steps: int,
           frames: int, reps: int, threads_list: list[int], other_nets: dict | None = None,
-          cull_cells: list | None = None, margin: float = 0.0) -> dict:
+          cull_cells: list | None, margin: float, cull_cell: float) -> dict:
     """Time per frame of the correction of ~10k vertices, each design tried (see the module docstring); the
-    culled designs (rows 3, 6, 7) with the network's surface moved out by ``margin`` metres, as corrected."""
+    culled designs (rows 3, 6, 7) with the network's surface moved out by ``margin`` metres, as corrected, and
+    bins of ``cull_cell`` metres (rows 3, 5, 6)."""
     from loosefit.body import AnnyBody, AnnyShape
     from loosefit.geometry.ray_cull import AxisRayCuller
     from loosefit.geometry.signed_distance import BodySDF
-    from loosefit.models.collision import (CULL_CELL, BodySDFConfig, BodySDFNet, CollisionResolver, ExactSDF,
+    from loosefit.models.collision import (BodySDFConfig, BodySDFNet, CollisionResolver, ExactSDF,
                                            SDFTrainConfig, body_sdf_samples, correct_frame, correct_motion,
                                            flushed_denormals, motion_sdf_inputs, sdf_and_gradient, train_body_sdf)
     from loosefit.models.motion_features import to_canonical
@@ -316,7 +318,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     code = codes[:, :net.code_size]
     picks = [int(t) for t in np.linspace(0, motion.num_frames - 1, frames).round()]
     out: dict = {"motion": test_seqs[0].motion.name, "body": "average Anny, collision proxy 1,229 vertices",
-                 "cull_cell_m": CULL_CELL, "frames_timed": picks, "garments": {}}
+                 "cull_cell_m": cull_cell, "frames_timed": picks, "garments": {}}
 
     # networks: the trained one and narrower ones fitted to the same samples for the same steps
     cfg = SDFTrainConfig(**sdf_summary["config"])
@@ -352,7 +354,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     for kind in kinds:
         garment = garment_10k(kind, body)
         verts = skinned(garment, body, motion)
-        culler = AxisRayCuller(posed[0], proxy.faces, CULL_CELL)
+        culler = AxisRayCuller(posed[0], proxy.faces, cull_cell)
         inside = [int((BodySDF(posed[t], proxy.faces).query(verts[t]) < 0).sum()) for t in picks]
         row = {"vertices": garment.num_verts, "inside_per_frame_exact": float(np.mean(inside)),
                "candidates_per_frame": float(np.mean([(~culler.update(posed[t], verts[t]).outside(verts[t])).sum() for t in picks]))}
@@ -454,6 +456,8 @@ def main() -> None:
     parser.add_argument("--speed-widths", default="32,64,128", help="narrower networks to time ('' for none)")
     parser.add_argument("--speed-steps", type=int, default=None, help="their training steps (default: the SDF run's)")
     parser.add_argument("--speed-sdf-runs", default="", help="other trained SDF run folders to time beside it (comma)")
+    parser.add_argument("--cull-cell", type=float, default=None,
+                        help="the cull's bin side of every correction and timed design, metres (default: CULL_CELL)")
     parser.add_argument("--cull-cells", default="", help="other cull bin sizes to time over a motion, metres: "
                         "';'-separated, each one size or 'x,y,z' (e.g. '0.015,0.015,0.03;0.02,0.02,0.04')")
     parser.add_argument("--speed-frames", type=int, default=12)
@@ -461,6 +465,9 @@ def main() -> None:
     parser.add_argument("--threads", default="1,2", help="torch thread counts of the speed part")
     parser.add_argument("--name", default="collision", help="results file name")
     args = parser.parse_args()
+    from loosefit.models.collision import CULL_CELL
+
+    args.cull_cell = args.cull_cell or CULL_CELL
     if args.speed_only and args.skip_speed:
         parser.error("--speed-only and --skip-speed leave nothing to do")
 
@@ -485,13 +492,14 @@ def main() -> None:
             print(f"{seq.name}: {len(seq.gt)} frames, {seq.gt.shape[1]} vertices", flush=True)
             rows.append({"sequence": seq.name, "kind": kind_of(seq.garment), "vertices": int(seq.gt.shape[1]),
                          "methods": evaluate_sequence(seq, predictions[seq.name], net, args.tolerance, args.push_distance,
-                                                      args.margin)})
+                                                      args.margin, args.cull_cell)})
     table = summarise(rows) if rows else {}
     results = {"data": str(data.resolve()), "run": str(Path(args.run).resolve()), "method": method,
                "sdf_run": str(sdf_run.resolve()), "sdf": {k: sdf_summary.get(k) for k in
                                                           ("bodies", "motions", "frames", "first_loss", "final_loss",
                                                            "config", "net", "train_wall_s")},
                "tolerance_m": args.tolerance, "push_distance_m": args.push_distance, "margin_m": args.margin,
+               "cull_cell_m": args.cull_cell,
                "collision_body": "the posed collision proxy (1,229-vertex Anny), the body the SDF learns and every "
                                  "correction uses; collision_full_body_pct: the 13.7k-vertex body, for reference",
                "paper_notes": PAPER_NOTES, "per_kind": table, "targets": targets(table),
@@ -514,7 +522,7 @@ def main() -> None:
                                  [int(t) for t in args.threads.split(",")], others,
                                  [[float(v) for v in c.split(",")] if "," in c else float(c)
                                   for c in filter(None, (c.strip() for c in args.cull_cells.split(";")))],
-                                 args.margin)
+                                 args.margin, args.cull_cell)
         results["speed"]["margin_m"] = args.margin
         results["targets"] += speed_targets(results["speed"])
     save_results(args.name, results)

@@ -448,3 +448,24 @@ def test_calibrated_margin_catches_its_share_of_the_inside_points(body):
     assert abs(share - 0.8) <= 2.0 / high["inside_points"]
     with pytest.raises(InputError, match="quantile"):
         calibrate_margin(net, [body.shape], motions, quantile=1.0)
+
+
+def test_the_cull_bins_change_the_work_not_the_exact_correction(body):
+    """:func:`handle_motion_collisions` with the exact field: the cull only skips vertices it proves outside, so
+    any bin size, and no cull at all, move the same vertices to the same places (the field of the skipped
+    free neighbours still enters ``delta_i``)."""
+    from loosefit.models.collision import handle_motion_collisions
+    from loosefit.motion.procedural import generate
+
+    motion = generate("spin", 0.3, 5, body)
+    posed = body.collision_proxy().pose(motion).verts
+    sheet_verts, sheet_faces = sheet(25, 25)
+    flat = (sheet_verts - sheet_verts.mean(0)) * [0.8, 0.8, 1.0]
+    verts = (flat[None] + posed.mean(1)[:, None]).astype(np.float32)  # a sheet through the torso, every frame
+    plain = handle_motion_collisions(verts, sheet_faces, body, motion, "exact", cull=False)
+    assert np.any(plain != verts, axis=-1).sum() > 30 * len(verts)  # ~40 torso vertices a frame
+    for cell in (0.01, (0.015, 0.02, 0.03)):
+        culled = handle_motion_collisions(verts, sheet_faces, body, motion, "exact", cull_cell=cell)
+        np.testing.assert_allclose(culled, plain, rtol=0, atol=1e-6)
+    with pytest.raises(InputError, match="cull cell"):
+        handle_motion_collisions(verts, sheet_faces, body, motion, "exact", cull_cell=0.0)

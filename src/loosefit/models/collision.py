@@ -1028,7 +1028,7 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
 
 def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
                              net: BodySDFNet | None = None, push_distance: float = 0.004,
-                             cull: bool = True, margin: float = 0.0) -> np.ndarray:
+                             cull: bool = True, margin: float = 0.0, cull_cell=CULL_CELL) -> np.ndarray:
     """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
     Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
 
@@ -1037,7 +1037,8 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     fixed-distance baseline). With ``cull`` (the default) SwinGar Eq. 10 evaluates its field only at the
     vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
     (:func:`correct_frame`); the network runs on :data:`FRAME_CHUNK` frames a pass (:func:`correct_motion`); the
-    Gaussian width is the mean edge length of the first frame.
+    Gaussian width is the mean edge length of the first frame. ``cull_cell``: the cull's bin side, metres (one
+    or ``(x, y, z)``).
 
     ``margin`` (metres, ``"neural"`` only; ours, 0 in the paper): Eq. 10 on the network's surface moved that far
     outwards, ``S - margin``: a vertex the network puts less than ``margin`` outside is corrected too, and moved
@@ -1054,7 +1055,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     proxy = body.collision_proxy()
     out = np.array(verts, np.float32, copy=True)
     posed = proxy.pose(motion).verts if (cull or mode != "neural") else None
-    culler = AxisRayCuller(posed[0], proxy.faces, CULL_CELL) if cull and mode != "pushout" else None
+    culler = AxisRayCuller(posed[0], proxy.faces, cull_cell) if cull and mode != "pushout" else None
     resolver = CollisionResolver(faces, out.shape[1])
     if mode == "neural":
         code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
