@@ -24,6 +24,7 @@ Every figure is named ``<garment>/<motion>/<probe>/<measure>`` in the JSON (``sk
 Run: .venv/bin/python benchmarks/chaos.py --plan configs/datasets/bench.yaml [--garments skirt,dress]
          [--motions walk-1,spin-1,jump-1,kick-1] [--seconds 4] [--probes noise,steps,nudge,repeat]
          [--sim-params NAME] [--set KEY=VALUE ...] [--workers 2] [--name chaos-bench]
+         [--sample-stride 40 --sample-offset 39]   (a held plan: the settled poses alone)
 (writes benchmarks/results/<name>.json)
 """
 
@@ -94,11 +95,15 @@ def simulate(task: Task) -> dict:
             "faces": garment.faces, "body_verts": result.body_verts, "body_faces": body.faces}
 
 
-def difference(a: np.ndarray, b: np.ndarray, below: np.ndarray, fps: float) -> dict:
-    """How far ``a`` is from ``b`` ``(T, V, 3)``: RMSE (mm) overall, per half second and below the knees."""
+def difference(a: np.ndarray, b: np.ndarray, below: np.ndarray, fps: float, samples: slice | None = None) -> dict:
+    """How far ``a`` is from ``b`` ``(T, V, 3)``: RMSE (mm) overall, per half second and below the knees; with
+    ``samples`` (frames ``offset::stride``), also over those frames alone and at each of them."""
     sq = ((a.astype(np.float64) - b) ** 2).sum(-1)  # (T, V)
     half = max(1, int(round(fps / 2)))
-    return {
+    at = {} if samples is None or not len(sq[samples]) else {
+        "rmse_at_samples_mm": float(np.sqrt(sq[samples].mean()) * 1e3),
+        "rmse_per_sample_mm": [float(np.sqrt(f.mean()) * 1e3) for f in sq[samples]]}
+    return {**at,
         "rmse_mm": float(np.sqrt(sq.mean()) * 1e3),
         "rmse_per_half_second_mm": [float(np.sqrt(sq[i:i + half].mean()) * 1e3) for i in range(0, len(sq), half)],
         "rmse_below_knees_mm": float(np.sqrt(sq[:, below].mean()) * 1e3) if below.any() else None,
@@ -134,6 +139,9 @@ def main() -> None:
     parser.add_argument("--data", default=None, help="a store simulated from the plan: compare the base with it")
     parser.add_argument("--workers", type=int, default=2, help="simulations at a time (one process each)")
     parser.add_argument("--name", default="chaos-bench", help="results name")
+    parser.add_argument("--sample-stride", type=int, default=0,
+                        help="also compare at frames offset::stride alone (a held plan's settled poses: 40)")
+    parser.add_argument("--sample-offset", type=int, default=0, help="see --sample-stride (a held plan: 39)")
     parser.add_argument("--save", default=None, help="a folder for the base runs as mesh sequences (<garment>-<motion>.npz)")
     args = parser.parse_args()
 
@@ -155,6 +163,9 @@ def main() -> None:
     params = plan.sim_params[params_name].with_overrides(args.set)
     seeds = [int(s) for s in args.noise_seeds.split(",")]
     degrees = [float(d) for d in args.nudge_degrees.split(",")]
+    if args.sample_stride < 0 or args.sample_offset < 0:
+        raise InputError("--sample-stride and --sample-offset must be >= 0")
+    samples = slice(args.sample_offset, None, args.sample_stride) if args.sample_stride else None
     fps = 30.0
     frames = max(2, int(round(args.seconds * fps)))
     start = time.perf_counter()
@@ -186,7 +197,8 @@ def main() -> None:
             runs[f"{key}/{name}"] = _run_summary(run)
             if "error" in run:
                 continue
-            for measure, value in difference(run["verts"], base["verts"], base["below_knees"], base["fps"]).items():
+            for measure, value in difference(run["verts"], base["verts"], base["below_knees"], base["fps"],
+                                             samples).items():
                 figures[f"{key}/{name}/{measure}"] = value
             if name == "repeat":
                 figures[f"{key}/repeat/bit_identical"] = bool(np.array_equal(run["verts"], base["verts"]))

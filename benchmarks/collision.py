@@ -295,11 +295,11 @@ def sdf_accuracy(net_or_bound_fn, test: dict, bone_frames: bool) -> dict:
 
 
 def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: list[int], width_steps: int,
-          frames: int, reps: int, threads_list: list[int], other_nets: dict | None = None,
+          frames: int, reps: int, threads_list: list[int], other_nets: dict | None,
           cull_cells: list | None, margin: float, cull_cell: float) -> dict:
     """Time per frame of the correction of ~10k vertices, each design tried (see the module docstring); the
     culled designs (rows 3, 6, 7) with the network's surface moved out by ``margin`` metres, as corrected, and
-    bins of ``cull_cell`` metres (rows 3, 5, 6)."""
+    bins of ``cull_cell`` metres (rows 3, 5, 6). ``other_nets``: ``{name: (network, its margin)}``."""
     from loosefit.body import AnnyBody, AnnyShape
     from loosefit.geometry.ray_cull import AxisRayCuller
     from loosefit.geometry.signed_distance import BodySDF
@@ -323,7 +323,9 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     # networks: the trained one and narrower ones fitted to the same samples for the same steps
     cfg = SDFTrainConfig(**sdf_summary["config"])
     nets = {f"trained (hidden {net.config.hidden})": net}
-    nets.update(other_nets or {})
+    margins = {name: margin for name in nets}
+    for name, (other, other_margin) in (other_nets or {}).items():
+        nets[name], margins[name] = other, other_margin
     if widths:
         train_names = store.sequence_names(split="train")
         shapes = [AnnyShape.from_array(store.body(b)) for b in sorted({store.sequence(n).body for n in train_names})]
@@ -334,7 +336,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
             with torch_threads(1):
                 small, history = train_body_sdf(samples, SDFTrainConfig(**{**vars(cfg), "steps": width_steps}),
                                                 BodySDFConfig(**{**sdf_summary["net"], "hidden": h}))
-            nets[f"hidden {h}"] = small.eval()
+            nets[f"hidden {h}"], margins[f"hidden {h}"] = small.eval(), margin
             out.setdefault("width_training", {})[f"hidden {h}"] = {"steps": width_steps, "final_loss": history[-1],
                                                                   "wall_s": time.perf_counter() - start}
     test_shapes = [s.body.shape for s in test_seqs]
@@ -379,7 +381,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                 for name, n in nets.items():
                     n_code = codes[:, :n.code_size]
                     bound = n.bind(n_code[0])
-                    moved_out = bound.offset(margin)
+                    moved_out = bound.offset(m := margins[name])
                     timing[f"2 {name}: bound code, hand gradient, denormals flushed, every vertex"] = time_frames(
                         lambda t: correct_frame(verts[t], resolver, bound.with_code(n_code[t]), (rot[t], origin[t])),
                         slow, 1)
@@ -388,11 +390,11 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                                                 culler.update(posed[t], verts[t])), picks, reps)
                     for workers in (1, 2):  # the whole motion, chunks of frames (what loosefit animate runs)
                         timing[f"6 {name}: + a motion's frames a pass, {workers} worker(s)"] = time_motion(
-                            lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, culler, margin,
+                            lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, culler, m,
                                                    workers=workers), motion.num_frames, reps)
                     for cell, other in cell_cullers.items():  # the same with other bins
                         timing[f"7 {name}: a motion, 2 workers, cull bins {cell} m"] = time_motion(
-                            lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, other, margin),
+                            lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, other, m),
                             motion.num_frames, reps)
                 b32 = main_net.bind(code[0])
                 bf = Bf16Bound(b32)
@@ -455,7 +457,8 @@ def main() -> None:
                         help="the speed part alone (no collision tables), e.g. to time on an idle machine")
     parser.add_argument("--speed-widths", default="32,64,128", help="narrower networks to time ('' for none)")
     parser.add_argument("--speed-steps", type=int, default=None, help="their training steps (default: the SDF run's)")
-    parser.add_argument("--speed-sdf-runs", default="", help="other trained SDF run folders to time beside it (comma)")
+    parser.add_argument("--speed-sdf-runs", default="",
+                        help="other trained SDF run folders to time beside it (comma), each with its --margin")
     parser.add_argument("--cull-cell", type=float, default=None,
                         help="the cull's bin side of every correction and timed design, metres (default: CULL_CELL)")
     parser.add_argument("--cull-cells", default="", help="other cull bin sizes to time over a motion, metres: "
@@ -482,7 +485,7 @@ def main() -> None:
     with torch_threads(1):
         net, sdf_summary = sdf_network(data, sdf_run, args.config, args.set)
         net.eval()
-        args.margin = margin_of(sdf_run, args.margin)
+        margin_arg, args.margin = args.margin, margin_of(sdf_run, args.margin)
         sequences = load_sequences(data, split="test")
         method, predictions = animate_run(args.run, sequences)
         rows = []
@@ -516,7 +519,7 @@ def main() -> None:
         others = {}
         for folder in filter(None, (f.strip() for f in args.speed_sdf_runs.split(","))):
             other = load_body_sdf(Path(folder) / SDF_FILE).eval()
-            others[f"{Path(folder).name} (hidden {other.config.hidden})"] = other
+            others[f"{Path(folder).name} (hidden {other.config.hidden})"] = (other, margin_of(Path(folder), margin_arg))
         results["speed"] = speed(net, sdf_summary, store, [s for s in sequences if s.name in predictions], kinds,
                                  widths, steps, args.speed_frames, args.speed_reps,
                                  [int(t) for t in args.threads.split(",")], others,
@@ -524,6 +527,7 @@ def main() -> None:
                                   for c in filter(None, (c.strip() for c in args.cull_cells.split(";")))],
                                  args.margin, args.cull_cell)
         results["speed"]["margin_m"] = args.margin
+        results["speed"]["other_sdf_margins_m"] = {name: m for name, (_, m) in others.items()}
         results["targets"] += speed_targets(results["speed"])
     save_results(args.name, results)
 
