@@ -8,7 +8,7 @@ With ``--collision SDF_RUN`` (and ``--margin``) SwinGar's meshes are also shown 
 correction (SwinGar Eq. 10, :func:`~loosefit.models.collision.handle_motion_collisions`).
 
 Run: .venv/bin/python benchmarks/graph_renders.py --data DATA.zarr --sequence NAME [--swingar RUN]
-         [--collision SDF_RUN [--margin 0.01]] [--fitgar RUN] [--frames 45,120] [--name graph-render-NAME]
+         [--collision SDF_RUN [--margin 0.01|auto]] [--fitgar RUN] [--frames 45,120] [--name graph-render-NAME]
 (writes benchmarks/results/<name>.png)
 """
 
@@ -27,7 +27,7 @@ from loosefit.animate import Animator  # noqa: E402
 from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
 from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
-from loosefit.models.collision import SDF_FILE, handle_motion_collisions, load_body_sdf  # noqa: E402
+from loosefit.models.collision import SDF_FILE, collision_margin, handle_motion_collisions, load_body_sdf  # noqa: E402
 from loosefit.sim.attach import body_lbs  # noqa: E402
 from loosefit.viz.render import render_frames, save_png  # noqa: E402
 from loosefit.viz.scene import BODY_COLOR, MeshTrack  # noqa: E402
@@ -47,7 +47,7 @@ def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Pa
         meshes["SwinGar"] = Animator(swingar, garment=garment, body=body).animate(motion)
         if collision is not None:
             net = load_body_sdf(collision / SDF_FILE)
-            label = "SwinGar + Eq. 10" + (f", {margin * 1e3:g} mm margin" if margin else "")
+            label = "SwinGar + Eq. 10" + (f", {margin * 1e3:.1f} mm margin" if margin else "")
             meshes[label] = handle_motion_collisions(meshes["SwinGar"], garment.faces, body, motion, "neural", net,
                                                      margin=margin)
     meshes["body-LBS"] = body_lbs(garment.verts, body, motion)
@@ -64,7 +64,7 @@ def main() -> None:
     p.add_argument("--sequence", required=True)
     p.add_argument("--swingar", type=Path, default=None, help="a SwinGar run")
     p.add_argument("--collision", type=Path, default=None, help="a body SDF run: SwinGar corrected by it too")
-    p.add_argument("--margin", type=float, default=0.0, help="the correction's margin, metres")
+    p.add_argument("--margin", default="0", help="the correction's margin, metres, or 'auto' (the SDF run's calibrated one)")
     p.add_argument("--fitgar", type=Path, default=None, help="a FitGar run")
     p.add_argument("--frames", default="45,120")
     p.add_argument("--size", default="360,480", help="W,H pixels of one panel")
@@ -73,8 +73,8 @@ def main() -> None:
     store = DatasetStore.open(args.data)
     if args.collision is not None and args.swingar is None:
         p.error("--collision corrects SwinGar's meshes: give --swingar")
-    meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar, args.collision,
-                                              args.margin)
+    margin = collision_margin(args.collision, args.margin) if args.collision is not None else 0.0
+    meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar, args.collision, margin)
     frames = [int(f) for f in args.frames.split(",")]
     posed = body.pose(motion).verts
     gt = meshes["simulation"]

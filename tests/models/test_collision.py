@@ -469,3 +469,17 @@ def test_the_cull_bins_change_the_work_not_the_exact_correction(body):
         np.testing.assert_allclose(culled, plain, rtol=0, atol=1e-6)
     with pytest.raises(InputError, match="cull cell"):
         handle_motion_collisions(verts, sheet_faces, body, motion, "exact", cull_cell=0.0)
+
+
+def test_cpu_config_file_loads_the_measured_recipe():
+    """``configs/models/collision-cpu.yaml`` (``loosefit train --method collision --config``) loads into the
+    run config with the recipe the benchmarks measured, the rest at the defaults."""
+    from pathlib import Path
+
+    from loosefit.config import load_config
+    from loosefit.models.collision import SDFRunConfig, SDFTrainConfig
+
+    path = Path(__file__).parents[2] / "configs" / "models" / "collision-cpu.yaml"
+    config = load_config(SDFRunConfig, path)
+    assert config.net == BodySDFConfig(hidden=32, bone_frames=True)
+    assert config.train == SDFTrainConfig(steps=30000, frames=16, random_shapes=16, random_motions=8, batch_frames=2)

@@ -18,14 +18,14 @@ Speed. Evaluating the network's value and autograd gradient at every vertex of a
 300-450 ms a frame on this project's CPUs at the paper's size. Frame by frame (:func:`correct_frame`, for
 streaming) these changes bring it to about 3 ms with a 32- or 64-wide network; over a whole motion
 (:func:`correct_motion`, used by :func:`handle_motion_collisions` and ``loosefit animate --collision``) to
-0.58-0.72 ms a frame with a 32-wide network and 0.65-0.92 ms with a 64-wide one, in two worker threads
-(benchmarks/collision.py, ``collision-speed-window.json``). With the exact
+0.60-0.92 ms a frame with the 32-wide network of ``configs/models/collision-cpu.yaml`` at its calibrated 13 mm
+margin, in two worker threads (benchmarks/collision.py, ``collision-speed-32-30k.json``). With the exact
 field they change nothing (beyond float rounding); with the network, a vertex it wrongly calls inside but
 that the cull proves outside is no longer moved:
 
 - the posed collision proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` proves most vertices outside
   (an axis-aligned ray that meets no triangle facing back along it), filling only the bins of the garment's box,
-  and only the others (1.6-4.7 % of a garment) reach the network;
+  and only the others (0.9-3.5 % of a garment with 1.25 cm bins) reach the network;
 - :class:`BoundBodySDF` runs the body-code branch once per frame and differentiates by hand; the gradient is
   taken only at the vertices found inside, the value of their other neighbours only where ``delta_i`` needs it;
 - denormal floats are flushed while the network runs (:func:`flushed_denormals`): Softplus(beta=100) makes
@@ -35,8 +35,9 @@ that the cull proves outside is no longer moved:
   Python's overhead is paid per chunk, and chunks run in two threads (the kernels, torch and NumPy release
   Python's lock).
 
-What remains is the cull (about 0.5 ms of one core a frame, most of it rasterising the proxy's 2,454
-triangles) and the network on the candidates (most of it Softplus, which torch computes element by element):
+What remains is the cull (about 0.6-0.9 ms of one core a frame with 1.25 cm bins, most of it rasterising the
+proxy's 2,454 triangles) and the network on the candidates (most of it Softplus, which torch computes element by
+element):
 narrower networks (``net.hidden``) are faster and less exact, the paper's width the slowest; the benchmark
 reports both sides. A margin (``--collision-margin``) finds more vertices inside, and each costs a gradient and
 its neighbours' values.
@@ -932,10 +933,13 @@ def load_body_sdf(path) -> BodySDFNet:
     return net.eval()
 
 
-#: Bin side of the cull (:class:`~loosefit.geometry.ray_cull.AxisRayCuller`), metres: on a 10k-vertex dress
-#: skinned to the walking Anny proxy, 1 cm bins left 3.4 % of the vertices to the field, 2 cm 4.3 %, 3 cm 5.5 %,
-#: while the cull's own cost grows with the bins (benchmarks/collision.py).
-CULL_CELL = 0.02
+#: Bin side of the cull (:class:`~loosefit.geometry.ray_cull.AxisRayCuller`), metres. Finer bins leave fewer
+#: candidates (10k-vertex garments skinned to the walking Anny proxy: 87-349 a frame at 1.25 cm against 160-467 at
+#: 2 cm, the skirt's 402 down to 93) but cost more to rasterise: over a motion the two sizes take the same time
+#: within 0.06 ms except for the skirt, 0.13-0.22 ms faster at 1.25 cm (benchmarks/collision.py,
+#: ``collision-speed-30k.json``, ``collision-speed-32-30k.json``). With a margin, fewer candidates also means fewer
+#: vertices moved that the cull could have proved outside.
+CULL_CELL = 0.0125
 
 
 def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFunction, frame=None,
