@@ -27,6 +27,7 @@ from loosefit.animate import Animator  # noqa: E402
 from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
 from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
+from loosefit.errors import InputError  # noqa: E402
 from loosefit.models.collision import SDF_FILE, collision_margin, handle_motion_collisions, load_body_sdf  # noqa: E402
 from loosefit.sim.attach import body_lbs  # noqa: E402
 from loosefit.viz.render import render_frames, save_png  # noqa: E402
@@ -73,7 +74,10 @@ def main() -> None:
     store = DatasetStore.open(args.data)
     if args.collision is not None and args.swingar is None:
         p.error("--collision corrects SwinGar's meshes: give --swingar")
-    margin = collision_margin(args.collision, args.margin) if args.collision is not None else 0.0
+    try:
+        margin = collision_margin(args.collision, args.margin) if args.collision is not None else 0.0
+    except InputError as e:
+        p.error(str(e))
     meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar, args.collision, margin)
     frames = [int(f) for f in args.frames.split(",")]
     posed = body.pose(motion).verts
