@@ -30,10 +30,10 @@ that the cull proves outside is no longer moved:
   taken only at the vertices found inside, the value of their other neighbours only where ``delta_i`` needs it;
 - denormal floats are flushed while the network runs (:func:`flushed_denormals`): Softplus(beta=100) makes
   many, and the CPU computed with them several times slower;
-- over a motion, up to :data:`FRAME_CHUNK` frames go through each step at once (the cull's kernels launched
-  once, :class:`MotionBodySDF` with the frame folded into its first layer, :meth:`CollisionResolver.frames`), so
+- over a motion, :data:`FRAME_CHUNK` frames go through each step at once (the cull's kernels launched once,
+  :class:`MotionBodySDF` with the frame folded into its first layer, :meth:`CollisionResolver.frames`), so
   Python's overhead is paid per chunk, and chunks run in two threads (the kernels, torch and NumPy release
-  Python's lock), each thread given the same number of frames (:func:`balanced_chunks`).
+  Python's lock).
 
 What remains is the cull (about 0.6-0.9 ms of one core a frame with 1.25 cm bins, most of it rasterising the
 proxy's 2,454 triangles) and the network on the candidates (most of it Softplus, which torch computes element by
@@ -966,28 +966,16 @@ def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFuncti
     return out.numpy(), inside.numpy()
 
 
-#: Frames corrected in one pass of the network by :func:`correct_motion`, at most: enough that Python's per-call
-#: overhead is paid rarely, few enough that a chunk's ``(T V, 3)`` arrays stay small and a short motion still gives
-#: both workers a chunk.
+#: Frames corrected in one pass of the network by :func:`correct_motion`: enough that Python's per-call overhead
+#: is paid rarely, few enough that a chunk's ``(T V, 3)`` arrays stay small and a short motion still gives both
+#: workers a chunk.
 FRAME_CHUNK = 32
-
-
-def balanced_chunks(num_frames: int, workers: int, most: int) -> list[slice]:
-    """``num_frames`` frames cut into chunks of at most ``most``, as many for every worker and of equal size (up to
-    one frame): a 180-frame motion in two workers is six chunks of 30, not five of 32 and one of 20 (the worker
-    with the short chunk would wait 12 frames for the other)."""
-    if num_frames <= 0:
-        return []
-    per_worker = -(-num_frames // (workers * most))  # chunks each worker takes
-    count = min(num_frames, workers * per_worker)
-    edges = np.linspace(0, num_frames, count + 1).round().astype(int)
-    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
 def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDFNet", code, rot, origin,
                    posed: np.ndarray | None = None, culler: AxisRayCuller | None = None, margin: float = 0.0,
                    workers: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """SwinGar Eq. 10 with the network on every frame of an animated garment, :func:`balanced_chunks` of frames a
+    """SwinGar Eq. 10 with the network on every frame of an animated garment, :data:`FRAME_CHUNK` frames a
     pass (:class:`MotionBodySDF`, :meth:`CollisionResolver.frames`): what :func:`correct_frame` gives frame by
     frame, up to float rounding.
 
@@ -1014,7 +1002,7 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
     inside = np.zeros(world.shape[:2], bool)
     if resolver.sigma is None and T:  # set before the threads share the resolver
         resolver.sigma = resolver.mean_edge(torch.from_numpy(world[0]))
-    chunks = balanced_chunks(T, workers, FRAME_CHUNK)
+    chunks = [slice(s, min(s + FRAME_CHUNK, T)) for s in range(0, T, FRAME_CHUNK)]
     workers = min(workers, len(chunks)) or 1
     cullers = queue.SimpleQueue()  # one culler (its map buffers) per running chunk
     for k in range(workers if culler is not None else 0):
@@ -1052,7 +1040,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     ``"exact"`` (SwinGar Eq. 10 with libigl's distance to the posed collision proxy) or ``"pushout"`` (the
     fixed-distance baseline). With ``cull`` (the default) SwinGar Eq. 10 evaluates its field only at the
     vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
-    (:func:`correct_frame`); the network runs on up to :data:`FRAME_CHUNK` frames a pass (:func:`correct_motion`); the
+    (:func:`correct_frame`); the network runs on :data:`FRAME_CHUNK` frames a pass (:func:`correct_motion`); the
     Gaussian width is the mean edge length of the first frame. ``cull_cell``: the cull's bin side, metres (one
     or ``(x, y, z)``).
 
