@@ -18,8 +18,9 @@ Speed. Evaluating the network's value and autograd gradient at every vertex of a
 300-450 ms a frame on this project's CPUs at the paper's size. Frame by frame (:func:`correct_frame`, for
 streaming) these changes bring it to about 3 ms with a 32- or 64-wide network; over a whole motion
 (:func:`correct_motion`, used by :func:`handle_motion_collisions` and ``loosefit animate --collision``) to
-0.60-0.92 ms a frame with the 32-wide network of ``configs/models/collision-cpu.yaml`` at its calibrated 13 mm
-margin, in two worker threads (benchmarks/collision.py, ``collision-speed-32-30k.json``). With the exact
+0.75-0.92 ms a frame (the median of five runs, per garment kind) with the 32-wide network of
+``configs/models/collision-cpu.yaml`` at its calibrated 13 mm margin, in two worker threads (benchmarks/collision.py,
+``collision-speed-32-30k*.json``). With the exact
 field they change nothing (beyond float rounding); with the network, a vertex it wrongly calls inside but
 that the cull proves outside is no longer moved:
 

@@ -138,7 +138,8 @@ CLAIMS: tuple[Claim, ...] = (
           ("collision-garments-bones-32-30k-auto",), "d_cons of Eq. 10 (neural) below push-out", COLLISION_CPU),
     Claim("SwinGar", "the collision correction is fast: a whole animation, 10k vertices, two CPU threads, loosefit's "
           "CPU body SDF at its calibrated margin", "about 0.2 ms a frame (hardware not stated; target < 1 ms on a CPU)",
-          ("collision-speed-32-30k", "collision-speed-30k"),
+          ("collision-speed-32-30k", "collision-speed-32-30k-run3", "collision-speed-32-30k-run4",
+           "collision-speed-32-30k-run5", "collision-speed-30k"),
           "correction under 1.0 ms a frame, neural SDF, 1 torch thread, a whole motion", COLLISION_CPU_SPEED),
     Claim("SwinGar", "the collision correction is fast: a whole animation, 10k vertices, two CPU threads",
           "about 0.2 ms a frame (hardware not stated; target < 1 ms on a CPU)",
