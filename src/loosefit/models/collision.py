@@ -38,10 +38,9 @@ that the cull proves outside is no longer moved:
 
 What remains is the cull (about 0.6-0.9 ms of one core a frame with 1.25 cm bins, most of it rasterising the
 proxy's 2,454 triangles) and the network on the candidates (most of it Softplus, which torch computes element by
-element):
-narrower networks (``net.hidden``) are faster and less exact, the paper's width the slowest; the benchmark
-reports both sides. A margin (``--collision-margin``) finds more vertices inside, and each costs a gradient and
-its neighbours' values.
+element): narrower networks (``net.hidden``) are faster and less exact, the paper's width the slowest; the
+benchmark reports both sides. A margin (``--collision-margin``) finds more vertices inside, and each costs a
+gradient and its neighbours' values.
 """
 
 from __future__ import annotations
