@@ -322,10 +322,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
 
     # networks: the trained one and narrower ones fitted to the same samples for the same steps
     cfg = SDFTrainConfig(**sdf_summary["config"])
-    nets = {f"trained (hidden {net.config.hidden})": net}
-    margins = {name: margin for name in nets}
-    for name, (other, other_margin) in (other_nets or {}).items():
-        nets[name], margins[name] = other, other_margin
+    nets = {f"trained (hidden {net.config.hidden})": (net, margin), **(other_nets or {})}  # name: (network, margin)
     if widths:
         train_names = store.sequence_names(split="train")
         shapes = [AnnyShape.from_array(store.body(b)) for b in sorted({store.sequence(n).body for n in train_names})]
@@ -336,16 +333,15 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
             with torch_threads(1):
                 small, history = train_body_sdf(samples, SDFTrainConfig(**{**vars(cfg), "steps": width_steps}),
                                                 BodySDFConfig(**{**sdf_summary["net"], "hidden": h}))
-            nets[f"hidden {h}"], margins[f"hidden {h}"] = small.eval(), margin
+            nets[f"hidden {h}"] = (small.eval(), margin)
             out.setdefault("width_training", {})[f"hidden {h}"] = {"steps": width_steps, "final_loss": history[-1],
                                                                   "wall_s": time.perf_counter() - start}
     test_shapes = [s.body.shape for s in test_seqs]
     test = near_surface_set(list({tuple(s.to_array()): s for s in test_shapes}.values()),
                             list({s.motion.name: s.motion for s in test_seqs}.values()), frames=4, points=2000)
     out["accuracy_near_surface"] = {name: sdf_accuracy(lambda c, n=n: n.bind(c), test, n.num_bones > 0)
-                                    for name, n in nets.items()}
-    main_net = nets[next(iter(nets))]
-    out["accuracy_near_surface"]["trained, bfloat16"] = sdf_accuracy(lambda c: Bf16Bound(main_net.bind(c)), test, bones)
+                                    for name, (n, _) in nets.items()}
+    out["accuracy_near_surface"]["trained, bfloat16"] = sdf_accuracy(lambda c: Bf16Bound(net.bind(c)), test, bones)
     if net.config.hidden != 512:  # the paper's size for the paper-way timing (untrained weights)
         torch.manual_seed(0)
         nets_paper = BodySDFNet(net.code_size, BodySDFConfig(**{**sdf_summary["net"], "hidden": 512}),
@@ -378,10 +374,10 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                 timing[f"1 before ({size}): value + autograd gradient at every vertex"] = time_frames(value_grad_all, slow, 1)
                 with flushed_denormals():
                     timing[f"1b before ({size}), denormals flushed"] = time_frames(value_grad_all, slow, 1)
-                for name, n in nets.items():
+                for name, (n, m) in nets.items():
                     n_code = codes[:, :n.code_size]
                     bound = n.bind(n_code[0])
-                    moved_out = bound.offset(m := margins[name])
+                    moved_out = bound.offset(m)
                     timing[f"2 {name}: bound code, hand gradient, denormals flushed, every vertex"] = time_frames(
                         lambda t: correct_frame(verts[t], resolver, bound.with_code(n_code[t]), (rot[t], origin[t])),
                         slow, 1)
@@ -396,7 +392,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
                         timing[f"7 {name}: a motion, 2 workers, cull bins {cell} m"] = time_motion(
                             lambda: correct_motion(verts, resolver, n, n_code, rot, origin, posed, other, m),
                             motion.num_frames, reps)
-                b32 = main_net.bind(code[0])
+                b32 = net.bind(code[0])
                 bf = Bf16Bound(b32)
                 cand = {t: ~culler.update(posed[t], verts[t]).outside(verts[t]) for t in picks}
                 with flushed_denormals():
