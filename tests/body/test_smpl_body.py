@@ -1,12 +1,14 @@
 """SMPL-family loader, on a small model file the test writes in the real SMPL pickle format."""
 
 import pickle
+import sys
+import types
 
 import numpy as np
 import pytest
 import scipy.sparse
 
-from loosefit.body.smpl_body import Y_UP_TO_Z_UP, SMPLBody
+from loosefit.body.smpl_body import Y_UP_TO_Z_UP, SMPLBody, read_smpl_file
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix
 from loosefit.motion import Motion
@@ -120,3 +122,91 @@ def test_bad_model_files(tmp_path):
     np.savez(partial, v_template=np.zeros((3, 3)))
     with pytest.raises(InputError, match="missing"):
         SMPLBody(partial)
+
+
+class _Payload:
+    """Unpickling this creates the file ``path`` (a crafted model file could run any code this way)."""
+
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def _plain_arrays(model):
+    return {k: v.toarray() if scipy.sparse.issparse(v) else np.asarray(v) for k, v in model.items()}
+
+
+def test_crafted_npz_runs_no_code(tmp_path):
+    model = write_smpl_pkl(tmp_path / "ref.pkl")
+    marker, path = tmp_path / "marker", tmp_path / "evil.npz"
+    np.savez(path, **{**_plain_arrays(model), "v_template": np.array([_Payload(marker)], dtype=object)})
+    with pytest.raises(InputError, match=r"evil.npz: .*array 'v_template' holds pickled Python objects") as err:
+        SMPLBody(path)
+    assert not marker.exists() and "convert it to .npz" not in str(err.value)
+    np.load(path, allow_pickle=True)["v_template"]  # the payload is live: unpickled, it writes the marker
+    assert marker.exists()
+
+
+@pytest.mark.parametrize("protocol", [0, 2, 5])
+def test_crafted_pickle_runs_no_code(tmp_path, protocol):
+    model = write_smpl_pkl(tmp_path / "ref.pkl")
+    marker, path = tmp_path / "marker", tmp_path / "evil.pkl"
+    with open(path, "wb") as f:
+        pickle.dump({**model, "v_template": _Payload(marker)}, f, protocol=protocol)
+    with pytest.raises(InputError, match=r"evil.pkl: the pickle asks for (builtins|io).open, .*refused"):
+        SMPLBody(path)
+    assert not marker.exists()
+    with open(path, "rb") as f:
+        pickle.load(f)  # the payload is live
+    assert marker.exists()
+
+
+@pytest.mark.parametrize("protocol", [0, 2, 5])
+def test_legit_pickles_of_every_protocol_load(tmp_path, protocol):
+    """numpy arrays, a scipy.sparse J_regressor and Python 2 style names are all a SMPL file needs."""
+    model = write_smpl_pkl(tmp_path / "ref.pkl")
+    path = tmp_path / f"SMPL_{protocol}.pkl"
+    with open(path, "wb") as f:
+        pickle.dump(model, f, protocol=protocol)
+    body, ref = SMPLBody(path), SMPLBody(tmp_path / "ref.pkl")
+    assert np.array_equal(body.rest_verts(), ref.rest_verts()) and body.num_betas == 10
+
+
+def test_original_chumpy_pickle_reads_without_chumpy(tmp_path, monkeypatch):
+    """Original SMPL files hold chumpy arrays: read as their values, without importing chumpy."""
+    module = types.ModuleType("chumpy.ch")
+
+    class Ch:  # chumpy's pickled layout: NEWOBJ of chumpy.ch.Ch, then a state dict with the array as 'x'
+        def __init__(self, x):
+            self.x, self._dirty_vars, self._itr = x, set(), None
+
+    Ch.__module__, Ch.__qualname__ = "chumpy.ch", "Ch"
+    module.Ch = Ch
+    model = write_smpl_pkl(tmp_path / "ref.pkl", posedirs_scale=0.01)
+    path = tmp_path / "SMPL_chumpy.pkl"
+    with monkeypatch.context() as m:  # chumpy exists only while the file is written
+        m.setitem(sys.modules, "chumpy", types.ModuleType("chumpy"))
+        m.setitem(sys.modules, "chumpy.ch", module)
+        with open(path, "wb") as f:
+            pickle.dump({**model, "shapedirs": Ch(model["shapedirs"]), "posedirs": Ch(model["posedirs"])}, f, protocol=2)
+    assert "chumpy.ch" not in sys.modules or sys.modules["chumpy.ch"] is not module
+    data = read_smpl_file(path)
+    assert np.array_equal(data["shapedirs"], model["shapedirs"]) and np.array_equal(data["posedirs"], model["posedirs"])
+    assert np.array_equal(SMPLBody(path).rest_verts(), SMPLBody(tmp_path / "ref.pkl").rest_verts())
+
+
+def test_pickles_that_are_no_model(tmp_path):
+    path = tmp_path / "list.pkl"
+    path.write_bytes(pickle.dumps([1, 2, 3]))
+    with pytest.raises(InputError, match="list.pkl: not a SMPL-family model file .a pickled list"):
+        SMPLBody(path)
+    model = write_smpl_pkl(tmp_path / "ref.pkl")
+    path.write_bytes(pickle.dumps({**model, "weights": "heavy"}))
+    with pytest.raises(InputError, match="list.pkl: not a SMPL-family model file: an array is not numeric"):
+        SMPLBody(path)
+    truncated = tmp_path / "cut.pkl"
+    truncated.write_bytes((tmp_path / "ref.pkl").read_bytes()[:500])
+    with pytest.raises(InputError, match="cut.pkl: cannot read SMPL model file"):
+        SMPLBody(truncated)

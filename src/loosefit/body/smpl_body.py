@@ -1,7 +1,8 @@
 """SMPL, SMPL-H and SMPL-X bodies through ``smplx``, from model files the user supplies.
 
 The model files are not distributed with loosefit (their licence forbids it): pass the path of a
-``SMPL_*.pkl`` / ``.npz``, ``SMPLH_*.npz`` or ``SMPLX_*.npz`` file. The forward pass is smplx's own
+``SMPL_*.pkl`` / ``.npz``, ``SMPLH_*.npz`` or ``SMPLX_*.npz`` file. Reading one runs no code from it
+(:func:`read_smpl_file`). The forward pass is smplx's own
 ``lbs`` (shape blend shapes, pose-corrective blend shapes, skinning); loosefit only changes the frame:
 SMPL is Y-up facing +Z, loosefit is Z-up facing -Y, a rotation of +90 degrees about X, then the same
 floor placement as every body (soles on ``z = 0``, root above the origin).
@@ -19,6 +20,7 @@ from loosefit.body.base import BodyModel, PosedBody
 from loosefit.errors import InputError
 from loosefit.geometry.lbs import forward_kinematics
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from loosefit.io.npz import load_npz
 from loosefit.motion.motion import Motion
 
 #: SMPL (Y-up, facing +Z) to loosefit (Z-up, facing -Y): (x, y, z) -> (x, -z, y).
@@ -44,28 +46,115 @@ def _dense(a) -> np.ndarray:
     return np.asarray(a.todense() if hasattr(a, "todense") else a, dtype=np.float64)
 
 
+class _ChumpyArray:
+    """What a ``chumpy.ch.Ch`` in an original SMPL pickle becomes: its array (the ``x`` of its pickled
+    state) without chumpy's own code, which the pickle would otherwise run."""
+
+    def __setstate__(self, state):
+        if not isinstance(state, dict) or not isinstance(state.get("x"), np.ndarray):
+            raise pickle.UnpicklingError("a chumpy array without its values ('x')")
+        self.x = state["x"]
+
+    def __array__(self, dtype=None, copy=None):
+        return np.asarray(self.x, dtype=dtype)
+
+
+def _pickle_allow_list() -> dict[tuple[str, str], object]:
+    """The only globals a SMPL-family pickle may name: numpy arrays, dtypes and scalars, scipy sparse
+    matrices (the J_regressor), chumpy arrays (as :class:`_ChumpyArray`) and the helpers that rebuild
+    them. Module paths of several numpy / scipy versions (numpy 2 writes ``numpy._core``)."""
+    import _codecs
+    import copyreg
+
+    import scipy.sparse
+
+    core = np.core.multiarray
+    allowed = {
+        ("numpy", "ndarray"): np.ndarray,
+        ("numpy", "dtype"): np.dtype,
+        ("_codecs", "encode"): _codecs.encode,  # bytes in protocol-2 pickles written by Python 3
+        ("copyreg", "_reconstructor"): copyreg._reconstructor,
+        ("builtins", "object"): object,
+        ("builtins", "set"): set,
+        ("builtins", "frozenset"): frozenset,
+        ("chumpy.ch", "Ch"): _ChumpyArray,
+    }
+    for module in ("numpy.core", "numpy._core"):
+        allowed[(f"{module}.multiarray", "_reconstruct")] = core._reconstruct
+        allowed[(f"{module}.multiarray", "scalar")] = core.scalar
+        allowed[(f"{module}.numeric", "_frombuffer")] = np.core.numeric._frombuffer
+    for kind in ("csc", "csr", "coo"):
+        for name in (f"{kind}_matrix", f"{kind}_array"):
+            if hasattr(scipy.sparse, name):
+                for module in ("scipy.sparse", f"scipy.sparse.{kind}", f"scipy.sparse._{kind}"):
+                    allowed[(module, name)] = getattr(scipy.sparse, name)
+    return allowed
+
+
+class _RefusedGlobal(pickle.UnpicklingError):
+    def __init__(self, module: str, name: str):
+        self.name = f"{module}.{name}"
+        super().__init__(self.name)
+
+
+class _SMPLUnpickler(pickle.Unpickler):
+    """An unpickler that builds only the objects of :func:`_pickle_allow_list`: a crafted pickle that
+    names anything else (``os.system``, ``builtins.eval``...) is refused before it can run."""
+
+    def __init__(self, file):
+        super().__init__(file, encoding="latin1")  # Python 2 pickles (the original SMPL files)
+        self._allowed = _pickle_allow_list()
+
+    def find_class(self, module, name):
+        from _compat_pickle import IMPORT_MAPPING, NAME_MAPPING  # Python 2 names: copy_reg, __builtin__
+
+        module, name = NAME_MAPPING.get((module, name), (IMPORT_MAPPING.get(module, module), name))
+        try:
+            return self._allowed[(module, name)]
+        except (KeyError, TypeError):
+            raise _RefusedGlobal(module, name) from None
+
+
+def _read_pickle(path: Path) -> object:
+    try:
+        with open(path, "rb") as f:
+            return _SMPLUnpickler(f).load()
+    except _RefusedGlobal as e:
+        raise InputError(f"the pickle asks for {e.name}, which a SMPL-family model file never holds; refused "
+                         "(unpickling it could run code)", path) from None
+    except Exception as e:  # noqa: BLE001 - a damaged pickle raises many types
+        raise InputError(f"cannot read SMPL model file: {type(e).__name__}: {e}", path) from None
+
+
 def read_smpl_file(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a SMPL-family model file (``.pkl`` or ``.npz``) into plain float64 / int64 arrays."""
+    """Read a SMPL-family model file (``.pkl`` or ``.npz``) into plain float64 / int64 arrays.
+
+    No code from the file runs: an ``.npz`` is read without pickles (an object array is refused) and a
+    ``.pkl`` through an unpickler that builds only numpy arrays, scipy sparse matrices and chumpy arrays
+    (read as their values, without chumpy).
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError("SMPL model file not found", path)
-    try:
-        if path.suffix == ".pkl":
-            with open(path, "rb") as f:
-                raw = pickle.load(f, encoding="latin1")
-        else:
-            raw = dict(np.load(path, allow_pickle=True))
-    except ModuleNotFoundError as e:
-        raise InputError(f"the pickle needs module {e.name!r} (original SMPL files use chumpy); "
-                         "convert it to .npz or install that module", path) from None
-    except Exception as e:  # noqa: BLE001 - any unreadable file gets the same clear message
-        raise InputError(f"cannot read SMPL model file: {e}", path) from None
+    if path.suffix.lower() == ".pkl":
+        raw = _read_pickle(path)
+        if not isinstance(raw, dict):
+            raise InputError(f"not a SMPL-family model file (a pickled {type(raw).__name__}, not a dict)", path)
+    else:
+        raw = load_npz(path, "SMPL model file", names=_REQUIRED)
     missing = [k for k in _REQUIRED if k not in raw]
     if missing:
         raise InputError(f"not a SMPL-family model file, missing {missing}", path)
-    data = {k: _dense(raw[k]) for k in ("v_template", "shapedirs", "posedirs", "J_regressor", "weights")}
-    data["kintree_table"] = np.asarray(raw["kintree_table"], dtype=np.int64)
-    data["f"] = np.asarray(raw["f"], dtype=np.int64)
+    try:
+        data = {k: _dense(raw[k]) for k in ("v_template", "shapedirs", "posedirs", "J_regressor", "weights")}
+        data["kintree_table"] = np.asarray(raw["kintree_table"], dtype=np.int64)
+        data["f"] = np.asarray(raw["f"], dtype=np.int64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"not a SMPL-family model file: an array is not numeric ({e})", path) from None
+    ndims = {"v_template": 2, "shapedirs": 3, "posedirs": 3, "J_regressor": 2, "weights": 2}
+    flat = [k for k, n in ndims.items() if data[k].ndim != n]
+    if flat:
+        raise InputError(f"not a SMPL-family model file: arrays {flat} have the wrong number of axes", path)
     V, J = data["v_template"].shape[0], data["J_regressor"].shape[0]
     checks = {
         "shapedirs": data["shapedirs"].shape[:2] == (V, 3),
@@ -73,7 +162,8 @@ def read_smpl_file(path: str | Path) -> dict[str, np.ndarray]:
         "J_regressor": data["J_regressor"].shape == (J, V),
         "weights": data["weights"].shape == (V, J),
         "kintree_table": data["kintree_table"].shape == (2, J),
-        "f": data["f"].ndim == 2 and data["f"].shape[1] == 3 and data["f"].max() < V,
+        "f": data["f"].ndim == 2 and data["f"].shape[1] == 3 and data["f"].size > 0
+             and 0 <= data["f"].min() and data["f"].max() < V,
     }
     bad = [k for k, ok in checks.items() if not ok]
     if bad:

@@ -1,8 +1,15 @@
-"""Named arrays in ``.npz`` files: atomic writes, and reads whose errors name the file."""
+"""Named arrays in ``.npz`` files: atomic writes, and reads whose errors name the file.
+
+Every ``.npz`` loosefit reads goes through :func:`load_npz`: it never unpickles (an object array in a
+file is refused, since unpickling can run code), and any damage to the file (truncated, a flipped
+byte, not a zip archive) is an :class:`~loosefit.errors.InputError` naming the file.
+"""
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -16,11 +23,53 @@ def save_npz(path: str | Path, arrays: dict[str, np.ndarray], compressed: bool =
         (np.savez_compressed if compressed else np.savez)(tmp, **arrays)
 
 
-def load_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
-    """All arrays of an ``.npz`` file (no pickles); an unreadable file raises
-    ``InputError("cannot read <what>: ...", path)``."""
+def load_npz(path: str | Path, what: str, names: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+    """The arrays of an ``.npz`` file: all of them, or those of ``names`` that it holds.
+
+    No pickles: an object array among those read is refused. A missing, unreadable or damaged file
+    (truncated, a flipped byte, a bad zip or zlib stream, a bad ``.npy`` header) or a plain ``.npy``
+    raises ``InputError("cannot read <what>: ...", path)``.
+    """
+    path = Path(path)
+    with _reading(path, what) as current:
+        with _open(path, what) as z:
+            arrays = {}
+            for current[0] in z.files if names is None else [k for k in names if k in z.files]:
+                arrays[current[0]] = z[current[0]]
+            return arrays
+
+
+def npz_names(path: str | Path, what: str) -> list[str]:
+    """The names of the arrays in an ``.npz`` file (none is read); errors as :func:`load_npz`."""
+    path = Path(path)
+    with _reading(path, what), _open(path, what) as z:
+        return list(z.files)
+
+
+def _open(path: Path, what: str) -> np.lib.npyio.NpzFile:
+    z = np.load(path, allow_pickle=False)
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise InputError(f"cannot read {what}: not an .npz archive (a single .npy array)", path)
+    return z
+
+
+@contextlib.contextmanager
+def _reading(path: Path, what: str) -> Iterator[list]:
+    """Turn every failure of reading ``path`` into an InputError; yields a one-item list where the
+    reader keeps the name of the array it is reading (for the message)."""
+    current: list = [None]
     try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise InputError(f"cannot read {what}: {e}", Path(path)) from None
+        yield current
+    except InputError:
+        raise
+    except ValueError as e:
+        if "allow_pickle" in str(e):
+            where = "the file holds" if current[0] is None else f"array {current[0]!r} holds"
+            raise InputError(f"cannot read {what}: {where} pickled Python objects, which loosefit never loads "
+                             "(unpickling can run code); store plain numeric arrays", path) from None
+        raise InputError(f"cannot read {what}: {e}", path) from None
+    except OSError as e:
+        raise InputError(f"cannot read {what}: {e.strerror or e}", path) from None
+    except Exception as e:  # noqa: BLE001 - zipfile, zlib, numpy's header parser... raise many types on damaged files
+        raise InputError(f"cannot read {what}: the file is damaged or not an .npz ({type(e).__name__}: {e})",
+                         path) from None
