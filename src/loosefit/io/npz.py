@@ -63,10 +63,12 @@ def _reading(path: Path, what: str) -> Iterator[list]:
     except InputError:
         raise
     except ValueError as e:
+        if "allow_pickle" in str(e) and current[0] is None:  # numpy takes any other file for a pickle
+            raise InputError(f"cannot read {what}: not an .npz archive (nor an .npy array; loosefit never "
+                             "unpickles a file, since that can run code)", path) from None
         if "allow_pickle" in str(e):
-            where = "the file holds" if current[0] is None else f"array {current[0]!r} holds"
-            raise InputError(f"cannot read {what}: {where} pickled Python objects, which loosefit never loads "
-                             "(unpickling can run code); store plain numeric arrays", path) from None
+            raise InputError(f"cannot read {what}: array {current[0]!r} holds pickled Python objects, which loosefit "
+                             "never loads (unpickling can run code); store plain numeric arrays", path) from None
         raise InputError(f"cannot read {what}: {e}", path) from None
     except OSError as e:
         raise InputError(f"cannot read {what}: {e.strerror or e}", path) from None
