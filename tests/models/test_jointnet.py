@@ -309,3 +309,26 @@ def test_fourier_prior_of_the_bone_rest_positions(tiny_train):
         R, T = model(batch["root"], batch["joints"], psd=False)["bones"]
         standardised = (matrix_to_euler(R, "xyz") - model.euler_mean) / model.euler_std
         assert torch.allclose(standardised[0, 0, 0], standardised[0, 0, 1], atol=1e-4)  # the same MLP input
+
+
+def test_grouped_gru_takes_a_strided_hidden_state():
+    """A hidden state that is a transposed view (as a stream passes it back in) gives the same output as a
+    contiguous copy; CUDA's GRU kernel refuses a strided one, so the grouped GRU makes it contiguous."""
+    torch.manual_seed(0)
+    gru = JointGRU(3, 5, 7)
+    x, h0 = torch.randn(2, 4, 3, 5), torch.randn(3, 2, 7).transpose(0, 1)
+    assert not h0.is_contiguous()
+    with torch.no_grad():
+        assert torch.equal(gru.joint_by_joint(x, h0)[0], gru.joint_by_joint(x, h0.contiguous())[0])
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+@pytest.mark.parametrize("order", ["joint_by_joint", "all_joints_per_frame"])
+def test_grouped_gru_on_cuda_equals_cpu(order):
+    torch.manual_seed(0)
+    gru = JointGRU(3, 5, 7)
+    x, h0 = torch.randn(2, 6, 3, 5), torch.randn(3, 2, 7).transpose(0, 1)
+    with torch.no_grad():
+        expected = getattr(gru, order)(x, h0)
+        got = getattr(gru.cuda(), order)(x.cuda(), h0.cuda())
+    assert all((g.cpu() - e).abs().max() < 1e-5 for g, e in zip(got, expected))

@@ -678,3 +678,35 @@ def test_skinning_prior_starts_at_body_lbs_and_learns_away_from_it(data, batch, 
     assert (moved - out["weights"]).abs().max() > 1e-4
     with pytest.raises(InputError, match="joints"):
         check_graph(graph, model.config, data.num_joints + 1)
+
+
+def _bound(model, data):
+    from loosefit.models.swingar import BoundSwinGar
+
+    return BoundSwinGar(model.eval(), data.graphs[0])
+
+
+def test_bound_model_moves_its_garment_graph_with_it(model, data):
+    """``.to(device)`` moves the garment graph and its features (plain tensors, not buffers) with the weights;
+    the meta device shows every tensor's move without a GPU, and the CPU round trip leaves them bit-identical."""
+    import copy
+
+    bound = _bound(copy.deepcopy(model), data)
+    before = {k: v.clone() for k, v in bound.g.items()}
+    bound.to("meta")
+    assert all(v.device.type == "meta" for v in bound.g.values())
+    assert all(t.device.type == "meta" for t in bound.features)
+    assert bound.faces.device.type == "meta"
+    bound = _bound(model, data).to(torch.float64).to(torch.float32)
+    assert all(torch.equal(before[k], v) for k, v in bound.g.items())
+    assert bound.g["table"].dtype == before["table"].dtype  # integer tables keep their type under a dtype cast
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_bound_model_animates_on_cuda_like_on_cpu(model, data):
+    bound = _bound(model, data)
+    root, joints = torch.randn(1, 4, 11), torch.randn(1, 4, model.sizes()["num_joints"] - 1, 6)
+    with torch.no_grad():
+        expected = bound(root, joints)["verts"]
+        got = bound.to("cuda")(root.cuda(), joints.cuda())["verts"].cpu()
+    assert (got - expected).abs().max() < 1e-4

@@ -190,12 +190,13 @@ class JointGRU(nn.Module):
     def joint_by_joint(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` evaluated one joint at a time with torch's GRU kernel (the ``nn.GRU`` call)."""
         N, T, G, _ = x.shape
-        h = x.new_zeros(G, N, self.hidden) if h is None else h.transpose(0, 1)  # (G, N, H)
+        # contiguous: CUDA's GRU kernel refuses a strided hidden state ("hx is not contiguous")
+        h = x.new_zeros(G, N, self.hidden) if h is None else h.transpose(0, 1).contiguous()  # (G, N, H)
         outputs, last = [], []
         for g in range(G):
             weights = [self.weight_ih[g], self.weight_hh[g], self.bias_ih[g, 0], self.bias_hh[g, 0]]
             # arguments: has_biases, num_layers, dropout, train, bidirectional, batch_first
-            out, h_g = torch._VF.gru(x[:, :, g], h[g][None], weights, True, 1, 0.0, self.training, False, True)
+            out, h_g = torch._VF.gru(x[:, :, g].contiguous(), h[g][None], weights, True, 1, 0.0, self.training, False, True)
             outputs.append(out)
             last.append(h_g[0])
         return torch.stack(outputs, 2), torch.stack(last, 1)

@@ -561,6 +561,14 @@ class BoundSwinGar(nn.Module):
         with torch.no_grad():
             self.features = model.garment_features(self.g)
 
+    def _apply(self, fn, recurse: bool = True):
+        # The graph and its features are plain tensors, not buffers: move them with the module (``.to(cuda)``),
+        # or the first CUDA forward pass mixes devices.
+        super()._apply(fn, recurse)
+        self.g = {k: fn(v) if torch.is_tensor(v) else v for k, v in self.g.items()}
+        self.features = tuple(fn(t) for t in self.features)
+        return self
+
     def sizes(self) -> dict:
         return {**self.model.sizes(), "num_verts": len(self.g["rest"]), "num_faces": len(self.g["faces"])}
 
