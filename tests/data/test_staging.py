@@ -14,37 +14,49 @@ import numpy as np
 import pytest
 
 from loosefit.data import DatasetStore
-from loosefit.data import staging
+from loosefit.data import lock, staging
 from tests.data.conftest import random_verts
 
-# Writes a sequence slowly (one 32-frame block every 0.1 s) and touches a flag file once it is half way.
+# Writes sequences slowly, each in its own thread of one process (one process writes a store at a
+# time): one 32-frame block every 0.1 s, touching a flag file once half way. Arguments: the store,
+# then name, flag file and seed for each sequence.
 _SLOW_WRITER = textwrap.dedent(
     """
-    import sys, time, pathlib
+    import sys, threading, time, pathlib
     import numpy as np
     from loosefit.data import DatasetStore
 
-    store_path, name, flag, seed = sys.argv[1], sys.argv[2], pathlib.Path(sys.argv[3]), int(sys.argv[4])
-
     class SlowFrames:
         shape = (70, 25, 3)
-        def __init__(self):
+        def __init__(self, flag, seed):
+            self.flag = flag
             self.data = np.random.default_rng(seed).normal(0, 0.3, self.shape).astype(np.float32)
         def __getitem__(self, frames):
             if frames.start > 0:
-                flag.touch()
+                self.flag.touch()
                 time.sleep(60)  # killed here, half of the chunks written
             return self.data[frames]
 
-    store = DatasetStore.open(store_path, mode="a")
-    store.write_sequence(name, SlowFrames(), "g", "b", "m70", {}, {}, "train")
+    store = DatasetStore.open(sys.argv[1], mode="a")
+    jobs = [sys.argv[i:i + 3] for i in range(2, len(sys.argv), 3)]
+    threads = [
+        threading.Thread(target=store.write_sequence,
+                         args=(name, SlowFrames(pathlib.Path(flag), int(seed)), "g", "b", "m70", {}, {}, "train"))
+        for name, flag, seed in jobs
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
     """
 )
 
 
-def _start_writer(store, name, flag, seed):
+def _start_writer(store, *jobs):
+    """A process writing ``jobs`` ((name, flag, seed)...) into ``store``."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    return subprocess.Popen([sys.executable, "-c", _SLOW_WRITER, str(store.path), name, str(flag), str(seed)], env=env)
+    args = [str(x) for job in jobs for x in job]
+    return subprocess.Popen([sys.executable, "-c", _SLOW_WRITER, str(store.path), *args], env=env)
 
 
 def _wait_for(flags, procs, timeout=60.0):
@@ -62,9 +74,10 @@ def test_killed_writers_leave_no_partial_sequence(store, tmp_path):
     store.write_sequence("replaced", random_verts(70, 25, seed=8), "g", "b", "m70", {}, {}, "test")
     old_replaced = store.sequence("replaced").verts[:]
 
-    # Two processes at once: one writes a new sequence, one rewrites an existing one; both are killed.
+    # Two writes at once: one of a new sequence, one rewriting an existing one; the writer is killed.
+    store.close()  # the writer process needs the store's write lock
     flags = [tmp_path / "new.flag", tmp_path / "rewrite.flag"]
-    procs = [_start_writer(store, "new", flags[0], 1), _start_writer(store, "replaced", flags[1], 2)]
+    procs = [_start_writer(store, ("new", flags[0], 1), ("replaced", flags[1], 2))]
     try:
         _wait_for(flags, procs)
     finally:
@@ -72,6 +85,8 @@ def test_killed_writers_leave_no_partial_sequence(store, tmp_path):
             p.send_signal(signal.SIGKILL)
             p.wait()
 
+    # The killed writer's lock file stays, naming it, but nobody holds the lock any more (stale).
+    assert lock.read_holder(store.path).pid == procs[0].pid and lock.current_holder(store.path) is None
     leftovers = staging.leftovers(store.path)
     assert sorted(l.target for l in leftovers) == ["sequences/new", "sequences/replaced"]
     assert all(l.kind == "tmp" and not l.writer_alive() for l in leftovers)
@@ -87,8 +102,10 @@ def test_killed_writers_leave_no_partial_sequence(store, tmp_path):
     problems = reader.problems()
     assert len(problems) == 2 and all("unfinished write" in p and "writer gone" in p for p in problems.values())
 
-    writer = DatasetStore.open(store.path, mode="a")  # cleans what dead writers left
-    assert len(writer.recovered) == 2 and staging.leftovers(store.path) == [] and writer.problems() == {}
+    writer = DatasetStore.open(store.path, mode="a")  # cleans what dead writers left, takes over the lock
+    assert len(writer.recovered) == 3 and staging.leftovers(store.path) == [] and writer.problems() == {}
+    assert writer.recovered[0].startswith(f"took over the write lock of pid {procs[0].pid} on {staging.this_host()}")
+    assert writer.recovered[0].endswith("which no longer holds it")
     again = random_verts(70, 25, seed=1)
     writer.write_sequence("new", again, "g", "b", "m70", {}, {}, "train")
     np.testing.assert_array_equal(DatasetStore.open(store.path).sequence("new").verts[:], again)

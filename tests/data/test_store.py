@@ -226,29 +226,34 @@ def test_corrupt_sequence_is_reported_by_name(store):
     (store.path / "sequences" / "broken" / "verts" / ".zarray").unlink()
     (store.path / "sequences" / "holed" / "verts" / "1.0.0").unlink()
     reopened = DatasetStore.open(store.path)
-    with pytest.raises(InputError, match="corrupt sequence 'broken': array 'verts' is missing") as err:
+    with pytest.raises(InputError, match="corrupt sequence 'broken': array 'verts': no readable .zarray") as err:
         reopened.sequence("broken")
-    assert str(store.path / "sequences" / "broken") in str(err.value)
-    with pytest.raises(InputError, match="corrupt sequence 'holed': array 'verts' has 2 of its 3 chunk files"):
+    assert err.value.path == store.path / "sequences" / "broken" / "verts" / ".zarray"
+    with pytest.raises(InputError, match=r"corrupt sequence 'holed': array 'verts': chunk file is missing \(2 of") as err:
         reopened.sequence("holed")
+    assert err.value.path == store.path / "sequences" / "holed" / "verts" / "1.0.0"
     np.testing.assert_array_equal(reopened.sequence("good").verts[:], verts)
     assert reopened.problems() == {
-        "sequences/broken": "array 'verts' is missing or has no readable .zarray",
-        "sequences/holed": "array 'verts' has 2 of its 3 chunk files",
+        "sequences/broken": "verts/.zarray: no readable .zarray (missing or not JSON)",
+        "sequences/holed": "verts/1.0.0: chunk file is missing (2 of the array's 3 are there)",
     }
-    assert "sequences/broken: array 'verts' is missing" in format_info(reopened.info())
+    assert "sequences/broken: verts/.zarray: no readable .zarray" in format_info(reopened.info())
     store.delete_sequence("broken")
     store.write_sequence("holed", verts, "g", "b", "m70", {}, {}, "train")
     assert store.problems() == {} and store.sequence_names() == ["good", "holed"]
 
 
-def test_sequence_without_marker_is_not_listed(store):
+def test_sequence_without_marker_is_refused_by_name(store):
+    """An entry without completion marker is not a sequence (has_sequence), but listing the store
+    names it rather than leaving it out silently."""
     store.write_sequence("s", random_verts(45, 25), "g", "b", "m45", {}, {}, "train")
     attrs_file = store.path / "sequences" / "s" / ".zattrs"
     attrs_file.write_text(json.dumps({k: v for k, v in json.loads(attrs_file.read_text()).items() if k != "complete"}))
-    assert not store.has_sequence("s") and store.sequence_names() == []
+    assert not store.has_sequence("s")
     assert store.problems() == {
         "sequences/s": "no completion marker in its .zattrs (corrupt or not written by loosefit)"
     }
-    with pytest.raises(InputError, match="corrupt sequence 's': no completion marker"):
-        store.sequence("s")
+    for read in (store.sequence_names, lambda: store.sequence("s")):
+        with pytest.raises(InputError, match="corrupt sequence 's': no completion marker") as err:
+            read()
+        assert err.value.path == attrs_file
