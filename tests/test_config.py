@@ -8,7 +8,15 @@ from typing import Literal, Optional
 
 import pytest
 
-from loosefit.config import apply_overrides, config_to_dict, load_config, parse_override, save_config
+from loosefit.config import (
+    apply_overrides,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+    load_yaml,
+    parse_override,
+    save_config,
+)
 from loosefit.errors import InputError
 from loosefit.train import StageConfig, TrainConfig
 
@@ -166,3 +174,27 @@ def test_value_checks_of_the_dataclass_name_the_file(tmp_path):
         load_config(TrainConfig, None, ["threads=0"])
     with pytest.raises(InputError, match=r"'schedule': must be one of \['cosine', 'step', 'none'\]"):
         load_config(TrainConfig, None, ["schedule=linear"])
+
+
+@pytest.mark.parametrize(
+    "text, key, line, first",
+    [
+        ("name: x\nflag: true\nname: y\n", "name", 3, 1),
+        ("name: x\ninner:\n  a: 1\n  b: 2.0\n  a: 5\n", "a", 5, 3),
+        ("name: x\ntable: {low: {a: 1}, low: {a: 2}}\n", "low", 2, 2),
+        ("name: x\n1: a\n1: b\n", 1, 3, 2),
+    ],
+)
+def test_duplicate_keys_are_refused_with_their_lines(tmp_path, text, key, line, first):
+    path = _write(tmp_path, text)
+    with pytest.raises(InputError) as info:
+        load_config(Outer, path)
+    assert str(info.value).startswith(f"{path}: duplicate key {key!r} on line {line} (first on line {first})")
+
+
+def test_merge_keys_may_be_overridden_and_override_values_are_checked(tmp_path):
+    text = "name: x\nbase: &base {a: 1, b: 2.0}\n"
+    cfg = config_from_dict(Outer, {k: v for k, v in load_yaml(text + "inner: {<<: *base, a: 7}\n").items() if k != "base"})
+    assert cfg.inner == Inner(a=7, b=2.0)
+    with pytest.raises(InputError, match=r"override 'inner=\{a: 1, a: 2\}': duplicate key 'a'"):
+        apply_overrides(Outer(name="x"), ["inner={a: 1, a: 2}"])

@@ -13,7 +13,8 @@ nested dataclasses and ``dict`` fields (creating missing dictionary entries); th
 type-checked like a file.
 
 YAML 1.1 reads ``1e-3`` (no dot) as a string; this module's loader reads it as a float, in files and
-in overrides alike.
+in overrides alike. Every YAML file loosefit reads goes through :func:`load_yaml`: a key given twice in one
+mapping is an error naming the file, the key and its lines (plain YAML keeps the last value silently).
 """
 
 from __future__ import annotations
@@ -43,8 +44,33 @@ __all__ = [
 ]
 
 
+class _DuplicateKey(yaml.YAMLError):
+    """A mapping names one key twice (YAML itself would silently keep the last value)."""
+
+    def __init__(self, key: Any, line: int, first: int):
+        self.key, self.line, self.first = key, line, first
+        super().__init__(f"duplicate key {key!r} on line {line} (first on line {first})")
+
+
 class _Loader(yaml.SafeLoader):
-    """Safe YAML loader that also reads exponent floats without a dot (``1e-3``) as floats."""
+    """Safe YAML loader that also reads exponent floats without a dot (``1e-3``) as floats, and refuses
+    a mapping that names a key twice."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # `<<: *base` entries may be overridden by the mapping's own keys
+                key = self.construct_object(key_node, deep=True)
+                line = key_node.start_mark.line + 1
+                try:
+                    if key in seen:
+                        raise _DuplicateKey(key, line, seen[key])
+                except TypeError:
+                    continue  # an unhashable key: SafeLoader's own error says so
+                seen[key] = line
+        return super().construct_mapping(node, deep=deep)
 
 
 _Loader.add_implicit_resolver(
@@ -55,9 +81,13 @@ _Loader.add_implicit_resolver(
 
 
 def load_yaml(text: str, source: str | Path | None = None) -> Any:
-    """Parse YAML text with the config loader; a syntax error is an :class:`InputError` naming ``source``."""
+    """Parse YAML text with the config loader (safe: plain data only); a syntax error or a key given twice
+    in one mapping is an :class:`InputError` naming ``source`` (and the key and its lines)."""
     try:
         return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader derives from SafeLoader
+    except _DuplicateKey as e:
+        raise InputError(f"{e}: a key may appear once in a mapping (YAML would keep only the last value)",
+                         source) from None
     except yaml.YAMLError as e:
         raise InputError(f"invalid YAML: {e}", source) from None
 

@@ -14,8 +14,8 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from loosefit.config import load_yaml
 from loosefit.errors import InputError
 from loosefit.motion.axes import parse_axis
 from loosefit.motion.rig import TargetRig
@@ -112,9 +112,13 @@ def load_joint_map(path: str | Path) -> JointMap:
     """Read a YAML joint map (format in :class:`JointMap`)."""
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"cannot read joint map: {e}", path) from None
+    try:
+        data = load_yaml(text, path)  # safe, and a key given twice (a joint mapped twice) is an error
+    except InputError as e:
+        raise InputError(f"cannot read joint map: {e.problem}", path) from None
     return JointMap.from_dict(data, path)
 
 
