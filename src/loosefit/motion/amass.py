@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from loosefit.errors import InputError
+from loosefit.io.npz import load_npz
 from loosefit.geometry.lbs import forward_kinematics
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from loosefit.geometry.vectors import unit
@@ -172,19 +173,17 @@ def source_floor(positions: np.ndarray, standing: float) -> float:
 def _read(path: Path, source_fps: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """``poses (T, W)`` float64, ``trans (T, 3)`` float64 and the frame rate of an AMASS file
     (``source_fps`` when the file has none)."""
+    # Only the arrays used: AMASS files may carry others (gender...); damage of any kind names the file.
+    z = load_npz(path, "AMASS file", names=("poses", "trans", "mocap_framerate", "mocap_frame_rate"))
+    rate_key = next((k for k in ("mocap_framerate", "mocap_frame_rate") if k in z), None)
+    missing = sorted({"poses", "trans"} - set(z))
+    if missing:
+        raise InputError(f"not an AMASS motion, missing arrays {missing}", path)
     try:
-        with np.load(path, allow_pickle=False) as z:
-            files = set(z.files)
-            rate_key = next((k for k in ("mocap_framerate", "mocap_frame_rate") if k in files), None)
-            missing = sorted({"poses", "trans"} - files)
-            if missing:
-                raise InputError(f"not an AMASS motion, missing arrays {missing}", path)
-            poses = np.asarray(z["poses"], np.float64)
-            trans = np.asarray(z["trans"], np.float64)
-            rate = float(z[rate_key]) if rate_key else None
-    except InputError:
-        raise
-    except (OSError, ValueError) as e:
+        poses = np.asarray(z["poses"], np.float64)
+        trans = np.asarray(z["trans"], np.float64)
+        rate = float(z[rate_key]) if rate_key else None
+    except (TypeError, ValueError) as e:
         raise InputError(f"cannot read AMASS file: {e}", path) from None
     if rate is None:
         if source_fps is None:

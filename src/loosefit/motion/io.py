@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
-import numpy as np
-
 from loosefit.errors import InputError
+from loosefit.io.npz import npz_names
 from loosefit.motion.amass import import_amass
 from loosefit.motion.bvh import read_bvh, retarget_bvh
 from loosefit.motion.motion import DEFAULT_FPS, Motion
@@ -50,14 +48,11 @@ def read_motion(path: str | Path, body, joint_map: JointMap | str | Path | None 
         return retarget_bvh(bvh, body, joint_map, fps=fps, name=path.stem)
     if joint_map is not None:
         raise InputError("a joint map applies to BVH files only", path)
+    # Damage of any kind (truncated, a flipped byte, pickles) is an InputError naming the file.
     try:
-        archive = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile) as e:
-        raise InputError(f"not a .bvh or .npz motion file ({e})", path) from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise InputError("not an .npz archive (a single .npy array)", path)
-    with archive:
-        keys = set(archive.files)
+        keys = set(npz_names(path, ".npz"))
+    except InputError as e:
+        raise InputError(f"not a .bvh or .npz motion file: {e.problem.removeprefix('cannot read .npz: ')}", path) from None
     if "rotations" in keys:
         motion = Motion.load(path)
         _check_rate(motion.fps, source_fps, path)

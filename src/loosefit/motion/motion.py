@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.io.npz import load_npz
 from loosefit.paths import atomic_path
 
 DEFAULT_FPS = 30.0
@@ -116,22 +117,22 @@ class Motion:
     def load(cls, path: str | Path) -> "Motion":
         """Read a Motion ``.npz`` written by :meth:`save`; errors name the file and the problem."""
         path = Path(path)
+        z = load_npz(path, "motion")  # any damage to the file: an InputError naming it
+        missing = {"rotations", "translation", "fps"} - set(z)
+        if missing:
+            raise InputError(f"not a loosefit motion, missing arrays {sorted(missing)}", path)
         try:
-            with np.load(path, allow_pickle=False) as z:
-                missing = {"rotations", "translation", "fps"} - set(z.files)
-                if missing:
-                    raise InputError(f"not a loosefit motion, missing arrays {sorted(missing)}", path)
-                return cls(
-                    rotations=z["rotations"],
-                    translation=z["translation"],
-                    fps=float(z["fps"]),
-                    rig=str(z["rig"]) if "rig" in z.files else "cmu_mb",
-                    joint_names=[str(n) for n in z["joint_names"]] if "joint_names" in z.files else [],
-                    name=str(z["name"]) if "name" in z.files else path.stem,
-                )
+            return cls(
+                rotations=z["rotations"],
+                translation=z["translation"],
+                fps=float(z["fps"]),
+                rig=str(z["rig"]) if "rig" in z else "cmu_mb",
+                joint_names=[str(n) for n in z["joint_names"]] if "joint_names" in z else [],
+                name=str(z["name"]) if "name" in z else path.stem,
+            )
         except InputError as e:
             if e.path is None:
                 raise InputError(e.problem, path) from None
             raise
-        except (OSError, ValueError, KeyError) as e:
+        except (ValueError, TypeError) as e:
             raise InputError(f"cannot read motion: {e}", path) from None

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.io.npz import load_npz, npz_names
 from loosefit.viz.scene import BODY_COLOR, GARMENT_COLOR, MeshTrack
 
 MOTION_ARRAYS = {"rotations", "translation", "fps"}
@@ -148,8 +149,4 @@ def load_panels(path, sequence: str | None = None, body=None) -> list[list[MeshT
 
 def _read_npz(path: Path, names_only: bool = False):
     """All arrays of an ``.npz`` as a dict (or only their names), with errors naming the file."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            return list(z.files) if names_only else {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError) as e:
-        raise InputError(f"cannot read .npz: {e}", path) from None
+    return npz_names(path, ".npz") if names_only else load_npz(path, ".npz")

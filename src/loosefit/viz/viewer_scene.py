@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.io.npz import load_npz
 from loosefit.viz.scene import BODY_COLOR, GARMENT_COLOR
 
 #: The heat map's colour map (matplotlib name) and its number of entries.
@@ -101,8 +102,7 @@ def _npz_panel(path: Path) -> tuple[ViewerPanel, float]:
     from loosefit.viz.inputs import mesh_sequence_panel
 
     tracks = mesh_sequence_panel(path)  # errors name the file; the file is readable past this line
-    with np.load(path, allow_pickle=False) as z:
-        fps = float(z["fps"]) if "fps" in z.files else 30.0
+    fps = float(load_npz(path, "mesh sequence", names=["fps"]).get("fps", 30.0))
     return _panel_from_tracks(tracks, path.stem, str(path)), fps
 
 
