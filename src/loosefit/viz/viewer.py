@@ -14,6 +14,11 @@ Its data is two things:
   (``file://``) but runs classic scripts.
 
 Identical arrays (a body shared by the simulation and its predictions) are stored once.
+
+The server (:class:`ViewerServer`) answers only requests addressed to this machine by name
+(:data:`LOOPBACK_HOSTS`: another site's page cannot read the scene through DNS rebinding), lists no
+folders, and answers a malformed request with its status (400, 414, 431, 505) rather than a traceback;
+a browser that drops a connection mid-answer is not an error.
 """
 
 from __future__ import annotations
@@ -24,9 +29,12 @@ import functools
 import hashlib
 import json
 import shutil
+import sys
 import threading
+from http import HTTPStatus
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
@@ -99,14 +107,58 @@ def manifest_script(manifest: dict) -> bytes:
     return ("window.LOOSEFIT_MANIFEST = " + json.dumps(manifest, separators=(",", ":")) + ";\n").encode()
 
 
-class _Handler(SimpleHTTPRequestHandler):
-    """Static files from ``viz/static`` plus the scene's ``data/manifest.js`` and ``data/scene.bin`` from memory."""
+#: Host header names the server answers besides its own address: a page of another site that points its
+#: own name at 127.0.0.1 (DNS rebinding) sends that name and gets 403, so it cannot read the scene.
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "[::1]")
 
-    def __init__(self, *args, files: dict[str, tuple[bytes, str]], **kwargs):
+
+def host_name(header: str) -> str:
+    """The host of a ``Host`` header without its port, lower case: ``"[::1]:8000"`` -> ``"[::1]"``."""
+    host = header.strip().lower()
+    if host.startswith("["):
+        return host[: host.find("]") + 1] if "]" in host else host
+    return host.rsplit(":", 1)[0] if ":" in host else host
+
+
+class _Handler(SimpleHTTPRequestHandler):
+    """Static files from ``viz/static`` plus the scene's ``data/manifest.js`` and ``data/scene.bin`` from memory.
+
+    Only ``GET`` and ``HEAD`` of files: no directory listings (404), a path with a NUL byte is no file
+    (404), and a request whose ``Host`` is not one of ``hosts`` gets 403. Malformed requests get the base
+    class's 400 / 414 / 431 / 505 answers.
+    """
+
+    # The base class answers a request line it cannot parse (or of HTTP/2) as HTTP/0.9 would: a body without
+    # a status line. HTTP/1.0 gives every error answer its status line.
+    default_request_version = "HTTP/1.0"
+
+    def __init__(self, *args, files: dict[str, tuple[bytes, str]], hosts: frozenset[str], **kwargs):
         self._files = files
+        self._hosts = hosts
         super().__init__(*args, directory=str(STATIC_DIR), **kwargs)
 
+    def _host_allowed(self) -> bool:
+        host = self.headers.get("Host")
+        if host is None:  # HTTP/1.0 clients may send none (browsers always do); HTTP/1.1 requires one
+            if self.request_version != "HTTP/1.1":
+                return True
+            self.send_error(HTTPStatus.BAD_REQUEST, "Missing Host header")
+            return False
+        if host_name(host) not in self._hosts:
+            self.send_error(HTTPStatus.FORBIDDEN, "Host not allowed",
+                            "This viewer answers only requests addressed to this machine (localhost).")
+            return False
+        return True
+
     def do_GET(self):
+        if self._host_allowed():
+            self._get()
+
+    def do_HEAD(self):
+        if self._host_allowed():
+            super().do_HEAD()
+
+    def _get(self):
         path = self.path.split("?", 1)[0]
         if path in self._files:
             body, ctype = self._files[path]
@@ -119,13 +171,40 @@ class _Handler(SimpleHTTPRequestHandler):
             return
         super().do_GET()
 
+    def send_head(self):
+        try:
+            if "\x00" not in unquote(self.path.split("?", 1)[0]):  # no file name holds a NUL byte
+                return super().send_head()
+        except ValueError:  # an unencodable name: os refuses it, so no such file
+            pass
+        self.send_error(HTTPStatus.NOT_FOUND, "File not found")
+        return None
+
+    def list_directory(self, path):
+        self.send_error(HTTPStatus.NOT_FOUND, "File not found")
+        return None
+
     def end_headers(self):
-        if not self.path.startswith("/data/"):
+        # error answers to a malformed request line come before the path is parsed
+        if not getattr(self, "path", "").startswith("/data/"):
             self.send_header("Cache-Control", "no-cache")
         super().end_headers()
 
     def log_message(self, format, *args):  # noqa: A002 - the base class's name
         pass
+
+
+class _Server(ThreadingHTTPServer):
+    daemon_threads = True
+
+    def handle_error(self, request, client_address):
+        """A browser that closes its connection mid-answer (a reload, a closed tab) is normal: say nothing.
+        Anything else: one line on stderr, not a traceback."""
+        error = sys.exc_info()[1]
+        if isinstance(error, (ConnectionError, TimeoutError)):
+            return
+        print(f"loosefit view: error answering {client_address[0]}: {type(error).__name__}: {error}",
+              file=sys.stderr, flush=True)
 
 
 class ViewerServer:
@@ -135,21 +214,26 @@ class ViewerServer:
         scene: what to show; None: nothing until :meth:`show` (the port is taken at once either way).
         port: TCP port; 0 picks a free one (see :attr:`url`).
         host: the address to listen on (default: this machine only).
+        allowed_hosts: the ``Host`` header names (without port) answered; the others get 403. Default:
+            :data:`LOOPBACK_HOSTS` and ``host``.
 
     Raises:
         InputError: the port is in use (or cannot be opened).
     """
 
-    def __init__(self, scene: ViewerScene | None, port: int = 8000, host: str = "127.0.0.1"):
+    def __init__(self, scene: ViewerScene | None, port: int = 8000, host: str = "127.0.0.1",
+                 allowed_hosts: tuple[str, ...] | None = None):
         self._files: dict[str, tuple[bytes, str]] = {}
+        if allowed_hosts is None:
+            allowed_hosts = LOOPBACK_HOSTS + (f"[{host}]" if ":" in host else host,)
+        hosts = frozenset(h.lower() for h in allowed_hosts)
         try:
-            self.httpd = ThreadingHTTPServer((host, port), functools.partial(_Handler, files=self._files))
+            self.httpd = _Server((host, port), functools.partial(_Handler, files=self._files, hosts=hosts))
         except OSError as e:
             if e.errno == errno.EADDRINUSE:
                 raise InputError(f"port {port} on {host} is in use: choose another with --port "
                                  f"(or stop what listens there)") from None
             raise InputError(f"cannot listen on {host}:{port}: {e.strerror or e}") from None
-        self.httpd.daemon_threads = True
         self.host, self.port = host, self.httpd.server_address[1]
         self._thread: threading.Thread | None = None
         if scene is not None:
