@@ -265,3 +265,45 @@ def test_garment_made_for_another_body(tmp_path, body):
     assert g.params["attachment"] == "straps"
     assert g.params["top_z"] - neck(body) == pytest.approx(v[:, 2].max() - neck(tall), abs=0.02)
     assert measure_body(tall).joints["neck"][0][2] - neck(body) > 0.05  # the bodies really differ
+
+
+def _tube(n, rings=2, radius=0.2, height=0.5):
+    """A cylinder side of ``rings`` rings of ``n`` vertices: two openings of ``n`` vertices each."""
+    angle = 2 * np.pi * np.arange(n) / n
+    verts = [[radius * np.cos(a), radius * np.sin(a), z] for z in np.linspace(1.0, 1.0 - height, rings) for a in angle]
+    faces = []
+    for r in range(rings - 1):
+        for i in range(n):
+            a, b, c, d = r * n + i, r * n + (i + 1) % n, (r + 1) * n + i, (r + 1) * n + (i + 1) % n
+            faces += [[a, c, b], [b, c, d]]
+    return np.array(verts), np.array(faces)
+
+
+def _grid(n, size=0.5):
+    """A flat square of ``n`` x ``n`` vertices: one opening."""
+    u = np.linspace(0, size, n)
+    verts = np.array([[x, 0.0, 1.0 - y] for y in u for x in u])
+    faces = [[j * n + i, j * n + i + 1, (j + 1) * n + i] for j in range(n - 1) for i in range(n - 1)]
+    faces += [[j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i] for j in range(n - 1) for i in range(n - 1)]
+    return verts, np.array(faces)
+
+
+@pytest.mark.parametrize("mesh, message", [
+    ((np.array([[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0]]), np.array([[0, 1, 2]])),
+     r"not a garment: 3 vertices, 1 faces with 1 opening\(s\)"),
+    (_grid(12), r"not a garment: 144 vertices, 242 faces with 1 opening\(s\)"),  # a cape: nothing to put on
+    ((trimesh.creation.icosphere(2, 0.3).vertices, trimesh.creation.icosphere(2, 0.3).faces),
+     r"not a garment: 162 vertices, 320 faces with 0 opening\(s\)"),  # a closed surface
+    (_tube(6, rings=4), r"too coarse to be a garment: 24 vertices, 36 faces, its largest opening has 6 vertices"),
+])
+def test_meshes_too_small_to_wear_are_refused(tmp_path, body, mesh, message):
+    path = write_obj(tmp_path / "small.obj", *mesh)
+    with pytest.raises(InputError, match=message) as err:
+        import_garment(path, body)
+    assert str(err.value).startswith(str(path))
+
+
+def test_the_smallest_wearable_tube_is_imported(tmp_path, body):
+    # 8 vertices around and two openings: wearable by the counts; placement puts it around the chest.
+    g = import_garment(write_obj(tmp_path / "tube.obj", *_tube(8, rings=6, radius=0.17)), body)
+    assert g.num_verts == 48 and g.params["attachment"] in ("strapless", "waistband")

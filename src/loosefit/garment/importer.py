@@ -10,7 +10,8 @@ edges where three or more panels meet and pinched vertices (split into manifold 
 split seam).
 What is an error (:class:`~loosefit.errors.InputError` naming the file): unreadable lines, face
 indices out of range, NaN or infinite coordinates, an empty mesh, a non-orientable surface,
-several large pieces, no plausible placement on the body.
+several large pieces, a mesh too small to be worn (:func:`check_wearable`: fewer than two openings,
+or a largest opening of fewer than 8 vertices), no plausible placement on the body.
 
 Units: each of metres, centimetres and millimetres that makes the garment's largest side
 between 0.15 and 2.5 m is tried (at most two of them can), and the better placement wins.
@@ -29,7 +30,7 @@ from loosefit.errors import InputError
 from loosefit.garment.fitting import orient_outward, push_out
 from loosefit.garment.garment import Garment
 from loosefit.garment.landmarks import measure_body
-from loosefit.garment.mesh_checks import face_areas, face_components, mesh_report, unique_edges
+from loosefit.garment.mesh_checks import boundary_loops, face_areas, face_components, mesh_report, unique_edges
 from loosefit.garment.obj_io import read_obj
 from loosefit.garment.placement import place, to_z_up
 from loosefit.garment.seam_repair import slivers, split_nonmanifold, weld
@@ -40,6 +41,13 @@ UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 WELD = 1e-4
 #: Plausible garment sizes (largest bounding-box side), m: they pick the file's unit.
 SIZE_RANGE = (0.15, 2.5)
+#: A garment is worn: the body passes through it, so its surface is at least a tube, open at the top
+#: (waist or neck) and at the hem: two boundary loops or more (a disc, a single triangle or a closed
+#: surface cannot be put on).
+MIN_OPENINGS = 2
+#: The hem goes all around the body, which placement reads in eight 45-degree sectors
+#: (:mod:`loosefit.garment.placement`): a largest opening of fewer vertices cannot follow the body.
+MIN_HEM_VERTICES = 8
 
 
 def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -103,6 +111,25 @@ def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.n
     faces, flipped = _orient(faces, path)
     repairs["reoriented_faces"] = flipped
     return verts, faces, repairs
+
+
+def check_wearable(verts: np.ndarray, faces: np.ndarray, path) -> None:
+    """Refuse a repaired mesh too small to be a garment: fewer than :data:`MIN_OPENINGS` openings
+    (boundary loops), or a largest opening of fewer than :data:`MIN_HEM_VERTICES` vertices."""
+    try:
+        loops = boundary_loops(faces)
+    except ValueError as err:  # repair leaves manifold boundaries; say so if one is not
+        raise InputError(f"the mesh's openings are not simple loops: {err}", path) from None
+    size = f"{len(verts)} vertices, {len(faces)} faces"
+    if len(loops) < MIN_OPENINGS:
+        raise InputError(
+            f"not a garment: {size} with {len(loops)} opening(s); a garment goes around the body, so it is at "
+            f"least a tube open at the top and at the hem ({MIN_OPENINGS} boundary loops)", path)
+    hem = max(len(loop) for loop in loops)
+    if hem < MIN_HEM_VERTICES:
+        raise InputError(
+            f"too coarse to be a garment: {size}, its largest opening has {hem} vertices; an opening that goes "
+            f"around the body needs at least {MIN_HEM_VERTICES} (one in each 45-degree sector)", path)
 
 
 def _orient(faces: np.ndarray, path) -> tuple[np.ndarray, int]:
@@ -182,6 +209,7 @@ def import_garment(
     else:
         raise InputError(f"unsupported garment format {suffix!r}; use .obj or .ply", path)
     verts, faces, repairs = repair(verts, faces, path)
+    check_wearable(verts, faces, path)
     units = _units(verts, unit, path)
     lm = measure_body(body)
     if up is not None and up not in ("y", "z"):
