@@ -117,8 +117,13 @@ def cmd_garment_import(args):
 
 
 def cmd_info(args):
-    from loosefit.data import DatasetStore, format_info
+    from loosefit.data import DatasetStore, format_info, format_repair
 
+    if args.repair:
+        with DatasetStore.open(args.data, mode="a") as store:
+            dropped = store.repair()
+        print(json.dumps({"dropped": dropped}, indent=2) if args.json else format_repair(args.data, dropped))
+        return
     info = DatasetStore.open(args.data, mode="r").info()
     print(json.dumps(info, indent=2, default=str) if args.json else format_info(info))
 
@@ -394,6 +399,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("info", help="summarise a dataset store")
     sp.add_argument("data")
     sp.add_argument("--json", action="store_true", help="print the summary as JSON")
+    sp.add_argument("--repair", action="store_true",
+                    help="drop the damaged sequences (and entries) that info lists as problems, keeping the rest as is")
     sp.set_defaults(func=cmd_info)
 
     sp = sub.add_parser("render", help="render a mesh sequence, dataset sequence or motion to MP4 / GIF / PNG")

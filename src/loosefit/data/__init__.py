@@ -3,7 +3,7 @@
 The PyTorch adapter lives in :mod:`loosefit.data.windows` (imported separately: it needs torch).
 """
 
-from loosefit.data.manifest import format_info
+from loosefit.data.manifest import format_info, format_repair
 from loosefit.data.store import FORMAT_VERSION, SPLITS, STATUSES, DatasetStore, Sequence
 
-__all__ = ["DatasetStore", "Sequence", "format_info", "FORMAT_VERSION", "SPLITS", "STATUSES"]
+__all__ = ["DatasetStore", "Sequence", "format_info", "format_repair", "FORMAT_VERSION", "SPLITS", "STATUSES"]

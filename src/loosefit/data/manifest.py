@@ -35,9 +35,29 @@ def format_info(info: dict) -> str:
     lines.append(f"sequences ({seqs['count']}, {seqs['frames']} frames ok):")
     for split, counts in sorted(seqs["by_split"].items()):
         lines.append(f"  {split}: {counts['ok']} ok ({counts['frames']} frames), {counts['failed']} failed")
+    if info.get("writer"):
+        lines.append(f"being written by {info['writer']}")
     if info["problems"]:
         lines.append(f"problems ({len(info['problems'])}):")
         lines.extend(f"  {path}: {problem}" for path, problem in info["problems"].items())
+        if any(not path.startswith(".staging") for path in info["problems"]):
+            lines.append(f"`loosefit info {info['path']} --repair` drops what is damaged (and only that)")
     else:
-        lines.append("problems: none")
+        lines.append("problems: none (every chunk read back as written)")
+    return "\n".join(lines)
+
+
+def format_repair(path, dropped: dict[str, str]) -> str:
+    """Text of :meth:`loosefit.data.store.DatasetStore.repair`'s result for the store at ``path``."""
+    if not dropped:
+        return f"{path}: nothing damaged, nothing dropped"
+    lines = [f"{path}: dropped {len(dropped)} damaged item(s), kept everything else as it was:"]
+    lines.extend(f"  {rel}: {why}" for rel, why in dropped.items())
+    kinds = {rel.split("/")[0] for rel in dropped}
+    if kinds & {"sequences", "garments", "bodies", "motions"}:
+        lines.append(f"`loosefit simulate PLAN --out {path}` (with the plan that made the store) simulates "
+                     "the dropped sequences again and adds the dropped garments, bodies and motions back")
+    if any(len(rel.split("/")) > 2 or rel.split("/")[0] not in ("sequences", "garments", "bodies", "motions")
+           for rel in dropped):
+        lines.append(f"`loosefit prepare {path}` writes the dropped prepared data again")
     return "\n".join(lines)

@@ -305,13 +305,22 @@ class StoreReader:
         def shape(collection: str, name: str, array: str) -> tuple[int, ...]:
             return tuple(read_json(self._entry_dir(collection, name) / array / ".zarray")["shape"])
 
+        def values(collection: str, name: str, array: str, attrs: dict) -> np.ndarray | None:
+            try:  # damage inside a chunk is only seen when verifying
+                return self._entry_array(collection, name, array, attrs)[...]
+            except InputError:
+                return None
+
         garments = {}
         for name, attrs in sound["garments"].items():
-            pinned = self._entry_array("garments", name, "pinned", attrs)[...]
+            pinned = values("garments", name, "pinned", attrs)
             garments[name] = {"kind": attrs["kind"], "verts": shape("garments", name, "verts")[0],
-                              "faces": shape("garments", name, "faces")[0], "pinned": int(pinned.sum())}
-        bodies = {name: {"model": attrs["model"], "shape": self._entry_array("bodies", name, "values", attrs)[...].tolist()}
-                  for name, attrs in sound["bodies"].items()}
+                              "faces": shape("garments", name, "faces")[0],
+                              "pinned": None if pinned is None else int(pinned.sum())}
+        bodies = {}
+        for name, attrs in sound["bodies"].items():
+            body = values("bodies", name, "values", attrs)
+            bodies[name] = {"model": attrs["model"], "shape": None if body is None else body.tolist()}
         motions = {}
         for name, attrs in sound["motions"].items():
             frames, joints = shape("motions", name, "rotations")[:2]

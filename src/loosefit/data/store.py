@@ -66,6 +66,7 @@ class DatasetStore(StoreReader, StoreWriter, StoreChecks):
         self.mode = mode
         self.attrs = attrs
         self.recovered: list[str] = []
+        self.created = False  # made by :meth:`create` (this object's process made the store)
         self._lock_key: str | None = None
         self._finalizer = None
         if mode == "a":
@@ -94,7 +95,7 @@ class DatasetStore(StoreReader, StoreWriter, StoreChecks):
         if path.exists():
             raise InputError("cannot create a dataset store: the path already exists", path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        lock.clean_creating_litter(path)
+        cleaned = lock.clean_creating_litter(path)
         # Built beside its final place and renamed: an interrupted create leaves no half store, and
         # the store is locked from the moment it appears.
         tmp = lock.creating_path(path)
@@ -121,7 +122,10 @@ class DatasetStore(StoreReader, StoreWriter, StoreChecks):
                 os.close(fd)
             staging.discard(tmp)
         try:
-            return cls.open(path, mode="a")
+            store = cls.open(path, mode="a")
+            store.created = True
+            store.recovered[:0] = cleaned
+            return store
         except BaseException:
             lock.release(os.path.realpath(path))  # the hold adopted above
             raise
@@ -195,7 +199,7 @@ class DatasetStore(StoreReader, StoreWriter, StoreChecks):
         before simulating anything: its garments, bodies and motions are the run's inputs, added
         again by the next run). Needs mode ``"a"``; returns whether the store was deleted."""
         self._check_writable()
-        if any(os.scandir(self._root / "sequences")):
+        if any(entry.is_dir() for entry in os.scandir(self._root / "sequences")):
             return False
         # Renamed to a creation leftover first: a kill during the deletion leaves litter that the
         # next run cleans, never a half store.

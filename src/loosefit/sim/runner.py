@@ -14,6 +14,7 @@ Each Ray worker is its own process with its own Blender.
 from __future__ import annotations
 
 import functools
+import logging
 import time
 import traceback
 from pathlib import Path
@@ -28,6 +29,8 @@ from loosefit.sim.plan import Plan, ProceduralMotion, SequenceJob, TemplateGarme
 from loosefit.sim.quality import QualityGate
 from loosefit.extras import require
 from loosefit.sim.sequence import SimResult, backend_run_cloth, save_result, simulate_sequence
+
+log = logging.getLogger(__name__)
 
 CRASHED = "crashed:"
 #: Object store of a local Ray: results (a few tens of MB each) pass through it.
@@ -148,7 +151,13 @@ def simulate_job(payload: dict[str, Any]) -> dict[str, Any]:
 
 
 def _done(store, job: SequenceJob) -> bool:
+    """Whether the job's sequence is stored, reads back as written (every chunk is checked: a
+    damaged one is simulated again), has the job's hash and did not crash."""
     if not store.has_sequence(job.id):
+        return False
+    problem = store.verify_sequence(job.id)
+    if problem:
+        log.warning("%s: sequence %s is damaged (%s); simulating it again", store.path, job.id, problem)
         return False
     seq = store.sequence(job.id)
     return seq.stats.get("job_hash") == job.hash and not seq.reason.startswith(CRASHED)
@@ -184,8 +193,19 @@ def run_plan(
         backend_run_cloth(params.backend)
     if workers > 1 or address is not None:
         require("ray", "parallel simulation (--workers / --address)")
-    out = Path(out)
-    store = DatasetStore.open(out, mode="a") if out.exists() else DatasetStore.create(out)
+    store = DatasetStore.open_or_create(Path(out))  # holds the store's write lock until the run ends
+    try:
+        return _run_jobs(plan, store, workers, address, progress, start)
+    except BaseException:
+        if store.created:  # a first run that fails before storing any sequence leaves no store behind
+            store.remove_if_empty()
+        raise
+    finally:
+        store.close()
+
+
+def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bool, start: float) -> dict[str, Any]:
+    """Simulate the plan's jobs that are not done into the open ``store``; see :func:`run_plan`."""
     todo = [job for job in plan.jobs if not _done(store, job)]
     summary: dict[str, Any] = {"plan": plan.name, "jobs": len(plan.jobs), "skipped": len(plan.jobs) - len(todo),
                                "ok": 0, "failed": 0, "crashed": 0, "sequences": {}}
