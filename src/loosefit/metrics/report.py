@@ -219,7 +219,23 @@ def _npz_files(path: Path) -> dict[str, Path]:
     return {path.stem: path}
 
 
-def _pair(name: str, pred: MeshSequence, gt: MeshSequence, pred_path: Path, gt_path: Path, body: MeshSequence | None) -> SequencePair:
+def _check_fps(pred: MeshSequence, gt: MeshSequence, pred_path: Path, gt_path: Path, body: MeshSequence | None,
+               body_path: Path | None) -> None:
+    """Frame rates must be positive and agree: frame-by-frame errors and STED's temporal term compare
+    frame ``t`` of one sequence with frame ``t`` of the other, which is the same instant only at one rate."""
+    for seq, path in ((pred, pred_path), (gt, gt_path), (body, body_path)):
+        if seq is not None and not 0 < seq.fps < float("inf"):
+            raise InputError(f"frame rate must be a positive number, got {seq.fps:g} fps", path)
+    if abs(pred.fps - gt.fps) > 1e-6 * gt.fps:
+        raise InputError(f"prediction at {pred.fps:g} fps, ground truth {gt_path} at {gt.fps:g} fps: resample one "
+                         "(frames are compared one to one)", pred_path)
+    if body is not None and abs(body.fps - gt.fps) > 1e-6 * gt.fps:
+        raise InputError(f"body at {body.fps:g} fps, ground truth {gt_path} at {gt.fps:g} fps", body_path)
+
+
+def _pair(name: str, pred: MeshSequence, gt: MeshSequence, pred_path: Path, gt_path: Path, body: MeshSequence | None,
+          body_path: Path | None = None) -> SequencePair:
+    _check_fps(pred, gt, pred_path, gt_path, body, body_path)
     if pred.verts.shape != gt.verts.shape:
         raise InputError(f"prediction {pred.verts.shape} does not match ground truth {gt.verts.shape} in {gt_path}", pred_path)
     if pred.faces.shape != gt.faces.shape or not np.array_equal(pred.faces, gt.faces):
@@ -242,14 +258,16 @@ def pairs_from_files(pred: str | Path, gt: str | Path, body: str | Path | None =
     sequence) overrides the ``body_verts`` a ground-truth file may carry.
     """
     pred_files, gt_files = _npz_files(Path(pred)), _npz_files(Path(gt))
+    body_path = None if body is None else Path(body)
     body_seq = MeshSequence.load(body) if body is not None else None
     if len(pred_files) == 1 and len(gt_files) == 1 and not Path(pred).is_dir():
         ((_, p),), ((name, g),) = pred_files.items(), gt_files.items()
-        return [_pair(name, MeshSequence.load(p), MeshSequence.load(g), p, g, body_seq)]
+        return [_pair(name, MeshSequence.load(p), MeshSequence.load(g), p, g, body_seq, body_path)]
     missing = sorted(set(gt_files) - set(pred_files))
     if missing:
         raise InputError(f"no prediction for ground-truth sequence(s) {missing}", Path(pred))
-    return [_pair(n, MeshSequence.load(pred_files[n]), MeshSequence.load(g), pred_files[n], g, body_seq) for n, g in gt_files.items()]
+    return [_pair(n, MeshSequence.load(pred_files[n]), MeshSequence.load(g), pred_files[n], g, body_seq, body_path)
+            for n, g in gt_files.items()]
 
 
 def pairs_from_store(
@@ -279,8 +297,9 @@ def pairs_from_store(
         path = pred_dir / f"{name}.npz"
         if not path.is_file():
             raise InputError(f"no prediction for dataset sequence {name!r}", path)
-        gt = MeshSequence(seq.verts[:], ds.read_array(f"garments/{seq.garment}", "faces"))
-        pairs.append(_pair(name, MeshSequence.load(path), gt, path, Path(store), body_seq))
+        gt = MeshSequence(seq.verts[:], ds.read_array(f"garments/{seq.garment}", "faces"), ds.motion(seq.motion).fps)
+        pairs.append(_pair(name, MeshSequence.load(path), gt, path, Path(store), body_seq,
+                           None if body is None else Path(body)))
     return pairs
 
 
