@@ -21,6 +21,7 @@ from loosefit.errors import InputError
 from loosefit.models.motion_features import FeatureStream, heading_frames, motion_features, to_world
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
+from loosefit.motion_range import range_warnings
 from loosefit.threads import torch_threads
 from loosefit.training import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
@@ -129,6 +130,12 @@ class Animator:
     @property
     def num_joints(self) -> int:
         return int(self.meta["sizes"]["num_joints"])
+
+    def range_warnings(self, motion: Motion, label=None) -> list[str]:
+        """One line per root quantity of ``motion`` outside the range the run was trained on, naming
+        ``label`` (default: the motion's name); empty for a run without a recorded range
+        (:func:`loosefit.motion_range.range_warnings`)."""
+        return range_warnings(self.meta, motion, label)
 
     def _check(self, motion: Motion) -> None:
         if motion.num_joints != self.num_joints:

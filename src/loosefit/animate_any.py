@@ -23,6 +23,7 @@ from loosefit.models.motion_features import to_world
 from loosefit.models.registry import model_class
 from loosefit.train.protocol import to_device
 from loosefit.motion.motion import Motion
+from loosefit.motion_range import range_warnings
 from loosefit.threads import torch_threads
 from loosefit.training import MODEL_META
 
@@ -79,6 +80,11 @@ class AnyGarmentAnimator:
     @property
     def method(self) -> str:
         return self.meta["method"]
+
+    def range_warnings(self, motion: Motion, label=None) -> list[str]:
+        """One line per root quantity of ``motion`` outside the run's training range (see
+        :meth:`loosefit.animate.Animator.range_warnings`)."""
+        return range_warnings(self.meta, motion, label)
 
     def pair(self, garment_verts: np.ndarray, faces: np.ndarray, body) -> GarmentBodyPair:
         """The garment ``(V, 3)`` / ``(F, 3)`` in the rest pose of ``body`` (its own shape), with its fit attribute."""

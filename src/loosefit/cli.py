@@ -232,6 +232,9 @@ def cmd_animate(args):
         animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads, garment=args.garment,
                             body=body if args.garment else None, device=args.device)
         results, faces = animator.animate_batch(motions), animator.faces
+    for path, motion in zip(args.motion, motions):  # root motion the run never saw: the garment may lag behind
+        for line in animator.range_warnings(motion, path):
+            print(f"loosefit animate: warning: {line}", file=sys.stderr)
     if args.collision:
         from loosefit.models.collision import SDF_FILE, collision_margin, handle_motion_collisions, load_body_sdf
 

@@ -7,8 +7,9 @@ no garment; a dynamic one (SwinGar) on windows of its sequences
 (:class:`loosefit.models.multi_garment.MultiWindowDataset`), on every garment or the named ones.
 
 The run folder holds, besides the trainer's files (:mod:`loosefit.train.run`), ``model.json`` (method,
-garment, sizes, dataset) and ``method.yaml`` (the method's full config: model, train and data sections),
-so that :mod:`loosefit.animate` rebuilds the model from the folder alone.
+garment, sizes, dataset, the range of the training motions' root: :mod:`loosefit.motion_range`) and
+``method.yaml`` (the method's full config: model, train and data sections), so that
+:mod:`loosefit.animate` rebuilds the model from the folder alone.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from loosefit.config import load_config, save_config
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.registry import model_class, run_config_class
+from loosefit.motion_range import META_KEY as MOTION_RANGE, store_motion_range
 from loosefit.paths import atomic_path
 from loosefit.train import distributed
 from loosefit.train.run import RunDir, save_checkpoint
@@ -85,7 +87,7 @@ def train_model(
             "sim_params": sim_params, "train_sequences": [s.name for s in train_data.sequences],
             "val_sequences": [s.name for s in val_data.sequences] if val_data else [],
             "rig": train_data.rig_settings}
-    _write_run(run, meta, cfg, resume)
+    _write_run(run, meta, cfg, resume, motion_range=trained)  # body-lbs follows any motion
     if not trained:
         _save_fixed(model, run)
         return None
@@ -142,12 +144,16 @@ def _train_garment_windows(cls, method: str, data, garment: str | None, run: Run
     return train(model, windows[0], windows[1], cfg.train, run.path, resume=resume)
 
 
-def _write_run(run: RunDir, meta: dict, cfg, resume: bool) -> None:
-    """Write the run folder's ``model.json`` and ``method.yaml``; on resume, first check that the data is the same."""
+def _write_run(run: RunDir, meta: dict, cfg, resume: bool, motion_range: bool = True) -> None:
+    """Write the run folder's ``model.json`` and ``method.yaml``; on resume, first check that the data is the same.
+    ``motion_range``: record the range of the training motions' root, which animation compares motions with."""
     if resume and run.has_checkpoint() and (run.path / MODEL_META).exists():
         _check_same_data(run.path / MODEL_META, meta)
     if not distributed.is_main():  # several training processes: rank 0 writes the run folder
         return
+    if motion_range:
+        found = store_motion_range(meta["data"], meta["train_sequences"])
+        meta = {**meta, MOTION_RANGE: None if found is None else found.to_json()}
     run.path.mkdir(parents=True, exist_ok=True)
     with atomic_path(run.path / MODEL_META) as tmp:
         tmp.write_text(json.dumps(meta, indent=2))
