@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 import torch
 
@@ -81,3 +84,30 @@ def test_run_dir_layout(tmp_path):
     assert run.metrics_csv.name == "metrics.csv" and run.summary.name == "run.json"
     save_checkpoint(run.last_checkpoint, _state(make_model()))
     assert run.has_checkpoint()
+
+
+def _killed_while_writing(target):
+    """A process killed inside ``atomic_path(target)``: its temporary file stays beside ``target``."""
+    code = ("import os, sys; from loosefit.paths import atomic_path; "
+            "tmp = atomic_path(sys.argv[1]).__enter__(); tmp.write_bytes(b'half'); os._exit(9)")
+    subprocess.run([sys.executable, "-c", code, str(target)], check=False)
+
+
+def test_resume_removes_temporaries_of_killed_writes(data, tmp_path):
+    from loosefit.train import train
+    from tests.train.conftest import quick_config
+
+    train_set, val_set = data
+    model = make_model()
+    model.crash_at_call = 8
+    with pytest.raises(KeyboardInterrupt):
+        train(model, train_set, val_set, quick_config(), tmp_path / "run")
+    run = RunDir(tmp_path / "run")
+    _killed_while_writing(run.last_checkpoint)
+    _killed_while_writing(run.path / "model.json")
+    litter = [p.name for p in [*run.path.glob(".model.json.*"), *run.checkpoints.glob(".last.pt.*")]]
+    assert len(litter) == 2 and litter[0].endswith(".json") and litter[1].endswith(".pt")  # what a killed run leaves
+    (run.path / "notes.txt").write_text("mine")
+    train(make_model(), train_set, val_set, quick_config(), run.path, resume=True)
+    assert not list(run.path.glob(".model.json.*")) and not list(run.checkpoints.glob(".*"))
+    assert (run.path / "notes.txt").read_text() == "mine" and load_checkpoint(run.last_checkpoint)["complete"]

@@ -27,7 +27,7 @@ from typing import Any
 import torch
 
 from loosefit.errors import InputError
-from loosefit.paths import atomic_path
+from loosefit.paths import atomic_path, remove_stale_temporaries
 
 CHECKPOINT_FORMAT = "loosefit-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -87,9 +87,16 @@ class RunDir:
         return self.path / "tensorboard"
 
     def create(self) -> "RunDir":
-        """Create the folder and its checkpoint folder."""
+        """Create the folder and its checkpoint folder (at the start of a run and of a resume), and delete
+        the temporary files of atomic writes that a killed run left in them (``.last.pt.k2j4x9_a.pt``)."""
         self.checkpoints.mkdir(parents=True, exist_ok=True)
+        self.remove_stale_temporaries()
         return self
+
+    def remove_stale_temporaries(self) -> list[Path]:
+        """Delete leftover temporary files of :func:`~loosefit.paths.atomic_path` in the run folder and its
+        checkpoint folder; call it only while no process of this run writes. Returns the paths removed."""
+        return remove_stale_temporaries(self.path) + remove_stale_temporaries(self.checkpoints)
 
     def has_checkpoint(self) -> bool:
         return self.last_checkpoint.exists()
