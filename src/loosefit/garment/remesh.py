@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from loosefit.garment.mesh_checks import boundary_loops, unique_edges
-from loosefit.geometry.normals import vertex_normals
+from loosefit.geometry.normals import face_normals, vertex_normals
 
 
 class ReferenceSurface:
@@ -68,9 +68,9 @@ def _boundary_verts(num_verts: int, edges: np.ndarray, count: np.ndarray) -> np.
 
 
 def _face_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    tri = verts[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    """Unit face normals ``(..., F, 3)`` float64 that keep the direction of nearly degenerate triangles too (the
+    flip checks compare directions)."""
+    return face_normals(verts, faces, np.float64, eps=1e-30)
 
 
 def split_long_edges(verts: np.ndarray, faces: np.ndarray, max_length: float, passes: int = 12):
@@ -140,8 +140,7 @@ def collapse_short_edges(verts: np.ndarray, faces: np.ndarray, min_length: float
         hit = (f == a[frows.row, None]) | (f == b[frows.row, None])
         keep = hit.sum(1) == 1  # faces that survive the collapse
         moved[hit] = np.repeat(target[frows.row], 3, 0).reshape(-1, 3, 3)[hit]
-        n_new = np.cross(moved[:, 1] - moved[:, 0], moved[:, 2] - moved[:, 0])
-        n_new /= np.maximum(np.linalg.norm(n_new, axis=1, keepdims=True), 1e-30)
+        n_new = _face_normals(moved, np.array([[0, 1, 2]]))[:, 0]  # each moved triangle on its own
         bad = keep & (np.einsum("ij,ij->i", n_new, normals[frows.col]) < 0.3)
         ok &= np.bincount(frows.row[bad], minlength=len(cand)) == 0
     # The two vertices opposite an interior edge lose a neighbour: keep them at valence >= 4.

@@ -43,7 +43,7 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences, SequenceData
-from loosefit.models.layers.mlp import mlp
+from loosefit.models.layers.mlp import MLP
 from loosefit.paths import atomic_path
 from loosefit.threads import torch_threads
 
@@ -321,7 +321,7 @@ class RBFEnsemble(nn.Module):
         self.register_buffer("pivot_theta", torch.tensor(space.transform(self.pivot_params), dtype=torch.float32))
         with torch.random.fork_rng():  # g's initial weights from the config's seed, global generators untouched
             torch.manual_seed(config.seed)
-            self.g = mlp((len(space.names), *config.hidden, config.latent))
+            self.g = MLP((len(space.names), *config.hidden, config.latent))
 
     @property
     def num_pivots(self) -> int:

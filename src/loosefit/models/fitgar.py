@@ -54,10 +54,12 @@ import torch
 from torch import nn
 
 from loosefit.errors import InputError
+from loosefit.geometry.normals import vertex_normals_torch
 from loosefit.models.fitgar_data import GarmentFrames, check_frame_choice, collate_frames
-from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput, dense_stack
+from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput
 from loosefit.models.layers.edge_pool import EdgeContractionPooling
 from loosefit.models.layers.gat_block import GATBlock
+from loosefit.models.layers.mlp import MLP
 from loosefit.rig.fit_attribute import FitAttributeModel
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import masked_errors_mm
@@ -219,14 +221,6 @@ class Generator(nn.Module):
         return self.output(self.magnitude(x, edge_index, batch), self.direction(x, edge_index, batch))["displacement"]
 
 
-def vertex_normals_torch(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
-    """Area-weighted unit vertex normals ``(N, 3)`` of ``verts (N, 3)``, ``faces (F, 3)``."""
-    a, b, c = verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]]
-    n = torch.cross(b - a, c - a, dim=-1)
-    out = torch.zeros_like(verts).index_add_(0, faces.reshape(-1), n.repeat_interleave(3, 0))
-    return out / out.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-
-
 class FitGar(nn.Module):
     """The FitGar network (see the module docstring).
 
@@ -264,7 +258,7 @@ class FitGar(nn.Module):
             self.coarse_first = GATBlock.of_width(COARSE_FEATURES, c.coarse_first, c.heads, c.self_fraction)
             self.coarse = Generator(c.coarse_first, c.coarse_blocks, c.coarse_dense, c, pool=False)
         attributes = F + S + P
-        self.parser = dense_stack((attributes, *c.parser), nn.ReLU) if c.parser_mode != "nodes" else None
+        self.parser = MLP((attributes, *c.parser), nn.ReLU, final_activation=True) if c.parser_mode != "nodes" else None
         node_features = 6 + J + (attributes if c.parser_mode == "nodes" else 0)
         self.detail_first = GATBlock.of_width(node_features, c.detail_first, c.heads, c.self_fraction)
         branch_in = c.detail_first + (c.parser[-1] if c.parser_mode == "concat" else 0)

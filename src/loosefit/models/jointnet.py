@@ -46,7 +46,7 @@ from loosefit.models.base import GarmentModel
 from loosefit.models.body_lbs import training_body
 from loosefit.models.config import WindowConfig
 from loosefit.models.dataset import GarmentSequences
-from loosefit.models.layers.mlp import mlp
+from loosefit.models.layers.mlp import MLP
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import masked_errors_mm, normal_loss, vertex_l1
@@ -266,8 +266,8 @@ class JointNet(GarmentModel):
         self.association = nn.Parameter(torch.rand(B, G) * (2.0 / G))
         self.fourier_alpha = nn.Parameter(torch.randn(K // 2))
         self.register_buffer("fourier_freqs", torch.randn(K // 2, 3) * config.fourier_scale)
-        self.bone_mlp = mlp([K, *config.bone_mlp, 6])
-        self.psd_mlp = mlp([K, *config.psd_mlp, config.psd_shapes])
+        self.bone_mlp = MLP([K, *config.bone_mlp, 6])
+        self.psd_mlp = MLP([K, *config.psd_mlp, config.psd_shapes])
         self.psd_basis = nn.Parameter(torch.randn(G, config.psd_shapes, V, 3) * PSD_INIT_STD)
 
         self.register_buffer("rig_rest", torch.zeros(V, 3))

@@ -68,12 +68,13 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.geometry.lbs import forward_kinematics, skinning_transforms
+from loosefit.geometry.normals import face_normals_torch
 from loosefit.geometry.rotations import sixd_to_matrix
 from loosefit.models.layers.gat_ln import GATLN
 from loosefit.models.layers.lstm_gat_ln import LSTMGATLN
+from loosefit.models.layers.mlp import MLP
 from loosefit.models.multi_garment import DEFAULT_DENSITY, MultiGarmentData, collate_by_graph
 from loosefit.train import StageConfig, TrainConfig
-from loosefit.train.losses import face_normals
 
 STAGES = ("supervised", "all")
 #: Values of :attr:`SwinGarConfig.global_descriptor` (SwinGar Table I), and the descriptor distance each reads
@@ -204,14 +205,6 @@ class Config:
     data: DataConfig = field(default_factory=DataConfig)
 
 
-def mlp_relu(channels: list[int]) -> nn.Sequential:
-    """Fully connected layers with ReLU after each (SwinGar Sec. IV), Kaiming-uniform weights."""
-    layers: list[nn.Module] = []
-    for a, b in zip(channels[:-1], channels[1:]):
-        layers += [nn.Linear(a, b), nn.ReLU()]
-    return nn.Sequential(*layers)
-
-
 def rms_normalized(a: torch.Tensor) -> torch.Tensor:
     """``a (..., n)`` divided by its root mean square over the last axis (zeros stay zeros).
 
@@ -258,11 +251,11 @@ class SwinGar(nn.Module):
         chans = [7, *c.graph_hidden]
         self.graph_encoder = nn.ModuleList(GATLN(i, o, h, a) for i, o, h in zip(chans[:-1], chans[1:], c.graph_heads))
         if c.descriptor_distance is not None:
-            self.shape_encoder = mlp_relu([c.descriptor_samples, *c.shape_mlp])
+            self.shape_encoder = MLP([c.descriptor_samples, *c.shape_mlp], nn.ReLU, final_activation=True)
         elif c.global_descriptor == "pooling":
             self.pool = nn.Sequential(nn.Linear(c.graph_hidden[-1], c.shape_mlp[-1]), nn.ReLU())
         self.motion_encoder = nn.LSTM(pose, c.motion_hidden, batch_first=True)
-        self.body_encoder = mlp_relu([S + pose, *c.body_mlp])
+        self.body_encoder = MLP([S + pose, *c.body_mlp], nn.ReLU, final_activation=True)  # SwinGar Sec. IV: ReLU after each
         self.state_encoder = GATLN(c.graph_hidden[-1], c.state_hidden, c.state_heads, a)
         self.weight_state = nn.Linear(c.state_hidden, c.shape_mlp[-1])
         self.weight_out = nn.Linear(c.shape_mlp[-1], J)
@@ -465,7 +458,7 @@ class SwinGar(nn.Module):
             return (x[..., e[:, 0], :] - x[..., e[:, 1], :]).norm(dim=-1)
 
         terms["edge"] = ((lengths(pred) - lengths(target)) ** 2).mean()
-        n = face_normals(pred, g["faces"])
+        n = face_normals_torch(pred, g["faces"])
         pairs = g["face_pairs"]
         diff = n[..., pairs[:, 1], :] - n[..., pairs[:, 0], :]
         lap = torch.zeros_like(n).index_add_(-2, pairs[:, 0], diff).index_add_(-2, pairs[:, 1], -diff)

@@ -49,7 +49,7 @@ from loosefit.models.dataset import GarmentSequences
 from loosefit.models.ensemble import EnsembleConfig
 from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
 from loosefit.models.layers.gru import GRUHead
-from loosefit.models.layers.mlp import NEGATIVE_SLOPE, mlp
+from loosefit.models.layers.mlp import MLP, NEGATIVE_SLOPE
 from loosefit.rig.normalization import RunningStats
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
@@ -187,7 +187,7 @@ class VirtualBones(GarmentModel):
         self.global_out = nn.Linear(c.global_rank, V * c.global_channels) if c.global_rank else nn.Identity()
         widths = (3, *c.edge_channels)
         self.edge_convs = nn.ModuleList(EdgeConv(a, b) for a, b in zip(widths[:-1], widths[1:]))
-        self.head = mlp((c.edge_channels[-1] + c.global_channels, *c.head_hidden, 3))
+        self.head = MLP((c.edge_channels[-1] + c.global_channels, *c.head_hidden, 3))
         with torch.no_grad():
             self.head[-1].weight.mul_(OUT_SCALE)
             self.head[-1].bias.mul_(OUT_SCALE)

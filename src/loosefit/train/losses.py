@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from loosefit.geometry.laplacian import uniform_laplacian
+from loosefit.geometry.normals import face_normals_torch
 
 
 def frame_mask(burn_in: torch.Tensor, frames: int) -> torch.Tensor:
@@ -73,16 +74,9 @@ def laplacian_difference(pred, target, L: torch.Tensor, mask=None) -> torch.Tens
     return vertex_distance(apply_laplacian(L, pred), apply_laplacian(L, target), mask)
 
 
-def face_normals(verts: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
-    """Unit face normals ``(..., F, 3)``."""
-    a, b, c = verts[..., faces[:, 0], :], verts[..., faces[:, 1], :], verts[..., faces[:, 2], :]
-    n = torch.cross(b - a, c - a, dim=-1)
-    return n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-
-
 def normal_loss(pred, target, faces: torch.Tensor, mask=None) -> torch.Tensor:
     """Mean ``1 - cos`` between predicted and target face normals (JointNet's L_norm)."""
-    cos = (face_normals(pred, faces) * face_normals(target, faces)).sum(-1)
+    cos = (face_normals_torch(pred, faces) * face_normals_torch(target, faces)).sum(-1)
     return _masked_mean((1 - cos).mean(-1), mask)
 
 

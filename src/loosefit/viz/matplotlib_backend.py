@@ -13,8 +13,9 @@ from typing import Sequence
 
 import numpy as np
 
+from loosefit.geometry.normals import face_cross
 from loosefit.viz.scene import Camera, Panel
-from loosefit.viz.shading import face_normals, lambert
+from loosefit.viz.shading import lambert
 
 DPI = 100
 TEXT_FONT_SIZE = 8
@@ -82,7 +83,7 @@ class MatplotlibRenderer:
             visible = (face_depth > NEAR).all(axis=1)
             faces = faces[visible]
             centres = verts[faces].mean(axis=1)
-            brightness = lambert(face_normals(verts, faces), eye - centres, basis)
+            brightness = lambert(face_cross(verts, faces), eye - centres, basis)  # area-weighted face normals
             scalars = track.frame_scalars(t)
             if scalars is None:
                 base = np.broadcast_to(np.asarray(track.color), (faces.shape[0], 3))

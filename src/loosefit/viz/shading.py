@@ -1,4 +1,4 @@
-"""Lighting shared by the render backends, and the vertex / face normals it needs.
+"""Lighting shared by the render backends, and the vertex normals it needs.
 
 Lights are fixed to the camera (they move with it), given as directions in camera coordinates
 (x right, y up, z towards the viewer): a key light from the upper left that rakes across folds,
@@ -8,7 +8,8 @@ and a weaker fill from the right so that shadowed sides keep some shape, plus am
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
+
+from loosefit.geometry.normals import vertex_incidence, vertex_normals
 
 #: ``(direction in camera coordinates, intensity)`` of each light.
 LIGHTS = (
@@ -21,34 +22,22 @@ SPECULAR = 0.08
 SPECULAR_POWER = 20.0
 
 
-def face_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``(F, 3)`` area-weighted face normals (length = twice the triangle's area) of ``verts (V, 3)``."""
-    v0, v1, v2 = verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]]
-    return np.cross(v1 - v0, v2 - v0)
-
-
 class VertexNormals:
-    """Unit vertex normals of a fixed triangulation: area-weighted sums of the adjacent faces' normals.
-
-    The vertex-face incidence matrix is built once, so each frame costs one sparse product.
+    """Unit vertex normals of a fixed triangulation for shading: area-weighted
+    (:func:`~loosefit.geometry.normals.vertex_normals`), with the vertex-face incidence built once, so each
+    frame costs one sparse product.
     """
 
     def __init__(self, faces: np.ndarray, num_verts: int):
-        self.faces = faces
-        rows = faces.reshape(-1)
-        cols = np.repeat(np.arange(faces.shape[0]), 3)
-        self.incidence = scipy.sparse.csr_matrix(
-            (np.ones(rows.shape[0], np.float32), (rows, cols)), shape=(num_verts, faces.shape[0])
-        )
+        self.faces = np.asarray(faces, np.int64)
+        self.incidence = vertex_incidence(self.faces, num_verts)
 
     def __call__(self, verts: np.ndarray) -> np.ndarray:
-        """``(V, 3)`` float32 unit normals of ``verts (V, 3)``; isolated vertices get ``+Z``."""
-        normals = np.asarray(self.incidence @ face_normals(verts, self.faces), dtype=np.float32)
-        length = np.linalg.norm(normals, axis=1, keepdims=True)
-        isolated = length[:, 0] < 1e-20
-        normals[isolated] = (0.0, 0.0, 1.0)
-        length[isolated] = 1.0
-        return normals / length
+        """``(V, 3)`` float32 unit normals of ``verts (V, 3)``; isolated vertices (and those of degenerate faces
+        only) get ``+Z``, which a renderer can normalise."""
+        normals = vertex_normals(verts, self.faces, incidence=self.incidence)
+        normals[~normals.any(axis=1)] = (0.0, 0.0, 1.0)
+        return normals
 
 
 def world_lights(camera_basis: np.ndarray) -> list[tuple[np.ndarray, float]]:

@@ -52,7 +52,7 @@ def test_compose_and_unit_direction():
 
 
 def test_bad_stack():
-    from loosefit.models.layers.decomposed_output import dense_stack
+    from loosefit.models.layers.mlp import MLP
 
     with pytest.raises(InputError):
-        dense_stack((4,), torch.nn.ReLU)
+        MLP((4,), torch.nn.ReLU)

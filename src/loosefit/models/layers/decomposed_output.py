@@ -15,6 +15,8 @@ import torch
 from torch import nn
 
 from loosefit.errors import InputError
+from loosefit.models.layers.init import undrawn
+from loosefit.models.layers.mlp import MLP
 
 #: Directions shorter than this (before normalising) are treated as this long: no division by zero.
 MIN_DIRECTION_NORM = 1e-6
@@ -30,16 +32,6 @@ def compose_displacement(magnitude: torch.Tensor, direction: torch.Tensor) -> to
     return magnitude * direction
 
 
-def dense_stack(channels: Sequence[int], activation: type[nn.Module]) -> nn.Sequential:
-    """Linear layers ``channels[0] -> ... -> channels[-1]`` with ``activation`` after every one of them."""
-    if len(channels) < 2:
-        raise InputError(f"a fully connected stack needs input and output sizes, got {list(channels)}")
-    layers: list[nn.Module] = []
-    for a, b in zip(channels[:-1], channels[1:]):
-        layers += [nn.Linear(a, b), activation()]
-    return nn.Sequential(*layers)
-
-
 class DecomposedOutput(nn.Module):
     """The two output branches' fully connected ends and FitGar Eq. 4.
 
@@ -53,16 +45,31 @@ class DecomposedOutput(nn.Module):
         scale: metres per unit of the magnitude branch.
         magnitude_bias: initial bias of the magnitude branch's last layer (positive: the ReLU starts
             open, so every vertex gets a gradient from the first step).
+
+    Shapes:
+        magnitude_features ``(N, magnitude_in)``, direction_features ``(N, direction_in)`` ->
+        ``displacement (N, 3)``, ``magnitude (N, 1)``, ``direction (N, 3)``.
     """
 
     def __init__(self, magnitude_in: int, direction_in: int, hidden: Sequence[int], scale: float = 1.0,
                  magnitude_bias: float = 0.5):
         super().__init__()
-        self.magnitude = dense_stack((magnitude_in, *hidden, 1), nn.ReLU)
-        self.direction = dense_stack((direction_in, *hidden, 3), nn.Tanh)
-        with torch.no_grad():
-            self.magnitude[-2].bias.fill_(magnitude_bias)
+        self.magnitude = undrawn(MLP, (magnitude_in, *hidden, 1), nn.ReLU, final_activation=True)
+        self.direction = undrawn(MLP, (direction_in, *hidden, 3), nn.Tanh, final_activation=True)
+        self.magnitude_bias = float(magnitude_bias)
         self.register_buffer("scale", torch.tensor(float(scale)))
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """The stacks' default initialisation (magnitude, then direction), the magnitude's last bias at
+        ``magnitude_bias``."""
+        self.magnitude.reset_parameters()
+        self.direction.reset_parameters()
+        with torch.no_grad():
+            self.magnitude[-2].bias.fill_(self.magnitude_bias)
+
+    def extra_repr(self) -> str:
+        return f"scale={float(self.scale):g}, magnitude_bias={self.magnitude_bias:g}"
 
     def forward(self, magnitude_features: torch.Tensor, direction_features: torch.Tensor) -> dict[str, torch.Tensor]:
         magnitude = self.magnitude(magnitude_features) * self.scale
@@ -83,6 +90,9 @@ class DirectOutput(nn.Module):
     ``"plain"`` gives ``scale * z``; ``"limited"`` gives ``limit * scale * tanh(z)``, every coordinate
     within plus or minus ``limit * scale`` (the paper limits to ``(-1, 1)`` after dividing by a factor of 5).
     Returns ``{"displacement": (N, 3)}`` metres.
+
+    Shapes:
+        features ``(N, in_channels)`` -> ``displacement (N, 3)``.
     """
 
     def __init__(self, in_channels: int, hidden: Sequence[int], mode: str, scale: float = 1.0, limit: float = 5.0):
@@ -90,9 +100,19 @@ class DirectOutput(nn.Module):
         if mode not in DIRECT_MODES:
             raise InputError(f"direct output mode must be one of {DIRECT_MODES}, got {mode!r}")
         self.mode, self.limit = mode, float(limit)
-        self.hidden = dense_stack((in_channels, *hidden), nn.Tanh) if hidden else nn.Identity()
-        self.out = nn.Linear(hidden[-1] if hidden else in_channels, 3)
+        self.hidden = undrawn(MLP, (in_channels, *hidden), nn.Tanh, final_activation=True) if hidden else nn.Identity()
+        self.out = undrawn(nn.Linear, hidden[-1] if hidden else in_channels, 3)
         self.register_buffer("scale", torch.tensor(float(scale)))
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """torch's default initialisation of the hidden layers, then of the read-out."""
+        if isinstance(self.hidden, MLP):
+            self.hidden.reset_parameters()
+        self.out.reset_parameters()
+
+    def extra_repr(self) -> str:
+        return f"mode={self.mode!r}, scale={float(self.scale):g}, limit={self.limit:g}"
 
     def forward(self, features: torch.Tensor) -> dict[str, torch.Tensor]:
         z = self.out(self.hidden(features))

@@ -25,6 +25,7 @@ import torch
 from torch import nn
 
 from loosefit.geometry.laplacian import edges
+from loosefit.models.layers.init import undrawn
 from loosefit.models.layers.mlp import NEGATIVE_SLOPE
 
 
@@ -48,12 +49,25 @@ def neighbour_table(faces: np.ndarray, num_verts: int) -> np.ndarray:
 
 
 class EdgeConv(nn.Module):
-    """One EdgeConv layer ``(..., V, in) -> (..., V, out)`` over a neighbour table ``(V, D)``."""
+    """One EdgeConv layer over a neighbour table (see the module docstring).
+
+    Shapes:
+        x ``(..., V, in_channels)``, neighbours ``(V, D)`` int64 (:func:`neighbour_table`) ->
+        ``(..., V, out_channels)``.
+    """
 
     def __init__(self, in_channels: int, out_channels: int):
         super().__init__()
-        self.linear = nn.Linear(2 * in_channels, out_channels)  # acts on [x_i, x_j - x_i]
-        self.in_channels = in_channels
+        self.linear = undrawn(nn.Linear, 2 * in_channels, out_channels)  # acts on [x_i, x_j - x_i]
+        self.in_channels, self.out_channels = in_channels, out_channels
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """torch's default initialisation of the edge function's linear layer."""
+        self.linear.reset_parameters()
+
+    def extra_repr(self) -> str:
+        return f"{self.in_channels}, {self.out_channels}"
 
     def forward(self, x: torch.Tensor, neighbours: torch.Tensor) -> torch.Tensor:
         C = self.in_channels

@@ -29,6 +29,8 @@ import torch
 from torch import nn
 from torch_geometric.utils import coalesce, scatter, softmax
 
+from loosefit.models.layers.init import undrawn
+
 #: Added to every softmax edge score (PyG's default ``add_to_edge_score``).
 SCORE_OFFSET = 0.5
 
@@ -76,12 +78,24 @@ class EdgeContractionPooling(nn.Module):
     ``forward(x (N, C), edge_index (2, E), batch (N,))`` -> ``(x (N', C), edge_index (2, E'), batch (N',),
     info)``; ``unpool(x (N', C'), info)`` -> ``(N, C')``. Graphs batched as one disjoint graph are pooled
     each on its own (no edge joins them).
+
+    Shapes:
+        x ``(N, channels)``, edge_index ``(2, E)`` int64, batch ``(N,)`` int64 -> x ``(N', channels)``,
+        edge_index ``(2, E')``, batch ``(N',)``, :class:`PoolInfo`; unpool: ``(N', C)`` -> ``(N, C)``.
     """
 
     def __init__(self, channels: int):
         super().__init__()
         self.channels = channels
-        self.lin = nn.Linear(2 * channels, 1)
+        self.lin = undrawn(nn.Linear, 2 * channels, 1)
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """torch's default initialisation of the edge score's linear layer."""
+        self.lin.reset_parameters()
+
+    def extra_repr(self) -> str:
+        return f"{self.channels}"
 
     def forward(self, x: torch.Tensor, edge_index: torch.Tensor, batch: torch.Tensor):
         raw = self.lin(torch.cat([x[edge_index[0]], x[edge_index[1]]], dim=-1)).view(-1)

@@ -20,6 +20,7 @@ from torch import nn
 from torch_geometric.nn import GATConv
 
 from loosefit.errors import InputError
+from loosefit.models.layers.init import undrawn
 
 
 class GATBlock(nn.Module):
@@ -33,6 +34,9 @@ class GATBlock(nn.Module):
 
     ``edge_index`` lists directed edges ``source -> target`` (both directions for a mesh); self loops
     are added by the attention layer. Nodes of several graphs batched as one disjoint graph never mix.
+
+    Shapes:
+        x ``(N, in_channels)``, edge_index ``(2, E)`` int64 -> ``(N, self_channels + heads * channels)``.
     """
 
     def __init__(self, in_channels: int, self_channels: int, channels: int, heads: int = 4):
@@ -40,9 +44,23 @@ class GATBlock(nn.Module):
         if min(in_channels, self_channels, channels, heads) < 1:
             raise InputError(f"GAT block sizes must be >= 1, got in {in_channels}, self {self_channels}, "
                              f"channels {channels}, heads {heads}")
-        self.self_stream = nn.Linear(in_channels, self_channels)
-        self.attention = GATConv(in_channels, channels, heads=heads, concat=True, add_self_loops=True)
+        self.self_stream = undrawn(nn.Linear, in_channels, self_channels)
+        self.attention = undrawn(GATConv, in_channels, channels, heads=heads, concat=True, add_self_loops=True)
+        self.in_channels, self.self_channels, self.channels, self.heads = in_channels, self_channels, channels, heads
         self.out_channels = self_channels + heads * channels
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """torch's default initialisation of the self stream, then PyG's of the attention layer (Glorot
+        projection and attention vectors, zero bias)."""
+        self.self_stream.reset_parameters()
+        # GATConv draws its projection twice when built (in its Linear's constructor and in its own
+        # reset_parameters); drawn twice here too, the initial weights stay those of a plainly built GATConv
+        self.attention.lin.reset_parameters()
+        self.attention.reset_parameters()
+
+    def extra_repr(self) -> str:
+        return f"{self.in_channels}, self_channels={self.self_channels}, channels={self.channels}, heads={self.heads}"
 
     @classmethod
     def of_width(cls, in_channels: int, width: int, heads: int = 4, self_fraction: float = 0.5) -> "GATBlock":

@@ -95,6 +95,10 @@ class GATLN(nn.Module):
         activation: ``"tanh"`` (SwinGar) or ``None`` (linear output).
 
     Parameters are initialised with Glorot's uniform rule (SwinGar Sec. IV), the bias with zeros.
+
+    Shapes:
+        x ``(..., V, in_channels)``, table and valid ``(V, D)`` (:func:`attention_table`) ->
+        ``(..., V, out_channels)``.
     """
 
     def __init__(self, in_channels: int, out_channels: int, heads: int = 1, alpha: float | None = 2.0,
@@ -122,6 +126,9 @@ class GATLN(nn.Module):
         nn.init.uniform_(self.att_dst, -bound, bound)
         nn.init.uniform_(self.att_src, -bound, bound)
         nn.init.zeros_(self.bias)
+
+    def extra_repr(self) -> str:
+        return f"{self.in_channels}, {self.out_channels}, heads={self.heads}, alpha={self.alpha}, activation={self.activation}"
 
     def score_vectors(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``c_dst, c_src (H, in)``: the score function as linear forms on the input features."""

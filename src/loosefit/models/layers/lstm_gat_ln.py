@@ -25,6 +25,7 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.models.layers.gat_ln import GATLN
+from loosefit.models.layers.init import undrawn
 
 
 class LSTMGATLN(nn.Module):
@@ -35,6 +36,10 @@ class LSTMGATLN(nn.Module):
         hidden: hidden and cell state size per node.
         heads: attention heads of both maps.
         alpha: GAT-LN score scale (SwinGar Eq. 4); None for plain GAT maps.
+
+    Shapes:
+        x ``(..., T, V, in_channels)``, table and valid ``(V, D)``, state ``(H, C)`` each ``(..., V, hidden)`` or
+        None -> hidden states ``(..., T, V, hidden)`` and the last ``(H, C)``.
     """
 
     def __init__(self, in_channels: int, hidden: int, heads: int = 1, alpha: float | None = 2.0):
@@ -42,9 +47,19 @@ class LSTMGATLN(nn.Module):
         if hidden < 1:
             raise InputError(f"LSTM-GAT-LN hidden size must be >= 1, got {hidden}")
         self.hidden = hidden
-        self.input_map = GATLN(in_channels, 4 * hidden, heads, alpha, activation=None)
-        self.state_map = GATLN(hidden, 4 * hidden, heads, alpha, activation=None)
-        self.peephole = nn.Parameter(torch.zeros(3, hidden))  # w_i, w_f, w_o
+        self.input_map = undrawn(GATLN, in_channels, 4 * hidden, heads, alpha, activation=None)
+        self.state_map = undrawn(GATLN, hidden, 4 * hidden, heads, alpha, activation=None)
+        self.peephole = nn.Parameter(torch.empty(3, hidden))  # w_i, w_f, w_o
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """The two maps' Glorot initialisation (input map, then state map), zero peepholes."""
+        self.input_map.reset_parameters()
+        self.state_map.reset_parameters()
+        nn.init.zeros_(self.peephole)
+
+    def extra_repr(self) -> str:
+        return f"hidden={self.hidden}"
 
     def cell(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
              state: tuple[torch.Tensor, torch.Tensor] | None = None,
