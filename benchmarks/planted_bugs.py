@@ -12,7 +12,11 @@ and records whether a test failed (caught) or all passed (missed).
 
 Writes ``benchmarks/results/planted-bugs-<label>.json``. An edit may list a text for each revision (the
 ones that do not occur are skipped); a bug none of whose texts occur, or one occurring twice, is reported
-as ``not planted`` (the source moved on): edit its entry.
+as ``not planted`` (the source moved on): edit its entry. A bug's file may be a tuple of paths, the first
+that exists in the revision taken (a module that moved). The ``sign-`` bugs flip a sign, drop or change a
+constant of a paper's equation, or swap what a gate reads; each names the ``*_signs.py`` test file that pins
+it. At a revision without that file, the module's own older test file runs instead (:data:`EARLIER_TESTS`),
+so that ``--rev`` of a revision before the sign tests measures what the tests caught then.
 """
 
 from __future__ import annotations
@@ -33,6 +37,17 @@ ROOT = Path(__file__).resolve().parents[1]
 VB, JN, LBS, FG, SG = (f"src/loosefit/models/{m}.py" for m in ("virtualbones", "jointnet", "body_lbs", "fitgar", "swingar"))
 T_VB, T_JN, T_LBS, T_FG, T_SG = (f"tests/models/test_{m}.py"
                                  for m in ("virtualbones", "jointnet", "body_lbs", "fitgar", "swingar"))
+GAT, LGL = (f"src/loosefit/models/layers/{m}.py" for m in ("gat_ln", "lstm_gat_ln"))
+#: The collision module before and after its split into a package.
+RESOLVER = ("src/loosefit/models/collision/resolver.py", "src/loosefit/models/collision.py")
+SDF_NET = ("src/loosefit/models/collision/network.py", "src/loosefit/models/collision.py")
+SDF_TRAIN = ("src/loosefit/models/collision/training.py", "src/loosefit/models/collision.py")
+S_VB, S_JN, S_FG, S_SG, S_COL = (f"tests/models/test_{m}_signs.py"
+                                 for m in ("virtualbones", "jointnet", "fitgar", "swingar", "collision"))
+S_GAT, S_LGL = (f"tests/models/layers/test_{m}_signs.py" for m in ("gat_ln", "lstm_gat_ln"))
+#: The test file of each module before its ``*_signs.py`` file existed.
+EARLIER_TESTS = {S_VB: T_VB, S_JN: T_JN, S_FG: T_FG, S_SG: T_SG, S_COL: "tests/models/test_collision.py",
+                 S_GAT: "tests/models/layers/test_gat_ln.py", S_LGL: "tests/models/layers/test_lstm_gat_ln.py"}
 
 #: name -> (file, [(text, replacement)...], test file, what the bug breaks)
 BUGS = {
@@ -96,6 +111,61 @@ BUGS = {
     "sg-weights-ignore-shape": (SG, [("self.weight_out(self.weight_state(S) * shape)",
                                       "self.weight_out(self.weight_state(S))")], T_SG,
                                 "the dynamic skinning weights ignore the garment's shape features"),
+    # ---- signs and constants of the papers' equations
+    "sign-jn-fourier-scale-dropped": (JN, [("torch.randn(K // 2, 3) * config.fourier_scale", "torch.randn(K // 2, 3)")],
+                                      S_JN, "the Fourier frequencies ignore fourier_scale (JointNet Eq. 3)"),
+    "sign-jn-association-init-scale": (JN, [("torch.rand(B, G) * (2.0 / G)", "torch.rand(B, G) * 2.0")], S_JN,
+                                       "the association starts with rows summing to J_s, not 1"),
+    "sign-sg-gravity-flipped": (SG, [('GRAVITY * (g["mass"] * (pred[..., 2] - target[..., 2]))',
+                                      'GRAVITY * (g["mass"] * (target[..., 2] - pred[..., 2]))')], S_SG,
+                                "gravity's sign flipped: raising the garment lowers the loss (SwinGar Eq. 13)"),
+    "sign-sg-bend-laplacian-sign": (SG, [(".index_add_(-2, pairs[:, 1], -diff)", ".index_add_(-2, pairs[:, 1], diff)")],
+                                    S_SG, "the face-normal Laplacian adds n_b - n_a at face b (SwinGar Eq. 12)"),
+    "sign-sg-vert-not-squared": (SG, [('terms = {"vert": ((pred - target) ** 2).sum(-1).mean()}',
+                                       'terms = {"vert": (pred - target).norm(dim=-1).mean()}')], S_SG,
+                                 "the vertex term is the mean distance, not squared (SwinGar Eq. 11)"),
+    "sign-lgl-forget-reads-input-peephole": (LGL, [("f = torch.sigmoid(gf + self.peephole[1] * c)",
+                                                    "f = torch.sigmoid(gf + self.peephole[0] * c)")], S_LGL,
+                                             "the forget gate reads the input gate's peephole w_i (SwinGar Eq. 6)"),
+    "sign-lgl-output-reads-forget-peephole": (LGL, [("o = torch.sigmoid(go + self.peephole[2] * c)",
+                                                     "o = torch.sigmoid(go + self.peephole[1] * c)")], S_LGL,
+                                              "the output gate reads the forget gate's peephole w_f (SwinGar Eq. 6)"),
+    "sign-lgl-output-peeks-new-cell": (LGL, [("        o = torch.sigmoid(go + self.peephole[2] * c)\n"
+                                              "        c = i * torch.tanh(gg) + f * c\n",
+                                              "        c = i * torch.tanh(gg) + f * c\n"
+                                              "        o = torch.sigmoid(go + self.peephole[2] * c)\n")], S_LGL,
+                                       "the output gate's peephole reads C^t, not C^{t-1} (SwinGar Eq. 6)"),
+    "sign-gat-alpha-dropped": (GAT, [("s = self.alpha * s / torch.maximum(row, feat * lip)[:, None, None]",
+                                      "s = s / torch.maximum(row, feat * lip)[:, None, None]")], S_GAT,
+                               "the normalised scores are not scaled by alpha (SwinGar Eq. 4)"),
+    "sign-gat-smaller-norm": (GAT, [("s = self.alpha * s / torch.maximum(row, feat * lip)[:, None, None]",
+                                     "s = self.alpha * s / torch.minimum(row, feat * lip)[:, None, None]")], S_GAT,
+                              "the scores are divided by the smaller of the two norms (SwinGar Eq. 4)"),
+    "sign-gat-heads-summed": (GAT, [("/ self.heads + self.bias", "+ self.bias")], S_GAT,
+                              "the heads' outputs are summed, not averaged"),
+    "sign-gat-score-slope": (GAT, [("SCORE_SLOPE = 0.2", "SCORE_SLOPE = 0.02")], S_GAT,
+                             "GAT's LeakyReLU slope on the scores is 0.02, not 0.2"),
+    "sign-col-weights-include-inside": (RESOLVER, [("w = np.exp(-d2 / (2 * self.sigma**2)) * free",
+                                                    "w = np.exp(-d2 / (2 * self.sigma**2))")], S_COL,
+                                        "delta_i's weights count the inside neighbours too (SwinGar Eq. 10)"),
+    "sign-col-eikonal-weight": (SDF_TRAIN, [("EIKONAL_WEIGHT = 0.15", "EIKONAL_WEIGHT = 1.5")], S_COL,
+                                "mu_e is 1.5, not 0.15 (SwinGar Eq. 8)"),
+    "sign-col-softplus-beta": (SDF_NET, [("SOFTPLUS_BETA = 100.0", "SOFTPLUS_BETA = 10.0")], S_COL,
+                               "the SDF network's Softplus has beta 10, not 100 (SwinGar Sec. IV)"),
+    "sign-vb-rest-6d-not-identity": (VB, [("IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)",
+                                           "IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0)")], S_VB,
+                                     "a zero output is a quarter turn about x, not the rest rotation"),
+    "sign-vb-pivot-at-origin": (VB, [("return rot, position - (rot @ self.bone_rest[:, :, None])[..., 0]",
+                                      "return rot, position - self.bone_rest")], S_VB,
+                                "a bone rotates about the origin, not its rest centroid"),
+    "sign-fg-coarse-reads-last-factor": (FG, [('batch["alpha"][:, :1] - self.alpha_mean[:1]) / self.alpha_std[:1]',
+                                               'batch["alpha"][:, -1:] - self.alpha_mean[-1:]) / self.alpha_std[-1:]')],
+                                         S_FG, "the coarse graph reads the last fit factor, not a_1 (FitGar Sec. 4.3)"),
+    "sign-fg-loss-scale-not-squared": (FG, [("/ self.coarse.output.scale ** 2}", "/ self.coarse.output.scale}")],
+                                       S_FG, "the coarse loss is divided by its output scale, not its square"),
+    "sign-fg-parser-added": (FG, [("h = h * self.encoding(batch)[idx]  # FitGar Eq. 7",
+                                   "h = h + self.encoding(batch)[idx]  # FitGar Eq. 7")], S_FG,
+                             "the parser's encoding is added to the first detail block, not multiplied (FitGar Eq. 7)"),
 }
 
 
@@ -110,10 +180,14 @@ def checkout(rev: str | None, dest: Path) -> None:
     subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
 
 
-def plant(root: Path, path: str, edits: list[tuple[str, str]]) -> bool:
-    """Apply the edits to ``root / path``; an edit whose text does not occur is skipped (an alternative
-    for another revision); False when no edit applies or a text occurs more than once."""
-    file = root / path
+def plant(root: Path, path: str | tuple[str, ...], edits: list[tuple[str, str]]) -> bool:
+    """Apply the edits to ``root / path`` (the first of several paths that exists); an edit whose text does
+    not occur is skipped (an alternative for another revision); False when no edit applies or a text occurs
+    more than once."""
+    paths = (path,) if isinstance(path, str) else path
+    file = next((root / p for p in paths if (root / p).exists()), None)
+    if file is None:
+        return False
     text = file.read_text()
     applied = 0
     for old, new in edits:
@@ -133,6 +207,8 @@ def run_bug(rev: str | None, name: str, timeout: float) -> dict:
         checkout(rev, root)
         if not plant(root, path, edits):
             return {"what": what, "result": "not planted"}
+        if not (root / tests).exists() and tests in EARLIER_TESTS:
+            tests = EARLIER_TESTS[tests]  # a revision before the sign tests: the module's own tests then
         env = {**os.environ, "PYTHONPATH": str(root / "src"), "PYTHONDONTWRITEBYTECODE": "1"}
         start = time.perf_counter()
         try:
