@@ -63,7 +63,7 @@ PAPER_NOTES = ("Table II/III rows 'T-shirt' are SwinGar's long t-shirts, shown b
 METHODS = ("none", "eq10-neural", "eq10-exact", "pushout")
 #: Targets: Eq. 10 (neural) removes at least this fraction of the collision loss's collisions (SwinGar: 88 %).
 MIN_REDUCTION = 0.8
-#: The issue's speed floor for 10k vertices on a CPU, ms per frame.
+#: The benchmark's speed floor for 10k vertices on a CPU, ms per frame.
 FLOOR_MS = 1.0
 
 

@@ -14,7 +14,7 @@ from the start of navigation) when the first frame is drawn with every panel, th
 ``wall_ms`` adds Playwright's round trip; ``page_timing_ms``: when the script started (``startMs``),
 how long the data took (``dataMs``: the binary fetch, or loading and decoding the export's base64 chunks;
 ``chunkScriptsMs``: when the chunk scripts had all run). ``step_ms``: the mean time of ``setFrame`` (positions, normals,
-heat-map colours and a draw of every panel) over 60 frames. Target (issue 15): a 12k-vertex, 300-frame
+heat-map colours and a draw of every panel) over 60 frames. Target: a 12k-vertex, 300-frame
 sequence opens in under 2 s on localhost. The machine is shared: the load average is recorded.
 
 Run: .venv/bin/python benchmarks/viewer.py [--repeats 3] [--frames 300] [--vertices 12000]
@@ -160,7 +160,7 @@ def main(argv=None):
             results["one"] = run_case("one", [str(root / "one.npz")], p, args.repeats, root, None)
             results["compare"] = run_case("compare", [str(root / "sim.npz"), str(root / "pred.npz")], p,
                                           args.repeats, root, RESULTS / "viewer-compare.png")
-        # The issue's target is the one-sequence case served on localhost; the others are reported beside it.
+        # The target is the one-sequence case served on localhost; the others are reported beside it.
         results["target_ms"] = 2000
         results["under_target"] = {f"{c}_{w}": results[c][w]["wall_ms_median"] < 2000
                                    for c in ("one", "compare") for w in ("served", "file")}
