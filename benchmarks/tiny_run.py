@@ -18,7 +18,11 @@ import torch
 
 from loosefit.rig.prepare import prepare
 from loosefit.sim import load_plan, run_plan
-from loosefit.train.pipeline import train_model  # the old path: it runs on trees before and after the move
+
+try:
+    from loosefit.training import train_model
+except ImportError:  # a tree from before loosefit.training existed
+    from loosefit.train.pipeline import train_model
 
 PLAN = """
 name: tiny

@@ -17,7 +17,7 @@ from loosefit.errors import InputError
 from loosefit.export_rig import body_rig, export_rig, garment_rig
 from loosefit.models.motion_features import heading_frames, motion_features, to_world
 from loosefit.motion import Motion
-from loosefit.train.pipeline import train_model
+from loosefit.training import train_model
 from tests.io.conftest import blender_skinned_frames
 
 QUIET = ["train.progress=false", "train.tensorboard=false", "data.window=20", "data.stride=10", "data.burn_in=4"]

@@ -63,11 +63,3 @@ def test_train_sits_below_models_and_training_above_both():
     assert any(inside(t, "loosefit.train") for t in graph["loosefit.training"])
     models = [m for m in graph if inside(m, "loosefit.models")]
     assert all(t != "loosefit.training" for m in models for t in graph[m])
-
-
-def test_the_old_pipeline_path_forwards_to_training():
-    from loosefit import training
-    from loosefit.train.pipeline import METHOD_CONFIG, MODEL_META, train_model
-
-    assert (train_model, MODEL_META, METHOD_CONFIG) == (training.train_model, training.MODEL_META,
-                                                        training.METHOD_CONFIG)

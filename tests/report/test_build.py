@@ -19,7 +19,7 @@ from loosefit.cli import main
 from loosefit.data import DatasetStore
 from loosefit.errors import InputError
 from loosefit.report import build_report
-from loosefit.train.pipeline import train_model
+from loosefit.training import train_model
 
 REPO = Path(__file__).resolve().parents[2]
 SMALL_JOINTNET = ["model.gru_hidden=16", "model.features=16", "model.bone_mlp=[32]", "model.psd_mlp=[16]",
