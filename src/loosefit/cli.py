@@ -8,55 +8,8 @@ import logging
 import sys
 from pathlib import Path
 
+from loosefit.cli_args import int_at_least, nonnegative_float, positive_float, writable
 from loosefit.errors import InputError, LoosefitError
-
-
-def _int_at_least(least: int, most: int | None = None):
-    """An argparse ``type=``: an integer in ``[least, most]``; anything else is a usage error (exit 2)."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if value < least or (most is not None and value > most):
-            bounds = f">= {least}" if most is None else f"in {least}..{most}"
-            raise argparse.ArgumentTypeError(f"must be an integer {bounds}, got {value}")
-        return value
-
-    return parse
-
-
-def _positive_float(text: str) -> float:
-    """An argparse ``type=``: a finite number > 0 (frame rates, durations, lengths)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
-
-
-def _nonnegative_float(text: str) -> float:
-    """An argparse ``type=``: a finite number >= 0 (a start time)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text}")
-    return value
-
-
-def _writable(path, folder: bool | None = None) -> None:
-    """Refuse an output that cannot be written before any work starts (``folder``: default, a path
-    without a suffix or ending in ``/``)."""
-    from loosefit.paths import check_writable
-
-    if folder is None:
-        folder = str(path).endswith(("/", "\\")) or Path(path).suffix == ""
-    check_writable(path, folder=folder)
 
 
 def _body(args):
@@ -78,7 +31,7 @@ def cmd_body(args):
     from loosefit.io.obj import write_obj
     from loosefit.motion.io import load_motion
 
-    _writable(args.out, folder=False)
+    writable(args.out, folder=False)
     body = _body(args)
     motion = load_motion(args.motion, body, joint_map=args.joint_map) if args.motion else body.rest_motion(1)
     posed = body.pose(motion)
@@ -97,7 +50,7 @@ def cmd_body(args):
 def cmd_motion_generate(args):
     from loosefit.motion.procedural import generate
 
-    _writable(args.out, folder=False)
+    writable(args.out, folder=False)
     body = _body(args)
     start = args.start or 0.0
     motion = generate(args.kind, start + args.seconds, args.seed, body, fps=args.fps)
@@ -110,7 +63,7 @@ def cmd_motion_generate(args):
 def cmd_motion_map(args):
     from loosefit.motion.map_writer import write_joint_map
 
-    _writable(args.out, folder=False)
+    writable(args.out, folder=False)
     joint_map, notes = write_joint_map(args.file, _body(args), args.out)
     print(f"wrote {args.out}: {len(joint_map.joints)} joints mapped, {len(joint_map.ignore)} ignored; "
           f"check it, then pass it with --joint-map {args.out}")
@@ -121,7 +74,7 @@ def cmd_motion_map(args):
 def cmd_motion_import(args):
     from loosefit.motion.io import load_motion
 
-    _writable(args.out, folder=False)
+    writable(args.out, folder=False)
     body = _body(args)
     motion = load_motion(args.file, body, joint_map=args.joint_map, source_fps=args.fps, start=args.start,
                          seconds=args.seconds)
@@ -145,7 +98,7 @@ def _garment_params(items: list[str]) -> dict:
 def cmd_garment_make(args):
     from loosefit.garment import make_garment
 
-    _writable(args.out, folder=False)
+    writable(args.out, folder=False)
     params = _garment_params(args.param)
     if args.length is not None:
         params["length"] = args.length
@@ -160,7 +113,7 @@ def cmd_garment_make(args):
 def cmd_garment_import(args):
     from loosefit.garment import import_garment
 
-    _writable(args.out, folder=False)
+    writable(args.out, folder=False)
     garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up)
     garment.save(args.out)
     p = garment.params
@@ -186,7 +139,7 @@ def cmd_render(args):
     from loosefit.viz.inputs import load_panels
     from loosefit.viz.render import render_video
 
-    _writable(args.out)  # a path without a suffix is a folder of PNGs
+    writable(args.out)  # a path without a suffix is a folder of PNGs
     panels = [panel for path in args.input for panel in load_panels(path, sequence=args.sequence)]
     render_video(panels, args.out, fps=args.fps, size=(args.width, args.height), backend=args.backend)
     print(f"wrote {args.out}")
@@ -197,7 +150,7 @@ def cmd_evaluate(args):
 
     given = dict(sted_rings=args.sted_rings, sted_dt=args.sted_dt, sted_c=args.sted_c, collision_tolerance=args.tolerance)
     settings = EvaluationSettings(**{k: v for k, v in given.items() if v is not None})
-    _writable(args.out, folder=True)
+    writable(args.out, folder=True)
     result = evaluate(load_pairs(args.pred, args.gt, args.body, args.sequence, args.split), settings)
     print(result.table())
     out = Path(args.out)
@@ -221,7 +174,7 @@ def cmd_simulate(args):
             where = "; ".join(f"{option} -> {in_plan[option]}" for option in given)
             raise InputError(f"options for one sequence (--garment, --motion), not for a plan: {', '.join(given)}; "
                              f"write them into the plan instead: {where}", args.plan)
-        _writable(args.out, folder=True)
+        writable(args.out, folder=True)
         summary = run_plan(args.plan, args.out, workers=args.workers, address=args.address)
         print(json.dumps({k: v for k, v in summary.items() if k != "sequences"}, indent=2))
         return
@@ -229,7 +182,7 @@ def cmd_simulate(args):
         raise LoosefitError("simulate needs PLAN.yaml, or --garment G.obj and --motion M.npz")
     sets = args.set or []
     params = SimParams.load(args.params, sets) if args.params else SimParams().with_overrides(sets)
-    _writable(args.out, folder=False)  # before the simulation, not after it
+    writable(args.out, folder=False)  # before the simulation, not after it
     result = simulate_file(args.garment, args.motion, args.out, params=params, shape=args.shape, joint_map=args.joint_map)
     print(json.dumps(result.stats, indent=2, default=str))
     if result.status != "ok":
@@ -251,7 +204,7 @@ def cmd_prepare(args):
 def cmd_train(args):
     from loosefit.training import train_model
 
-    _writable(args.out, folder=True)
+    writable(args.out, folder=True)
 
     if args.method == "collision":
         if args.nproc != 1 or args.device not in (None, "cpu"):
@@ -286,7 +239,7 @@ def cmd_animate(args):
     from loosefit.io.export import export_animation
     from loosefit.motion.io import load_motion
 
-    _writable(args.out, folder=True if len(args.motion) > 1 else None)
+    writable(args.out, folder=True if len(args.motion) > 1 else None)
     body = _body(args)
     motions = [load_motion(path, body, joint_map=args.joint_map) for path in args.motion]
     if is_static_run(args.run):
@@ -421,11 +374,11 @@ def build_parser() -> argparse.ArgumentParser:
     motion = sub.add_parser("motion", help="generate or import motions").add_subparsers(dest="motion_command", required=True)
     sp = motion.add_parser("generate", help="a procedural motion by kind and seed")
     sp.add_argument("--kind", required=True, help="walk, run, turn, spin, jump, kick, squat, bow, arm_raise, wave, sway, mix")
-    sp.add_argument("--seconds", type=_positive_float, default=8.0, help="length of the motion written")
-    sp.add_argument("--start", type=_nonnegative_float, default=None,
+    sp.add_argument("--seconds", type=positive_float, default=8.0, help="length of the motion written")
+    sp.add_argument("--start", type=nonnegative_float, default=None,
                     help="skip the first START seconds of the generated motion")
     sp.add_argument("--seed", type=int, default=0)
-    sp.add_argument("--fps", type=_positive_float, default=30.0)
+    sp.add_argument("--fps", type=positive_float, default=30.0)
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_motion_generate)
@@ -443,10 +396,10 @@ def build_parser() -> argparse.ArgumentParser:
                                        + JOINT_MAP_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
     sp.add_argument("file")
     joint_map_option(sp)
-    sp.add_argument("--fps", type=_positive_float, default=None, help="the file's frame rate, for AMASS / SMPL-H files "
+    sp.add_argument("--fps", type=positive_float, default=None, help="the file's frame rate, for AMASS / SMPL-H files "
                     "that store none (mocap_framerate); the motion is written at 30 fps")
-    sp.add_argument("--start", type=_nonnegative_float, default=None, help="keep the motion from START seconds on")
-    sp.add_argument("--seconds", type=_positive_float, default=None, help="keep SECONDS seconds (default: to the end)")
+    sp.add_argument("--start", type=nonnegative_float, default=None, help="keep the motion from START seconds on")
+    sp.add_argument("--seconds", type=positive_float, default=None, help="keep SECONDS seconds (default: to the end)")
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_motion_import)
@@ -457,7 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--length", type=float, default=None)
     sp.add_argument("--flare", type=float, default=None)
     sp.add_argument("--seed", type=int, default=0)
-    sp.add_argument("--edge-length", type=_positive_float, default=0.02,
+    sp.add_argument("--edge-length", type=positive_float, default=0.02,
                     help="target edge length, metres (sets the resolution)")
     sp.add_argument("--param", action="append", help="any other template parameter, NAME=VALUE (repeatable)")
     body_options(sp)
@@ -482,9 +435,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, or DATA.zarr with --sequence; several side by side")
     sp.add_argument("--sequence", default=None, help="sequence name inside a dataset store")
     sp.add_argument("--out", required=True, help="out.mp4, out.gif, out.png or a folder")
-    sp.add_argument("--fps", type=_positive_float, default=30.0)
-    sp.add_argument("--width", type=_int_at_least(1), default=640)
-    sp.add_argument("--height", type=_int_at_least(1), default=480)
+    sp.add_argument("--fps", type=positive_float, default=30.0)
+    sp.add_argument("--width", type=int_at_least(1), default=640)
+    sp.add_argument("--height", type=int_at_least(1), default=480)
     sp.add_argument("--backend", choices=["auto", "pyvista", "matplotlib"], default="auto")
     sp.set_defaults(func=cmd_render)
 
@@ -497,7 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--set", action="append", help="simulation parameter override, e.g. bending=1e-4 (repeatable)")
     sp.add_argument("--shape", default=None, help="Anny shape, e.g. height=0.8")
     joint_map_option(sp)
-    sp.add_argument("--workers", type=_int_at_least(1), default=1, help="parallel Blender workers (Ray) for a plan")
+    sp.add_argument("--workers", type=int_at_least(1), default=1, help="parallel Blender workers (Ray) for a plan")
     sp.add_argument("--address", default=None, help="an existing Ray cluster's address")
     sp.set_defaults(func=cmd_simulate)
 
@@ -537,7 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
     sp.add_argument("--with-body", action="store_true", help="export the posed body too (always in an .npz)")
     sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
-    sp.add_argument("--threads", type=_int_at_least(1), default=1, help="torch CPU threads")
+    sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the model runs")
     sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
                     "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
@@ -588,12 +541,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser")
     sp.add_argument("input", nargs="+", help="SEQ.npz (mesh sequence), DATA.zarr:SEQUENCE or RUN:MOTION; the first "
                     "is the simulation, the others predictions compared with it")
-    sp.add_argument("--port", type=_int_at_least(0, 65535), default=8000,
+    sp.add_argument("--port", type=int_at_least(0, 65535), default=8000,
                     help="port of the local server (127.0.0.1; 0: any free port)")
     sp.add_argument("--export", default=None, metavar="DIR", help="write the page as static files to DIR instead "
                     "of serving it (opens from disk)")
     sp.add_argument("--no-collisions", action="store_true", help="skip the per-frame collision ratio")
-    sp.add_argument("--collision-frames", type=_int_at_least(0), default=100, help="compute the collision ratio at this many "
+    sp.add_argument("--collision-frames", type=int_at_least(0), default=100, help="compute the collision ratio at this many "
                     "evenly spaced frames (0: every frame; ~0.5 s a frame for a 13.7k-vertex body)")
     sp.set_defaults(func=cmd_view)
 
