@@ -4,6 +4,7 @@ its training motions, and animating a motion outside it warns while a training m
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -111,12 +112,16 @@ def test_a_run_records_the_range_of_its_training_motions(run, tiny_store, tmp_pa
     assert META_KEY not in json.loads((tmp_path / "lbs" / MODEL_META).read_text())
 
 
+def lifted(motion: Motion, metres: float = 1.0) -> Motion:
+    return Motion(motion.rotations, motion.translation + [0, 0, metres], motion.fps, motion.rig, motion.joint_names,
+                  motion.name)
+
+
 def test_animate_warns_for_a_lifted_motion_only(run, tiny_store, tmp_path, capsys):
     store = DatasetStore.open(tiny_store)
     walk = store.motion("walk")
     walk.save(tmp_path / "walk.npz")
-    Motion(walk.rotations, walk.translation + [0, 0, 1.0], walk.fps, walk.rig, walk.joint_names,
-           walk.name).save(tmp_path / "lifted.npz")
+    lifted(walk).save(tmp_path / "lifted.npz")
     args = ["animate", str(run), "--motion", str(tmp_path / "walk.npz"), "--motion", str(tmp_path / "lifted.npz"),
             "--out", str(tmp_path / "out")]
     assert main(args) == 0
@@ -137,3 +142,41 @@ def test_animate_warns_for_a_lifted_motion_only(run, tiny_store, tmp_path, capsy
     (old / MODEL_META).write_text(json.dumps({k: v for k, v in meta.items() if k != META_KEY}))
     assert main(["animate", str(old), "--motion", str(tmp_path / "lifted.npz"), "--out", str(tmp_path / "o.npz")]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_view_warns_for_a_lifted_motion_only(run, tiny_store, tmp_path, capsys, body):
+    from loosefit.viz.viewer import view
+
+    walk = DatasetStore.open(tiny_store).motion("walk")
+    walk.save(tmp_path / "walk.npz")
+    lifted(walk).save(tmp_path / "lifted.npz")
+    view([f"{run}:{tmp_path / 'walk.npz'}"], export=tmp_path / "v1", body=body, collisions=False)
+    assert capsys.readouterr().err == ""
+    view([f"{run}:{tmp_path / 'lifted.npz'}"], export=tmp_path / "v2", body=body, collisions=False)
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"loosefit view: warning: motion {tmp_path / 'lifted.npz'}: root height ")
+    assert (tmp_path / "v2" / "index.html").is_file()
+
+
+def test_report_warns_for_a_sequence_outside_the_range(run, tiny_store, tmp_path, capsys):
+    from loosefit.report import build_report
+
+    # the store with two short test sequences: the start of a training one, and the same lifted by a metre
+    data = tmp_path / "short.zarr"
+    shutil.copytree(tiny_store, data)
+    store = DatasetStore.open(data, mode="a")
+    seq = store.sequence(next(n for n in store.sequence_names(split="train") if store.sequence(n).motion == "walk"))
+    walk, verts = store.motion("walk").slice(0, 4), np.asarray(seq.verts[:4])
+    for name, motion, lift in (("walk-start", walk, 0.0), ("walk-lifted", lifted(walk), 1.0)):
+        store.add_motion(name, motion)
+        store.write_sequence(name, verts + np.float32([0, 0, lift]), seq.garment, seq.body, name, seq.sim_params,
+                             {}, "test")
+    build_report(data, [run], tmp_path / "r", sequences=["walk-start", "walk-lifted"], results_dir=None,
+                 images=False)
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("loosefit report: warning: jointnet: motion of sequence walk-lifted: root height ")
+    doc = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    assert doc["methods"][0]["warnings"] == [line.removeprefix("loosefit report: warning: jointnet: ")]
+    for page in ("report.md", "index.html"):
+        text = (tmp_path / "r" / page).read_text()
+        assert "motion of sequence walk-lifted: root height" in text and "sequence walk-start" not in text

@@ -17,6 +17,7 @@ from a source checkout that is the repository's folder, otherwise give ``results
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -71,6 +72,9 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         raise InputError("benchmark results folder not found", results_dir)
     seqs = load_sequences(data, sequences, split)
     methods = load_methods(runs, seqs, device)
+    for m in methods:  # its predictions of these motions are extrapolations
+        for line in m.warnings:
+            print(f"loosefit report: warning: {m.label}: {line}", file=sys.stderr, flush=True)
     figures = out / "figures"
     figures.mkdir(parents=True, exist_ok=True)
 
@@ -79,7 +83,8 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         pairs = [SequencePair(s.name, m.predictions[s.name], s.gt, s.faces, s.body_verts, s.body_faces)
                  for s in seqs if s.name in m.predictions]
         ev = evaluate(pairs, progress=False)
-        evaluations.append({"method": m.label, "run": str(m.run), "rows": ev.rows, "pooled": ev.overall})
+        evaluations.append({"method": m.label, "run": str(m.run), "rows": ev.rows, "pooled": ev.overall,
+                            "warnings": m.warnings})
 
     plots = []
     for s in seqs:
@@ -107,7 +112,8 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         "headers": [h for _, h, _ in METRIC_COLUMNS],
         "methods": [{"label": e["method"], "run": e["run"],
                      "rows": [{"name": r["name"], "frames": r["frames"], "cells": _metric_cells(r)} for r in e["rows"]],
-                     "pooled": {"frames": e["pooled"]["frames"], "cells": _metric_cells(e["pooled"])}}
+                     "pooled": {"frames": e["pooled"]["frames"], "cells": _metric_cells(e["pooled"])},
+                     "warnings": e["warnings"]}
                     for e in evaluations],
         "sequences": [{"name": s.name, "garment": s.garment, "frames": len(s.gt), "vertices": s.gt.shape[1]}
                       for s in seqs],

@@ -35,12 +35,14 @@ class Sequence:
 
 @dataclass
 class Method:
-    """One run: its ``label`` in the report, ``method`` name, folder and predictions ``{sequence: (T, V, 3)}``."""
+    """One run: its ``label`` in the report, ``method`` name, folder, predictions ``{sequence: (T, V, 3)}``
+    and a line per sequence motion outside the run's training range (:mod:`loosefit.motion_range`)."""
 
     label: str
     method: str
     run: Path
     predictions: dict[str, np.ndarray]
+    warnings: list[str] = field(default_factory=list)
 
 
 def load_sequences(data: str | Path, names: list[str] | None = None, split: str | None = "test") -> list[Sequence]:
@@ -106,9 +108,15 @@ def load_methods(runs: list[str | Path], sequences: list[Sequence], device: str 
     runs share a method."""
     if not runs:
         raise InputError("give at least one run folder to report on")
+    from loosefit.animate import read_run_meta
+    from loosefit.motion_range import range_warnings
+
     loaded = []
     for run in runs:
         method, predictions = animate_run(run, sequences, device)
-        loaded.append((method, Path(run), predictions))
-    counts = {m: sum(1 for x, _, _ in loaded if x == m) for m, _, _ in loaded}
-    return [Method(m if counts[m] == 1 else f"{m} ({r.name})", m, r, p) for m, r, p in loaded]
+        meta = read_run_meta(run)
+        warnings = [line for s in sequences if s.name in predictions
+                    for line in range_warnings(meta, s.motion, f"of sequence {s.name}")]
+        loaded.append((method, Path(run), predictions, warnings))
+    counts = {m: sum(1 for x, *_ in loaded if x == m) for m, *_ in loaded}
+    return [Method(m if counts[m] == 1 else f"{m} ({r.name})", m, r, p, w) for m, r, p, w in loaded]

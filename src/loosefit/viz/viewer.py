@@ -314,6 +314,13 @@ def export_scene(scene: ViewerScene, out_dir: str | Path) -> Path:
     return out / "index.html"
 
 
+def print_warnings(scene: ViewerScene) -> None:
+    """Each panel's warnings, one stderr line each (``loosefit view: warning: ...``)."""
+    for panel in scene.panels:
+        for line in panel.warnings:
+            print(f"loosefit view: warning: {line}", file=sys.stderr, flush=True)
+
+
 def view(inputs: list[str], port: int = 8000, export: str | Path | None = None, body=None,
          collisions: bool = True, collision_frames: int = DEFAULT_COLLISION_FRAMES, serve: bool = True):
     """``loosefit view INPUT... [--port P] [--export DIR]``: export the page to ``DIR``, or serve it on
@@ -321,6 +328,7 @@ def view(inputs: list[str], port: int = 8000, export: str | Path | None = None, 
     started in the background; close it when done)."""
     if export is not None:
         scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames)
+        print_warnings(scene)
         return export_scene(scene, export)
     server = ViewerServer(None, port=port)  # a port in use fails before the inputs are loaded
     try:
@@ -328,6 +336,7 @@ def view(inputs: list[str], port: int = 8000, export: str | Path | None = None, 
     except BaseException:
         server.httpd.server_close()
         raise
+    print_warnings(scene)
     server.show(scene)
     if not serve:
         return server.start()

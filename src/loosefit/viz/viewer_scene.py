@@ -52,13 +52,15 @@ class ViewerTrack:
 
 @dataclass
 class ViewerPanel:
-    """One input: its title, the source it came from, its tracks (body first) and its per-frame metrics
-    (``{"rmse_mm": (T,), "collision_pct": (T,)}``, each present only when defined)."""
+    """One input: its title, the source it came from, its tracks (body first), its per-frame metrics
+    (``{"rmse_mm": (T,), "collision_pct": (T,)}``, each present only when defined) and warnings about it
+    (a run's motion outside the run's training range: :mod:`loosefit.motion_range`)."""
 
     title: str
     source: str
     tracks: list[ViewerTrack]
     metrics: dict[str, np.ndarray] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def garment(self) -> ViewerTrack | None:
@@ -137,7 +139,8 @@ def _run_panel(run: Path, motion_path: Path, body) -> tuple[ViewerPanel, float]:
     tracks = [ViewerTrack("body", posed.verts[: len(verts)], body.faces, BODY_COLOR),
               ViewerTrack("garment", verts, animator.faces, GARMENT_COLOR)]
     name = run.name if run.name == animator.method else f"{run.name} ({animator.method})"
-    return ViewerPanel(f"{name} on {motion_path.stem}", f"{run}:{motion_path}", tracks), motion.fps
+    return ViewerPanel(f"{name} on {motion_path.stem}", f"{run}:{motion_path}", tracks,
+                       warnings=animator.range_warnings(motion, motion_path)), motion.fps
 
 
 def load_input(spec: str, body=None) -> tuple[ViewerPanel, float]:
