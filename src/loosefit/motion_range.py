@@ -18,7 +18,8 @@ The quantities, per motion of ``T`` frames at ``fps`` (Z up):
 
 Tolerances (:data:`HEIGHT_TOLERANCE_M`, :data:`SPEED_TOLERANCE`, :data:`TURN_TOLERANCE`): a motion is
 out of range when a value passes the training range by more than the tolerance, so that another take of a
-trained kind of motion (another seed of a walk: a few centimetres of bobbing, a little faster) passes.
+trained kind of motion passes: three seeds of the procedural 3 s walk differ by up to 2.2 cm in their lowest
+root height (0.744-0.780 m) and reach 1.08-1.26 m/s and 0.62-0.91 rad/s.
 """
 
 from __future__ import annotations
