@@ -1,0 +1,391 @@
+"""Moving garment vertices out of the body: SwinGar Eq. 10 and the push-out baseline.
+
+Sign convention: loosefit's (:mod:`loosefit.geometry.signed_distance`): negative inside the body, the gradient
+pointing outwards. SwinGar Eq. 7 calls the inside positive, with which SwinGar Eq. 10 would move a vertex further
+in; the displacement here is along the outward gradient, as intended there.
+
+- :class:`CollisionResolver` / :func:`resolve_collisions`: SwinGar Eq. 10 for any SDF (the network,
+  :class:`ExactSDF` from libigl, or a closed-form one): a vertex with ``S(x_i) < 0`` moves to
+  ``x_i + grad S / |grad S| * (|S(x_i)| + delta_i)``, ``delta_i`` the Gaussian-weighted ``|S|`` of its free
+  neighbours.
+- :func:`push_out`: the fixed-distance baseline (TailorNet) the paper compares with.
+- :func:`correct_frame` (one frame, for streaming), :func:`correct_motion` (a whole motion) and
+  :func:`handle_motion_collisions` (any method's animated garment, ``loosefit animate --collision``): the posed
+  collision proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` first proves most vertices outside (an
+  axis-aligned ray that meets no triangle facing back along it), and only the others reach the field. Over a
+  motion, :data:`FRAME_CHUNK` frames go through each step at once (the cull's kernels launched once,
+  :class:`~loosefit.models.collision.fast_eval.MotionBodySDF`, :meth:`CollisionResolver.frames`), and chunks
+  run in two threads (the kernels, torch and NumPy release Python's lock).
+
+With the exact field the cull changes nothing (beyond float rounding); with the network, a vertex it wrongly
+calls inside but that the cull proves outside is not moved. Timings: ``benchmarks/README.md``.
+"""
+
+from __future__ import annotations
+
+import queue
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import torch
+
+from loosefit.errors import InputError
+from loosefit.geometry.laplacian import edges
+from loosefit.geometry.ray_cull import AxisRayCuller
+from loosefit.geometry.signed_distance import BodySDF
+from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF, flushed_denormals, value_and_gradient_fn
+from loosefit.models.collision.network import BodySDFNet, SDFFunction, motion_sdf_inputs
+from loosefit.threads import torch_threads
+
+class ExactSDF:
+    """The body's exact signed distance (libigl, :class:`BodySDF`) as an :data:`SDFFunction`: values from the
+    mesh, gradients the unit direction from the closest surface point (outwards), so that
+    :func:`resolve_collisions` can use it as the reference for the network.
+
+    Args:
+        mesh: a :class:`BodySDF` (the posed body, its tree built once).
+    """
+
+    def __init__(self, mesh: BodySDF):
+        self.mesh = mesh
+
+    def _query(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Signed distances ``(N,)`` and unit outward gradients ``(N, 3)``, as tensors like ``points``."""
+        p = points.detach().cpu().double().numpy()
+        dist, closest, face = self.mesh.closest(p)
+        away = p - closest
+        norm = np.linalg.norm(away, axis=1, keepdims=True)
+        direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None],
+                             self.mesh.face_normals[face])  # on the surface: the face normal
+        as_points = dict(dtype=points.dtype, device=points.device)
+        return torch.as_tensor(dist, **as_points), torch.as_tensor(direction, **as_points)
+
+    def __call__(self, points: torch.Tensor) -> torch.Tensor:
+        value, direction = self._query(points)
+        # the value with the exact gradient attached: d/dx (value + n . (x - x0)) = n
+        return value + (direction * (points - points.detach())).sum(-1)
+
+    def value_and_gradient_fn(self, points: torch.Tensor):
+        """Values ``(N,)`` and ``rows -> gradients (M, 3)`` from one query (see :func:`value_and_gradient_fn`)."""
+        value, direction = self._query(points)
+        return value, lambda rows: direction[rows]
+
+
+def vertex_neighbours(faces: np.ndarray, num_verts: int) -> tuple[np.ndarray, np.ndarray]:
+    """Both directions of every mesh edge: ``src, dst (2E,)`` int64."""
+    e = edges(np.asarray(faces, np.int64))
+    return np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
+
+
+def _bool_mask(mask, shape: tuple) -> np.ndarray:
+    """``mask`` (NumPy or torch) as a NumPy bool array of ``shape``, or a clear error."""
+    mask = mask.cpu().numpy() if isinstance(mask, torch.Tensor) else np.asarray(mask)
+    if mask.shape != shape or mask.dtype != bool:
+        raise InputError(f"candidates must be a {shape} bool mask, got {mask.dtype} {mask.shape}")
+    return mask
+
+
+class CollisionResolver:
+    """SwinGar Eq. 10 on one garment mesh: its neighbour lists are built once, then each call moves the
+    vertices a field says are inside out of the body.
+
+    For a vertex with ``S(x_i) < 0``: ``x_i + grad S / |grad S| * (|S(x_i)| + delta_i)``, where ``delta_i`` is the
+    Gaussian-weighted average of ``|S|`` over its mesh neighbours that are not inside (weights
+    ``exp(-d^2 / (2 sigma^2))`` of their distances, normalised to mean 1; 0 without such a neighbour).
+    One step leaves a vertex inside only where the field's gradient is not a unit vector: on the medial
+    axis of a non-smooth field, or where a learned field is not yet a distance.
+
+    The field is evaluated where it is needed, not everywhere: its value at the ``candidates`` (every vertex by
+    default), its value at the other neighbours of the vertices found inside (their ``|S|`` enters
+    ``delta_i``), and its gradient at the inside vertices only. A vertex left out of ``candidates`` must be known
+    to be outside (:class:`~loosefit.geometry.ray_cull.AxisRayCuller` proves it); it is never moved and counts as
+    a free neighbour. With every vertex a candidate the result is that of evaluating the field everywhere.
+
+    Args:
+        faces: ``(F, 3)`` triangles (the neighbourhoods).
+        num_verts: ``V``.
+        sigma: Gaussian width, metres; None: the mean edge length of the first mesh given to :meth:`__call__`.
+    """
+
+    def __init__(self, faces: np.ndarray, num_verts: int, sigma: float | None = None):
+        src, dst = vertex_neighbours(faces, num_verts)
+        self.src, self.dst = src, dst
+        order = np.argsort(src, kind="stable")
+        self.neighbours = dst[order]  # CSR: the neighbours of i are neighbours[start[i]:start[i + 1]]
+        self.start = np.concatenate([[0], np.cumsum(np.bincount(src, minlength=num_verts))])
+        self.num_verts = num_verts
+        self.sigma = sigma
+
+    def mean_edge(self, verts: torch.Tensor) -> float:
+        """Mean edge length of ``verts (V, 3)``, metres (1 for a mesh without edges)."""
+        if len(self.src) == 0:
+            return 1.0
+        src, dst = (torch.from_numpy(a).to(verts.device) for a in (self.src, self.dst))
+        return float((verts[src] - verts[dst]).norm(dim=-1).mean())  # each edge twice: the same mean
+
+    def __call__(self, verts: torch.Tensor, sdf: SDFFunction, candidates=None):
+        """Move the inside vertices of ``verts (V, 3)`` (metres, in the SDF's frame) out.
+
+        Args:
+            verts: ``(V, 3)`` garment vertices.
+            sdf: an :data:`SDFFunction` (a :meth:`BodySDFNet.bind`, :class:`ExactSDF`, ...).
+            candidates: ``(V,)`` bool (NumPy or torch), the vertices that may be inside; None: all.
+
+        Returns:
+            ``(V, 3)`` corrected vertices and the ``(V,)`` bool mask of the vertices that were inside.
+        """
+        V = self.num_verts
+        if verts.ndim != 2 or verts.shape != (V, 3):
+            raise InputError(f"resolve_collisions takes one garment ({V}, 3), got {tuple(verts.shape)}")
+        cand = np.arange(V) if candidates is None else np.flatnonzero(_bool_mask(candidates, (V,)))
+        moved, inside = self._resolve(verts, sdf, cand)
+        return moved, torch.from_numpy(inside).to(verts.device)
+
+    def frames(self, verts: torch.Tensor, sdf: "MotionBodySDF", candidates) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`__call__` on ``T`` frames of the garment at once: ``verts (T, V, 3)`` world metres, ``sdf`` the
+        :class:`MotionBodySDF` of those frames, ``candidates (T, V)`` bool (NumPy or torch). Returns ``(T, V, 3)``
+        and ``(T, V)`` bool, what :meth:`__call__` gives frame by frame (up to float rounding)."""
+        V = self.num_verts
+        if verts.ndim != 3 or verts.shape[1:] != (V, 3):
+            raise InputError(f"resolving frames takes a garment (T, {V}, 3), got {tuple(verts.shape)}")
+        T = len(verts)
+        cand = np.flatnonzero(_bool_mask(candidates, (T, V)))
+        if getattr(sdf, "num_frames", None) != T:
+            raise InputError(f"resolving {T} frames needs a MotionBodySDF of {T} frames")
+        moved, inside = self._resolve(verts.reshape(T * V, 3), sdf, cand, frames=True)
+        return moved.reshape(T, V, 3), torch.from_numpy(inside.reshape(T, V)).to(verts.device)
+
+    def _resolve(self, verts: torch.Tensor, sdf, cand: np.ndarray, frames: bool = False):
+        """The moved copy of ``verts`` and the NumPy mask of the vertices found inside, evaluating ``sdf`` at the
+        flat indices ``cand`` (and where ``delta_i`` needs it). The field runs in torch on the vertices' device;
+        the bookkeeping of a few hundred vertices runs in NumPy (cheaper per call). With ``frames``, ``verts``
+        is ``(T V, 3)``, flat index ``t V + i`` is vertex ``i`` of frame ``t``, and ``sdf`` (a
+        :class:`MotionBodySDF`) takes each point's frame. The Gaussian width, if not set, is the mean edge of
+        the first frame."""
+        if self.sigma is None:
+            self.sigma = self.mean_edge(verts[:self.num_verts])
+        out = verts.detach().clone()
+        inside = np.zeros(len(out), bool)
+        with flushed_denormals():
+            self._move_out(out, sdf, cand, inside, frames)
+        return out, inside
+
+    def _move_out(self, out: torch.Tensor, sdf, cand: np.ndarray, inside: np.ndarray, frames: bool) -> None:
+        """:meth:`_resolve`'s work, in place on ``out``, filling ``inside``."""
+        dev = out.device
+        V = self.num_verts
+        if len(cand) == 0:
+            return
+
+        def at(index: np.ndarray) -> tuple:  # the field's arguments for these flat indices
+            rows = torch.from_numpy(index).to(dev)
+            return (out[rows], rows // V) if frames else (out[rows],)
+
+        x = out.cpu().numpy()
+        s_cand, gradient = value_and_gradient_fn(sdf, *at(cand))
+        s_cand = s_cand.detach().cpu().numpy().astype(np.float64)
+        hit = s_cand < 0
+        ins = cand[hit]
+        inside[ins] = True
+        if len(ins) == 0:
+            return
+        g = gradient(torch.from_numpy(np.flatnonzero(hit)).to(dev)).detach().cpu().numpy().astype(np.float64)
+        value = np.full(len(x), np.nan)
+        value[cand] = s_cand
+        # the neighbours of the inside vertices, flat: neighbour nbr[k] belongs to inside vertex ins[rows[k]]
+        vertex = ins % V
+        count = self.start[vertex + 1] - self.start[vertex]
+        total = np.cumsum(count)
+        nbr = self.neighbours[np.repeat(self.start[vertex] - total + count, count) + np.arange(total[-1])]
+        nbr = nbr + np.repeat(ins - vertex, count)  # the same frame's
+        rows = np.repeat(np.arange(len(ins)), count)
+        free = ~inside[nbr]
+        need = np.zeros(len(x), bool)
+        need[nbr[free]] = True
+        need[cand] = False
+        missing = np.flatnonzero(need)  # free neighbours not evaluated yet: their |S| enters delta
+        if len(missing):
+            with torch.no_grad():
+                value[missing] = sdf(*at(missing)).cpu().numpy()
+        x_in = x[ins].astype(np.float64)
+        diff = x_in[rows] - x[nbr]
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        w = np.exp(-d2 / (2 * self.sigma**2)) * free
+        wsum = np.bincount(rows, w, len(ins))
+        weighted = np.bincount(rows, w * np.abs(np.where(free, value[nbr], 0.0)), len(ins))
+        delta = np.divide(weighted, wsum, out=np.zeros(len(ins)), where=wsum > 0)
+        direction = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+        moved = x_in + direction * (np.abs(s_cand[hit]) + delta)[:, None]
+        out[torch.from_numpy(ins).to(dev)] = torch.from_numpy(moved).to(out)
+
+
+def resolve_collisions(verts: torch.Tensor, faces: np.ndarray, sdf: SDFFunction, sigma: float | None = None,
+                       candidates=None):
+    """Move every vertex inside the body out of it (SwinGar Eq. 10): one call of a :class:`CollisionResolver`.
+
+    Args:
+        verts: ``(V, 3)`` garment vertices, metres, in the SDF's frame.
+        faces: ``(F, 3)`` triangles (the neighbourhoods).
+        sdf: an :data:`SDFFunction` (a :meth:`BodySDFNet.bind`, :class:`ExactSDF`, a closed-form one).
+        sigma: Gaussian width, metres; None: the mean edge length.
+        candidates: ``(V,)`` bool, the vertices that may be inside (the others are known outside); None: all.
+
+    Returns:
+        ``(V, 3)`` corrected vertices and the ``(V,)`` bool mask of the vertices that were inside.
+    """
+    if verts.ndim != 2 or verts.shape[1] != 3:
+        raise InputError(f"resolve_collisions takes one garment (V, 3), got {tuple(verts.shape)}")
+    return CollisionResolver(faces, len(verts), sigma)(verts, sdf, candidates)
+
+
+def push_out(verts: np.ndarray, body: BodySDF, distance: float = 0.004) -> tuple[np.ndarray, np.ndarray]:
+    """The baseline (TailorNet): each vertex inside the body moves to its closest surface point plus
+    ``distance`` along the outward direction, whatever its neighbours do. Returns vertices and the mask."""
+    v = np.asarray(verts, np.float64)
+    dist, closest, face = body.closest(v)
+    inside = dist < 0
+    away = closest - v
+    norm = np.linalg.norm(away, axis=1, keepdims=True)
+    direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12), body.face_normals[face])
+    out = v.copy()
+    out[inside] = closest[inside] + distance * direction[inside]
+    return out.astype(np.float32), inside
+
+
+#: Bin side of the cull (:class:`~loosefit.geometry.ray_cull.AxisRayCuller`), metres. Finer bins leave fewer
+#: candidates but cost more to rasterise; over a motion 1.25 cm was as fast as 2 cm or faster (benchmarks/README.md).
+#: With a margin, fewer candidates also means fewer vertices moved that the cull could have proved outside.
+CULL_CELL = 0.0125
+
+
+def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFunction, frame=None,
+                  culler: AxisRayCuller | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Collision handling of one world frame: SwinGar Eq. 10 where the garment may be inside the body.
+
+    Args:
+        verts: ``(V, 3)`` world garment vertices, metres.
+        resolver: the garment's :class:`CollisionResolver`.
+        sdf: the field, in its own frame (:meth:`BodySDFNet.bind` in the canonical frame, :class:`ExactSDF`).
+        frame: ``(rot (3, 3), origin (3,))``: the field's frame, ``p_sdf = (p - origin) @ rot``; None: the world.
+        culler: the posed collision body's :class:`~loosefit.geometry.ray_cull.AxisRayCuller`, updated to this
+            frame: the vertices it proves outside are never given to the field (they could not be moved
+            anyway); None: every vertex is evaluated.
+
+    Returns:
+        ``(V, 3)`` float32 corrected world vertices and the ``(V,)`` bool mask of the vertices moved.
+    """
+    world = np.ascontiguousarray(verts, np.float32)
+    candidates = None if culler is None else ~culler.outside(world)
+    if frame is not None:
+        sdf = FramedSDF(sdf, *frame)
+    out, inside = resolver(torch.from_numpy(world), sdf, candidates)
+    return out.numpy(), inside.numpy()
+
+
+#: Frames corrected in one pass of the network by :func:`correct_motion`: enough that Python's per-call overhead
+#: is paid rarely, few enough that a chunk's ``(T V, 3)`` arrays stay small and a short motion still gives both
+#: workers a chunk.
+FRAME_CHUNK = 32
+
+
+def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDFNet", code, rot, origin,
+                   posed: np.ndarray | None = None, culler: AxisRayCuller | None = None, margin: float = 0.0,
+                   workers: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """SwinGar Eq. 10 with the network on every frame of an animated garment, :data:`FRAME_CHUNK` frames a
+    pass (:class:`MotionBodySDF`, :meth:`CollisionResolver.frames`): what :func:`correct_frame` gives frame by
+    frame, up to float rounding.
+
+    Args:
+        verts: ``(T, V, 3)`` world garment vertices, metres.
+        resolver: the garment's :class:`CollisionResolver`.
+        net: the body SDF network; ``code (T, C)``, ``rot (T, 3, 3)``, ``origin (T, 3)``: its inputs per frame
+            (:func:`motion_sdf_inputs`).
+        posed, culler: the posed collision proxy ``(T, Vb, 3)`` and its
+            :class:`~loosefit.geometry.ray_cull.AxisRayCuller`: only the vertices it cannot prove outside reach
+            the network; None: every vertex does.
+        margin: metres, the network's surface moved outwards (:meth:`BoundBodySDF.offset`).
+        workers: threads correcting chunks side by side (Warp's kernels, torch and NumPy's large operations run
+            without Python's lock, so two use two cores; each has its own culler and one torch thread); 1: one
+            chunk after another, with torch's thread count as it is.
+
+    Returns:
+        ``(T, V, 3)`` float32 corrected vertices and the ``(T, V)`` bool mask of the vertices moved.
+    """
+    if workers < 1:
+        raise InputError(f"collision workers must be >= 1, got {workers}")
+    world = np.array(verts, np.float32, copy=True)
+    T = len(world)
+    inside = np.zeros(world.shape[:2], bool)
+    if resolver.sigma is None and T:  # set before the threads share the resolver
+        resolver.sigma = resolver.mean_edge(torch.from_numpy(world[0]))
+    chunks = [slice(s, min(s + FRAME_CHUNK, T)) for s in range(0, T, FRAME_CHUNK)]
+    workers = min(workers, len(chunks)) or 1
+    cullers = queue.SimpleQueue()  # one culler (its map buffers) per running chunk
+    for k in range(workers if culler is not None else 0):
+        cullers.put(culler if k == 0 else culler.twin())
+
+    def correct(chunk: slice) -> None:  # frames of one chunk, written in place (chunks do not overlap)
+        if culler is None:
+            cand = np.ones((chunk.stop - chunk.start, world.shape[1]), bool)
+        else:
+            mine = cullers.get()
+            try:
+                cand = ~mine.update(posed[chunk], world[chunk]).outside(world[chunk])  # the chunk's frames at once
+            finally:
+                cullers.put(mine)
+        field = MotionBodySDF(net, code[chunk], rot[chunk], origin[chunk]).offset(margin)
+        moved, hit = resolver.frames(torch.from_numpy(world[chunk]), field, cand)
+        world[chunk], inside[chunk] = moved.numpy(), hit.numpy()
+
+    if workers == 1:
+        for chunk in chunks:
+            correct(chunk)
+    else:  # one torch thread a worker: measured faster than two each on two cores (benchmarks/collision.py)
+        with torch_threads(1), ThreadPoolExecutor(workers) as pool:
+            list(pool.map(correct, chunks))  # list(): an exception in a chunk is raised here
+    return world, inside
+
+
+def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
+                             net: BodySDFNet | None = None, push_distance: float = 0.004,
+                             cull: bool = True, margin: float = 0.0, cull_cell=CULL_CELL) -> np.ndarray:
+    """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
+    Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
+
+    ``mode``: ``"neural"`` (SwinGar Eq. 10 with ``net``, in the canonical frame, the code from the motion),
+    ``"exact"`` (SwinGar Eq. 10 with libigl's distance to the posed collision proxy) or ``"pushout"`` (the
+    fixed-distance baseline). With ``cull`` (the default) SwinGar Eq. 10 evaluates its field only at the
+    vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
+    (:func:`correct_frame`); the network runs on :data:`FRAME_CHUNK` frames a pass (:func:`correct_motion`); the
+    Gaussian width is the mean edge length of the first frame. ``cull_cell``: the cull's bin side, metres (one
+    or ``(x, y, z)``).
+
+    ``margin`` (metres, ``"neural"`` only; ours, 0 in the paper): Eq. 10 on the network's surface moved that far
+    outwards, ``S - margin``: a vertex the network puts less than ``margin`` outside is corrected too, and moved
+    to ``margin + delta_i``. A network that is millimetres off near the surface misses the shallow collisions
+    on the wrong side of its zero level; the margin catches them (the cull still skips every vertex it proves
+    outside the proxy, so no vertex far from the body moves).
+    """
+    if mode not in ("neural", "exact", "pushout"):
+        raise InputError(f"collision mode must be 'neural', 'exact' or 'pushout', got {mode!r}")
+    if mode == "neural" and net is None:
+        raise InputError("neural collision handling needs a body SDF network")
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InputError(f"collision margin must be a non-negative number of metres, got {margin!r}")
+    proxy = body.collision_proxy()
+    out = np.array(verts, np.float32, copy=True)
+    posed = proxy.pose(motion).verts if (cull or mode != "neural") else None
+    culler = AxisRayCuller(posed[0], proxy.faces, cull_cell) if cull and mode != "pushout" else None
+    resolver = CollisionResolver(faces, out.shape[1])
+    if mode == "neural":
+        code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
+        return correct_motion(out, resolver, net.eval(), code, rot, origin, posed, culler, margin)[0]
+    for t in range(len(out)):
+        mesh = BodySDF(posed[t], proxy.faces)
+        if mode == "pushout":
+            out[t] = push_out(out[t], mesh, push_distance)[0]
+        else:
+            out[t] = correct_frame(out[t], resolver, ExactSDF(mesh), None,
+                                   culler.update(posed[t], out[t]) if culler else None)[0]
+    return out
+
