@@ -166,6 +166,23 @@ def test_replacing_used_garment_or_motion_with_other_size_is_refused(store):
     np.testing.assert_array_equal(store.motion("m45").rotations, random_motion(45, seed=9).rotations)
 
 
+def test_a_plan_run_replaces_a_used_entry_only_if_it_rewrites_every_user(store):
+    """A second plan defining motion ``m45`` (or garment ``g``) otherwise would leave the first plan's sequences
+    with vertices simulated on the old one: refused unless the run writes every sequence using it again."""
+    store.write_sequence("s", random_verts(45, 25), "g", "b", "m45", {}, {}, "train")
+    store.write_sequence("t", random_verts(45, 25), "g", "b", "m45", {}, {}, "train")
+    stored = store.motion("m45").rotations
+    with pytest.raises(InputError, match=r"motion 'm45' differs .* \['t'\]"):
+        store.add_motion("m45", random_motion(45, seed=9), rewritten={"s"})
+    with pytest.raises(InputError, match=r"garment 'g' differs .* \['s', 't'\]"):
+        store.add_garment("g", grid_garment(kind="dress"), rewritten=set())
+    np.testing.assert_array_equal(store.motion("m45").rotations, stored)  # nothing replaced
+    assert store.garment("g").kind == "skirt"
+    store.add_motion("m45", random_motion(45, seed=2, name="spin"), rewritten=set())  # identical: nothing to do
+    store.add_motion("m45", random_motion(45, seed=9), rewritten={"s", "t"})
+    np.testing.assert_array_equal(store.motion("m45").rotations, random_motion(45, seed=9).rotations)
+
+
 def test_write_array_and_attrs(store):
     w = np.random.default_rng(0).random((25, 8)).astype(np.float32)
     store.write_array("garments/g/rig", "weights", w)

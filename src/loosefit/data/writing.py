@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 from pathlib import Path
-from typing import Iterator
+from typing import Collection, Iterator
 
 import numpy as np
 import zarr
@@ -73,9 +73,17 @@ class StoreWriter:
                 return False
         return True
 
-    def _add_entry(self, collection: str, name: str, arrays: dict[str, np.ndarray], attrs: dict) -> None:
+    def _add_entry(self, collection: str, name: str, arrays: dict[str, np.ndarray], attrs: dict,
+                   user_key: str | None = None, rewritten: Collection[str] | None = None) -> None:
         if self._same_entry(collection, name, arrays, attrs):
             return
+        if rewritten is not None and self._entry_attrs(collection, name) is not None:
+            stale = sorted(set(self._sequences_using(user_key, name)) - set(rewritten))
+            if stale:
+                raise InputError(
+                    f"{user_key} {name!r} differs from the one stored, which sequences {stale[:5]}"
+                    f"{'...' if len(stale) > 5 else ''} were simulated with; give it another name, or write into "
+                    f"another store", self._root)
         with self._staged_group(f"{collection}/{name}", attrs, name) as group:
             for key, value in arrays.items():
                 group.create_dataset(key, data=value, compressor=COMPRESSOR)
@@ -92,13 +100,15 @@ class StoreWriter:
 
     # ---------------------------------------------------------------- garments, bodies, motions
 
-    def add_garment(self, name: str, garment) -> None:
+    def add_garment(self, name: str, garment, rewritten: Collection[str] | None = None) -> None:
         """Store a garment (any object with ``verts (V,3)``, ``faces (F,3)``, ``pinned (V,)``, ``kind``,
         ``params`` (JSON values), ``name``), atomically.
 
         Adding an identical garment again does nothing (arrays stored under it by later stages stay);
         a different (or damaged) one is replaced, dropping those arrays. Replacing a garment that
-        sequences use by one with another vertex count is refused.
+        sequences use by one with another vertex count is refused. With ``rewritten`` (the sequences the
+        caller is about to write again, e.g. a plan run's jobs), replacing it with different content is
+        refused while any other sequence uses it: those would keep vertices simulated on the old one.
         """
         self._check_writable()
         self._check_name(name, "garment")
@@ -132,7 +142,8 @@ class StoreWriter:
             "params": jsonable(dict(garment.params), f"garment {name!r} params", self._root),
             "garment_name": str(garment.name),
         }
-        self._add_entry("garments", name, {"verts": verts, "faces": faces, "pinned": pinned}, attrs)
+        self._add_entry("garments", name, {"verts": verts, "faces": faces, "pinned": pinned}, attrs,
+                        user_key="garment", rewritten=rewritten)
 
     def add_body(self, name: str, shape: np.ndarray, model: str = "anny") -> None:
         """Store a body shape: ``shape (S,)`` values of the body ``model`` (Anny: the six phenotype
@@ -147,9 +158,10 @@ class StoreWriter:
             )
         self._add_entry("bodies", name, {"values": values}, {"model": str(model)})
 
-    def add_motion(self, name: str, motion: Motion) -> None:
+    def add_motion(self, name: str, motion: Motion, rewritten: Collection[str] | None = None) -> None:
         """Store a motion, atomically; same replacement rules as :meth:`add_garment` (a motion that
-        sequences use keeps its frame count)."""
+        sequences use keeps its frame count; with ``rewritten``, only those sequences may use a motion
+        whose content changes)."""
         self._check_writable()
         self._check_name(name, "motion")
         if self._entry_attrs("motions", name) is not None:
@@ -167,7 +179,8 @@ class StoreWriter:
             "joint_names": [str(j) for j in motion.joint_names],
             "motion_name": str(motion.name),
         }
-        self._add_entry("motions", name, {"rotations": motion.rotations, "translation": motion.translation}, attrs)
+        self._add_entry("motions", name, {"rotations": motion.rotations, "translation": motion.translation}, attrs,
+                        user_key="motion", rewritten=rewritten)
 
     # ---------------------------------------------------------------- sequences
 

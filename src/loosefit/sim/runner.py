@@ -252,15 +252,17 @@ def _inputs(plan: Plan, store, jobs: list[SequenceJob]) -> list[dict[str, Any]]:
     garments: dict[str, Any] = {}
     motions: dict[str, Any] = {}
     payloads = []
+    # a garment or motion whose plan changed may be replaced only if every sequence using it is simulated again
+    rewritten = {job.id for job in jobs}
     for job in jobs:
         shape = shapes[job.shape]
         if job.garment_entry not in garments:
             store.add_body(job.shape, np.asarray(shape, np.float32))
             garments[job.garment_entry] = load_plan_garment(plan, job.garment, shape)
-            store.add_garment(job.garment_entry, garments[job.garment_entry])
+            store.add_garment(job.garment_entry, garments[job.garment_entry], rewritten=rewritten)
         if job.motion not in motions:
             motions[job.motion] = load_plan_motion(plan, job.motion)
-            store.add_motion(job.motion, motions[job.motion])
+            store.add_motion(job.motion, motions[job.motion], rewritten=rewritten)
         payloads.append({
             "garment": garments[job.garment_entry],
             "motion": motions[job.motion],
