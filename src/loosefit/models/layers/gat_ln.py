@@ -28,6 +28,14 @@ a bias is added and ``tanh`` applied (SwinGar Sec. IV: every GAT-LN layer uses t
 leaves it out, as the gate maps of :mod:`loosefit.models.layers.lstm_gat_ln` need). ``alpha=None``
 switches the normalisation off: the plain GAT layer of SwinGar's ablation (Fig. 8, 9).
 
+Departures, named: the normaliser is global, one per graph and head, as SwinGar Eq. 4's matrix norms read
+(the largest row norm over the whole graph, the largest feature norm over the whole graph), where the
+Lipschitz normalisation SwinGar cites (Dasoulas et al. 2021) divides each node's scores by a norm of its own;
+with one normaliser a vertex's scores also depend on the largest scores elsewhere in the graph. The heads are
+averaged, where GAT (and FitGar's blocks, :mod:`loosefit.models.layers.gat_block`) concatenate them: SwinGar
+gives each layer one hidden size and 24 heads without saying which; concatenated, a 128-wide layer of 24 heads
+would need a width divisible by 24.
+
 The graph is a padded neighbour table (:func:`attention_table`) rather than PyG's edge list: the
 forward pass then scatters nothing (the backward pass scatters one value per vertex, slot and input
 channel), which matters on CPUs where torch's scatter is slow with several threads. Since

@@ -16,6 +16,17 @@ peephole weights on the previous cell state, as SwinGar Eq. 6 writes them (all t
 The peepholes start at zero, so with every node attending only to itself and one head the cell is
 exactly ``torch.nn.LSTMCell`` applied per node (``A``'s weight and bias are ``weight_ih.T`` and
 ``bias_ih``, ``S``'s are ``weight_hh.T`` and ``bias_hh``).
+
+Departures from SwinGar Eq. 6, named:
+
+- one GAT-LN per map serves all four gates, where Eq. 6 writes a GAT-LN per gate: the gates share the
+  attention weights of each head (their projections are separate columns of the one layer), so a step runs two
+  graph attentions instead of eight;
+- Eq. 6 prints ``C^t = i^t o tanh(A(X^t) + S(H^{t-1}) + f^t o C^{t-1})``, the forget term inside the tanh;
+  here it is outside, ``C^t = i^t o tanh(A_g + S_g) + f^t o C^{t-1}``, the standard LSTM cell update, which
+  the parenthesis most likely misprints (inside, a closed input gate would erase the cell whatever the forget
+  gate says, and the forget gate would not gate the memory);
+- the paper does not say how the peepholes start; zero here (the cell starts as a plain LSTM).
 """
 
 from __future__ import annotations
