@@ -13,7 +13,8 @@ windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints 
    features to bones: ``relu(A) @ psi``. An L1 penalty keeps it sparse, so a bone listens to few joints
    (an arm does not swing the hem of a skirt).
 3. **Garment prior.** Fourier features of each bone's rest position, ``[alpha_m cos(2 pi c_m . p),
-   alpha_m sin(2 pi c_m . p)]`` with fixed random frequencies ``c_m`` and learnt ``alpha_m``, are added.
+   alpha_m sin(2 pi c_m . p)]`` with fixed random frequencies ``c_m`` and learnt ``alpha_m``, are added
+   (JointNet Eq. 4; the paper's Fig. 2 and text concatenate them, see the departures below).
 4. **Bone transforms.** A per-bone (shared) MLP ``F`` (K, 1024, 2048, 1024, 6) gives three Euler angles
    and a three-vector offset, both standardised by the training statistics of the rig's bone
    transforms. The bone rotates about its rest position ``c`` and moves by the offset, so
@@ -28,6 +29,18 @@ windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints 
 Loss: ``L1(vertices) + lambda_norm * normal loss + lambda_s * ||relu(A)||_1``, against the full
 simulated garment. Training has two stages (paper Sec. 4.2): ``stage1`` without the PSD (its output is
 zero and its parameters are not optimised), ``stage2`` everything.
+
+Departures from the paper, named:
+
+- the garment prior is added to the bone features, as JointNet Eq. 4 writes, where Fig. 2 and Sec. 3.2's text
+  concatenate it: ``F`` reads ``K`` features, not ``2 K`` (at the paper's sizes 491,520 fewer weights in its
+  first layer), and the prior shifts the joints' features instead of filling channels of its own;
+- a joint's input is the root features (height, displacement and heading change since the previous frame,
+  tilt), its own rotation, its parent's and those of all its selected children, as 6D rotations; the paper
+  concatenates the root position, the joint's axis-angle and those of its two skeleton neighbours;
+- the Euler angles and offsets are standardised by the rig's training statistics (the paper does not say);
+- ``L_cloth`` (JointNet Eq. 7) is averaged over vertices and coordinates rather than summed over the mesh, so
+  that the loss weights (not in the paper) do not depend on the vertex count.
 """
 
 from __future__ import annotations
@@ -113,8 +126,8 @@ class JointNetConfig:
 
 
 def _paper_training() -> TrainConfig:
-    # RMSProp, batch 8, lr 1e-3 times 0.7 every 30 epochs (paper Sec. 4.2 and the authors' code); the
-    # epochs per stage are not in the paper.
+    # RMSProp, batch 8, lr 1e-3 times 0.7 every 30 epochs (paper Sec. 4.2 and the authors' code: the paper's
+    # "decays by 70%" read as the code has it, not as times 0.3); the epochs per stage are not in the paper.
     return TrainConfig(optimizer="rmsprop", lr=1e-3, batch_size=8, schedule="step", step_epochs=30, step_gamma=0.7,
                        stages={"stage1": StageConfig(epochs=150), "stage2": StageConfig(epochs=60)})
 
@@ -346,7 +359,7 @@ class JointNet(GarmentModel):
         psi = grouped_linear(self.joint_out_weight, hidden.transpose(0, 2).flatten(1, 2)) + self.joint_out_bias
         psi = psi.unflatten(1, (T, N)).permute(2, 1, 0, 3)  # (N, T, J_s, K)
         association = self.association_matrix()
-        bone_features = association @ psi + self.fourier_features()  # (N, T, B, K)
+        bone_features = association @ psi + self.fourier_features()  # (N, T, B, K): Eq. 4's sum, not a concatenation
         R, trans = self.bone_transforms(bone_features)
         rest, displacement = self.rig_rest, None
         if psd:
