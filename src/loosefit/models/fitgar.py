@@ -43,6 +43,19 @@ scaling the direction to unit length, so that the magnitude branch gives the dis
 the magnitude in units of the training displacements' root mean square length; everything in the
 heading frame of each frame (as every loosefit method), so the pose ``theta`` holds the root's tilt
 but not its heading.
+
+Departures from the paper, named:
+
+- the fit attribute keeps the factors the store was prepared with, 4 by default
+  (:data:`loosefit.rig.fit_attribute.DEFAULT_FACTORS`), where Sec. 5.1 uses ``alpha`` in R^3: the coarse graph
+  reads ``a_1`` either way, the parser one value more;
+- the parser's ReLU follows every layer, its last included (Sec. 5.1: three layers "and ReLU"), so the
+  encoding is never negative and FitGar Eq. 7's product can only gate a feature (scale it down, up or shut
+  it), never flip its sign;
+- the anchors ``I M_b`` are many-to-one: each garment vertex takes the nearest of the body's 13,718 rest
+  vertices (:mod:`loosefit.models.fitgar_inputs`), where the paper subdivides SMPL to 27,554 vertices for a
+  one-to-one correspondence;
+- ``beta`` is the body model's shape vector and ``theta`` 6D rotations (SMPL: 10 and 72 axis-angle values).
 """
 
 from __future__ import annotations
@@ -258,6 +271,7 @@ class FitGar(nn.Module):
             self.coarse_first = GATBlock.of_width(COARSE_FEATURES, c.coarse_first, c.heads, c.self_fraction)
             self.coarse = Generator(c.coarse_first, c.coarse_blocks, c.coarse_dense, c, pool=False)
         attributes = F + S + P
+        # ReLU after the last layer too: the encodings are >= 0, so FitGar Eq. 7 gates (see the module doc)
         self.parser = MLP((attributes, *c.parser), nn.ReLU, final_activation=True) if c.parser_mode != "nodes" else None
         node_features = 6 + J + (attributes if c.parser_mode == "nodes" else 0)
         self.detail_first = GATBlock.of_width(node_features, c.detail_first, c.heads, c.self_fraction)

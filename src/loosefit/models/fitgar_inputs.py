@@ -20,6 +20,14 @@ the body faces -Y, its root above the origin), ``T`` frames, ``V`` garment verti
 
 Only the indicated body vertices and their one-ring (for the normals) are skinned, not the whole body:
 the cost follows the garment.
+
+Departure from the paper, named: the indicator is many-to-one. FitGar subdivides SMPL once (6,890 to 27,554
+vertices) so that every garment vertex has a body vertex of its own (Sec. 4.1, 4.3, 5.1); here each garment vertex
+takes the nearest vertex of the body as it is (Anny: 13,718), and neighbouring garment vertices often share
+one, with the same body normal and skinning feature on their coarse nodes. Measured on the seed-0 templates
+at 2 cm edges on the average Anny body: the skirt's 1,775 vertices have 776 distinct anchors (84 % of the
+vertices share theirs, up to 14 on one), the dress's 5,716 have 1,374 (90 %, up to 57), the long shirt's
+3,833 have 2,134 (72 %, up to 11).
 """
 
 from __future__ import annotations
