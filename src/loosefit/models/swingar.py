@@ -54,7 +54,14 @@ budget rose from 122 to 136 mm), so without the prior ``a`` is left as the paper
 
 Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather
 than axis-angles; the fit attribute ``a_i`` is each vertex's rest distance to the body (FitGar's
-quantity before its factor analysis, which describes a garment, not a vertex); heads are averaged.
+quantity before its factor analysis, which describes a garment, not a vertex); heads are averaged and
+GAT-LN normalises once per graph (:mod:`loosefit.models.layers.gat_ln`); the LSTM-GAT-LN shares one GAT-LN per
+map across its four gates (:mod:`loosefit.models.layers.lstm_gat_ln`). In the losses, every term is a mean
+(over vertices, edges, faces and frames) where SwinGar Eqs. 12 and 14 write squared norms, sums over the
+edges, faces and vertices: the terms' balance then does not move with a garment's resolution (summed, the
+edge term would add about 3 V squares against Eq. 11's mean over V vertices); and the bending term applies
+the graph Laplacian of the face adjacency (``(L N)_f = sum_{g ~ f} (n_g - n_f)``, unweighted) to the face
+normals, where the paper names the Laplace-Beltrami operator.
 """
 
 from __future__ import annotations
