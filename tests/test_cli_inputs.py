@@ -105,15 +105,16 @@ def _outputs(tmp_path, a_file):
         "animate": ["animate", tmp_path / "run", "--motion", tmp_path / "m.npz", "--out", f"{bad}.glb"],
         "animate several": ["animate", tmp_path / "run", "--motion", tmp_path / "m.npz", "--motion",
                             tmp_path / "n.npz", "--out", "/proc/anim"],
+        "view": ["view", tmp_path / "seq.npz", "--export", "/proc/page"],
     }
 
 
 @pytest.mark.parametrize("case", ["body", "motion generate", "motion import", "garment make", "garment import",
                                   "render", "render folder", "evaluate", "simulate", "simulate plan", "train",
-                                  "train collision", "animate", "animate several"])
+                                  "train collision", "animate", "animate several", "view"])
 def test_unwritable_outputs_are_refused_before_the_work(tmp_path, a_file, capsys, case):
     argv = _outputs(tmp_path, a_file)[case]
-    out = argv[argv.index("--out") + 1]
+    out = argv[argv.index("--export" if case == "view" else "--out") + 1]
     err = _error(capsys, argv, argv[0])  # the inputs do not even exist: the output is checked first
     assert f"error: {out}: cannot write here: " in err
     assert a_file.read_text() == "keep me"

@@ -307,6 +307,8 @@ def cmd_export_rig(args):
 def cmd_view(args):
     from loosefit.viz.viewer import view
 
+    if args.export is not None:
+        writable(args.export, folder=True)  # before the scene is built
     result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
                   collision_frames=args.collision_frames)
     if args.export is not None:
