@@ -150,12 +150,13 @@ def prepare(
     """
     s = prepare_settings({**settings, **({} if bones is None else {"bones": int(bones)})})
     store = DatasetStore.open(store_path, mode="a")
-    store.write_attrs("prepare", {"status": "writing"})
     sequences = {name: store.sequence(name) for name in store.sequence_names(status="ok")}
     train = {g: [] for g in store.garment_names()}
     for name, q in sequences.items():
         if q.split == "train":
             train[q.garment].append(name)
+    _check_before_writing(store, s, train, force)
+    store.write_attrs("prepare", {"status": "writing"})
     summary: dict = {"garments": {}}
     for g in tqdm(store.garment_names(), desc="garments", disable=not progress):
         garment = store.garment(g)
@@ -182,16 +183,40 @@ def _is_done(store: DatasetStore, group: str, expected: dict) -> bool:
     return attrs.get("status") == DONE and all(attrs.get(k) == v for k, v in expected.items())
 
 
+def _rig_expected(s: PrepareSettings, names: list[str]) -> dict:
+    """The attributes a finished rig of these settings and training sequences has."""
+    return {"settings": s.rig(), "sequences": names}
+
+
+def _check_before_writing(store: DatasetStore, s: PrepareSettings, train: dict[str, list[str]], force: bool) -> None:
+    """Refuse, before anything in the store changes, what would stop prepare half-way: a garment with fewer
+    vertices than the descriptor's samples, a bone count its rig cannot have, a damaged training sequence
+    that its rig would read (every chunk is read: the time of reading those sequences once). A refused
+    prepare leaves a prepared store as it was; a rig interrupted half-way is marked ``"writing"``."""
+    for g, names in train.items():
+        num_verts = store.garment_num_verts(g)
+        if num_verts < s.descriptor_samples:
+            raise InputError(
+                f"garment {g!r} has {num_verts} vertices, fewer than the spectral descriptor's "
+                f"{s.descriptor_samples} samples: lower descriptor_samples (all garments need the same)",
+                store.path,
+            )
+        if not names or (not force and _is_done(store, f"garments/{g}/rig", _rig_expected(s, names))):
+            continue
+        if not 1 <= s.bones <= num_verts:
+            raise InputError(f"bones={s.bones}: garment {g!r} has {num_verts} vertices, so its rig can have "
+                             f"1 to {num_verts} bones", store.path)
+        for name in names:
+            problem = store.verify_sequence(name)
+            if problem:
+                raise InputError(f"training sequence {name!r} is damaged ({problem}); nothing was changed: "
+                                 f"`loosefit info {store.path} --repair` drops it", store.path / "sequences" / name)
+
+
 def _prepare_descriptor(store: DatasetStore, g: str, garment, s: PrepareSettings, force: bool) -> None:
     group = f"garments/{g}/descriptor"
     if not force and _is_done(store, group, {"settings": s.descriptor()}):
         return
-    if len(garment.verts) < s.descriptor_samples:
-        raise InputError(
-            f"garment {g!r} has {len(garment.verts)} vertices, fewer than the spectral descriptor's "
-            f"{s.descriptor_samples} samples: lower descriptor_samples (all garments need the same)",
-            store.path,
-        )
     store.write_attrs(group, {"status": "writing"})
     d = spectral_descriptor(garment.verts, garment.faces, s.descriptor_samples, s.descriptor_sigma, s.seed)
     store.write_array(group, "spectral", d)
@@ -208,7 +233,7 @@ def _prepare_rig(
     store: DatasetStore, g: str, garment, names: list[str], s: PrepareSettings, force: bool, progress: bool
 ) -> dict:
     group = f"garments/{g}/rig"
-    expected = {"settings": s.rig(), "sequences": names}
+    expected = _rig_expected(s, names)
     if not force and _is_done(store, group, expected):
         attrs = store.read_attrs(group)
         kept = ("bones", "rmse_lf_mm", "rmse_full_mm", "seconds", "fit_seconds")
