@@ -282,6 +282,7 @@ def cmd_report(args):
     from loosefit.report import build_report
     from loosefit.report.build import DEFAULT_RESULTS
 
+    writable(args.out, folder=True)  # before the runs are evaluated
     index = build_report(args.data, args.run, args.out, sequences=args.sequence, split=args.split,
                          results_dir=args.results or DEFAULT_RESULTS, device=args.device, images=not args.no_images)
     print(f"wrote {index} (and report.md, metrics.json, figures/)")
@@ -291,6 +292,7 @@ def cmd_export_rig(args):
     from loosefit.export_rig import export_rig
     from loosefit.motion.io import load_motion
 
+    writable(args.out, folder=False)
     body = _body(args)
     motion = load_motion(args.motion, body, joint_map=args.joint_map)
     summary = export_rig(args.run, motion, args.out, body=None if args.no_body else body, influences=args.influences,
@@ -318,6 +320,7 @@ def cmd_view(args):
 def cmd_demo(args):
     from loosefit.demo import run_demo
 
+    writable(args.out, folder=True)
     run_demo(Path(args.out))
 
 
@@ -512,7 +515,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--influences", type=int, choices=[4, 8], default=4, help="skinning weights kept per vertex")
     sp.add_argument("--no-body", action="store_true", help="write the garment only")
     sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
-    sp.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.set_defaults(func=cmd_export_rig)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")

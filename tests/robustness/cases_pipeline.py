@@ -18,7 +18,7 @@ from tests.robustness.live import then, two_writers
 QUICK_PLAN = """\
 name: quick
 garments:
-  skirt: {{template: skirt, seed: 0, edge_length: 0.08, params: {{length: 0.4, flare: 20}}}}
+  skirt: {{template: skirt, seed: 0, edge_length: 0.06, params: {{length: 0.4, flare: 20}}}}
 motions:
   walk: {{procedural: walk, seconds: 0.3, seed: {seed}}}
 sim_params:
@@ -177,6 +177,8 @@ def simulate_cases() -> list[Case]:
             absent=no_store),
         bad("simulate/plan-unknown-template", p, quick(edit=lambda t: t.replace("template: skirt", "template: cape")),
             names=("plan.yaml", "cape"), absent=no_store),
+        bad("simulate/plan-bad-garment-parameter", p, quick(edit=lambda t: t.replace("edge_length: 0.06", "edge_length: 0.5")),
+            brief="inputs", names=("plan.yaml",), absent=no_store),
         bad("simulate/plan-a-list", p, plan("- walk\n- spin\n"), names=("plan.yaml",), absent=no_store),
         bad("simulate/plan-python-tag", p, quick(edit=lambda t: t.replace(
             "name: quick", "name: !!python/object/apply:builtins.open [PAYLOAD-RAN, w]")), names=("plan.yaml",),
@@ -225,7 +227,7 @@ def train_cases() -> list[Case]:
         ok("prepare/force", prep, store_copy(), cost=4),
         bad("prepare/missing-store", ["prepare", "{tmp}/none.zarr"], names=("none.zarr",)),
         bad("prepare/a-file", ["prepare", "{tmp}/d.zarr"], lambda t, s: craft.write(t / "d.zarr", "x"), names=("d.zarr",)),
-        bad("prepare/zero-bones", prep[:-1] + ["0"], store_copy(), names=("bones",), keep=kept),
+        bad("prepare/zero-bones", prep[:-1] + ["0"], store_copy(), defect=True, names=("bones",), keep=kept),
         bad("prepare/negative-bones", prep[:-1] + ["-3"], store_copy(), names=("bones",), keep=kept),
         bad("prepare/unknown-setting", ["prepare", "{tmp}/d.zarr", "--set", "bone=3"], store_copy(), names=("bone",),
             keep=kept),

@@ -37,7 +37,8 @@ CONTROL_OUTCOMES = ("ok", "controls_failed")
 MARKER = "PAYLOAD-RAN"
 #: Briefs that own the fix of a defect family (cases from elsewhere carry "").
 BRIEFS = ("store", "inputs", "viewer")
-_ERROR_LINE = re.compile(r"^(usage: .*|loosefit[\w -]*: error: .+)$")
+#: loosefit's error line (argparse's too); a progress bar left unfinished may precede it on its line.
+_ERROR_LINE = re.compile(r"loosefit[\w -]*: error: .+$")
 
 
 @dataclass
@@ -222,8 +223,8 @@ def _quote(arg: str) -> str:
 
 def error_line(stderr: str) -> str:
     """The last ``loosefit VERB: error: ...`` line of stderr ("" when there is none)."""
-    lines = [ln.strip() for ln in stderr.splitlines() if _ERROR_LINE.match(ln.strip()) and ": error: " in ln]
-    return lines[-1] if lines else ""
+    found = [m.group(0).strip() for m in map(_ERROR_LINE.search, stderr.splitlines()) if m]
+    return found[-1] if found else ""
 
 
 def classify(case: Case, tmp: Path, result: Result, before: dict[str, str], shared: Shared) -> Result:

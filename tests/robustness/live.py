@@ -128,6 +128,7 @@ def send(port: int, raw: bytes, abort: bool = False, timeout: float = 20.0) -> t
         if abort:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
             return "", b""
+        s.shutdown(socket.SHUT_WR)  # nothing more comes: an empty request ends here
         chunks = []
         try:
             while True:
