@@ -26,7 +26,8 @@ from loosefit.paths import atomic_path
 from loosefit.train import distributed
 from loosefit.train.run import RunDir, save_checkpoint
 from loosefit.train.seeding import rng_state, seed_everything
-from loosefit.train.trainer import TrainResult, train
+from loosefit.train.settings import TrainResult
+from loosefit.train.trainer import train
 
 MODEL_META = "model.json"
 METHOD_CONFIG = "method.yaml"

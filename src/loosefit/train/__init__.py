@@ -3,7 +3,8 @@
 from loosefit.train.protocol import TrainableModel
 from loosefit.train.run import RunDir, load_checkpoint, load_weights, save_checkpoint
 from loosefit.train.seeding import seed_everything
-from loosefit.train.trainer import StageConfig, TrainConfig, TrainingError, TrainResult, train
+from loosefit.train.settings import StageConfig, TrainConfig, TrainResult
+from loosefit.train.trainer import TrainingError, train
 
 __all__ = [
     "TrainableModel",
