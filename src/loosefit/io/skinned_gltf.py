@@ -29,32 +29,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pygltflib as gl  # one namespace: the names are the glTF schema's own
 import torch
-from pygltflib import (
-    ARRAY_BUFFER,
-    ELEMENT_ARRAY_BUFFER,
-    FLOAT,
-    GLTF2,
-    UNSIGNED_BYTE,
-    UNSIGNED_INT,
-    UNSIGNED_SHORT,
-    Accessor,
-    Animation,
-    AnimationChannel,
-    AnimationChannelTarget,
-    AnimationSampler,
-    Asset,
-    Attributes,
-    Buffer,
-    BufferView,
-    Material,
-    Mesh,
-    Node,
-    PbrMetallicRoughness,
-    Primitive,
-    Scene,
-    Skin,
-)
 
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_quaternion
@@ -64,26 +40,26 @@ from loosefit.paths import atomic_path
 
 #: glTF's axis change as a matrix: ``to_y_up(p) == Y_UP @ p``.
 Y_UP = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
-_COMPONENT = {np.float32: FLOAT, np.uint32: UNSIGNED_INT, np.uint16: UNSIGNED_SHORT, np.uint8: UNSIGNED_BYTE}
+_COMPONENT = {np.float32: gl.FLOAT, np.uint32: gl.UNSIGNED_INT, np.uint16: gl.UNSIGNED_SHORT, np.uint8: gl.UNSIGNED_BYTE}
 _WIDTH = {1: "SCALAR", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
 
 
 class _Buffer:
     """One binary buffer: each array a buffer view (padded to 4 bytes) with one accessor."""
 
-    def __init__(self, gltf: GLTF2):
+    def __init__(self, gltf: gl.GLTF2):
         self.gltf, self.chunks, self.size = gltf, [], 0
 
     def add(self, data: np.ndarray, width: int, target: int | None = None, bounds: bool = False) -> int:
         """An accessor over ``data`` as rows of ``width`` components (float32, uint8/16/32); its index."""
         data = np.ascontiguousarray(data)
         raw = data.tobytes()
-        self.gltf.bufferViews.append(BufferView(buffer=0, byteOffset=self.size, byteLength=len(raw), target=target))
+        self.gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=self.size, byteLength=len(raw), target=target))
         padded = raw + b"\0" * (-len(raw) % 4)
         self.chunks.append(padded)
         self.size += len(padded)
         rows = data.reshape(-1, width)
-        accessor = Accessor(bufferView=len(self.gltf.bufferViews) - 1, componentType=_COMPONENT[data.dtype.type],
+        accessor = gl.Accessor(bufferView=len(self.gltf.bufferViews) - 1, componentType=_COMPONENT[data.dtype.type],
                             count=len(rows), type=_WIDTH[width])
         if bounds:
             accessor.min, accessor.max = rows.min(0).tolist(), rows.max(0).tolist()
@@ -113,46 +89,46 @@ def write_skinned_glb(path: str | Path, meshes: list[SkinnedMesh]) -> None:
         if mesh.influences > 8:
             raise InputError(f"mesh {mesh.name!r} has {mesh.influences} influences per vertex; glTF engines "
                              "take 4 or 8: limit them first (SkinnedMesh.limited)", path)
-    gltf = GLTF2(asset=Asset(generator="loosefit"), scene=0, scenes=[Scene(nodes=[])])
-    cloth = PbrMetallicRoughness(baseColorFactor=[0.8, 0.8, 0.8, 1.0], metallicFactor=0.0)
-    gltf.materials.append(Material(name="cloth", doubleSided=True, pbrMetallicRoughness=cloth))
+    gltf = gl.GLTF2(asset=gl.Asset(generator="loosefit"), scene=0, scenes=[gl.Scene(nodes=[])])
+    cloth = gl.PbrMetallicRoughness(baseColorFactor=[0.8, 0.8, 0.8, 1.0], metallicFactor=0.0)
+    gltf.materials.append(gl.Material(name="cloth", doubleSided=True, pbrMetallicRoughness=cloth))
     buffer = _Buffer(gltf)
     times = np.arange(frames, dtype=np.float32) / np.float32(fps)
-    animation = Animation(name="loosefit", extras={"fps": float(fps)})
+    animation = gl.Animation(name="loosefit", extras={"fps": float(fps)})
     keyframes = buffer.add(times, 1, bounds=True)
     for mesh in meshes:
         _add_skinned_mesh(gltf, buffer, animation, keyframes, mesh)
     gltf.animations.append(animation)
     blob = buffer.blob()
-    gltf.buffers.append(Buffer(byteLength=len(blob)))
+    gltf.buffers.append(gl.Buffer(byteLength=len(blob)))
     gltf.set_binary_blob(blob)
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(b"".join(gltf.save_to_bytes()))
 
 
-def _add_skinned_mesh(gltf: GLTF2, buffer: _Buffer, animation: Animation, keyframes: int, mesh: SkinnedMesh) -> None:
+def _add_skinned_mesh(gltf: gl.GLTF2, buffer: _Buffer, animation: gl.Animation, keyframes: int, mesh: SkinnedMesh) -> None:
     """The mesh node, its rig node with the joint nodes, its skin and its animation channels (``keyframes``:
     the accessor of the keyframe times)."""
     V, J = len(mesh.rest_verts), mesh.num_joints
     faces = mesh.faces.astype(np.uint32)
     position = to_y_up(mesh.rest_verts).astype(np.float32)
-    attributes = Attributes(POSITION=buffer.add(position, 3, ARRAY_BUFFER, bounds=True))
+    attributes = gl.Attributes(POSITION=buffer.add(position, 3, gl.ARRAY_BUFFER, bounds=True))
     sets = -(-mesh.influences // 4)
     idx = np.zeros((V, 4 * sets), np.uint8 if J <= 256 else np.uint16)
     val = np.zeros((V, 4 * sets), np.float32)
     idx[:, : mesh.influences], val[:, : mesh.influences] = mesh.weight_indices, mesh.weight_values
     for s in range(sets):
-        setattr(attributes, f"JOINTS_{s}", buffer.add(idx[:, 4 * s : 4 * s + 4], 4, ARRAY_BUFFER))
-        setattr(attributes, f"WEIGHTS_{s}", buffer.add(val[:, 4 * s : 4 * s + 4], 4, ARRAY_BUFFER))
-    primitive = Primitive(attributes=attributes, indices=buffer.add(faces.ravel(), 1, ELEMENT_ARRAY_BUFFER), material=0)
-    gltf.meshes.append(Mesh(name=mesh.name, primitives=[primitive]))
+        setattr(attributes, f"JOINTS_{s}", buffer.add(idx[:, 4 * s : 4 * s + 4], 4, gl.ARRAY_BUFFER))
+        setattr(attributes, f"WEIGHTS_{s}", buffer.add(val[:, 4 * s : 4 * s + 4], 4, gl.ARRAY_BUFFER))
+    primitive = gl.Primitive(attributes=attributes, indices=buffer.add(faces.ravel(), 1, gl.ELEMENT_ARRAY_BUFFER), material=0)
+    gltf.meshes.append(gl.Mesh(name=mesh.name, primitives=[primitive]))
 
     rig = len(gltf.nodes)
-    gltf.nodes.append(Node(name=f"{mesh.name}_rig", children=[]))
+    gltf.nodes.append(gl.Node(name=f"{mesh.name}_rig", children=[]))
     first = len(gltf.nodes)
     bind_local = to_y_up(mesh.bind_local())
     for j, name in enumerate(mesh.joint_names):
-        gltf.nodes.append(Node(name=name, translation=bind_local[j].tolist(), children=[]))
+        gltf.nodes.append(gl.Node(name=name, translation=bind_local[j].tolist(), children=[]))
         parent = rig if mesh.parents[j] < 0 else first + int(mesh.parents[j])
         gltf.nodes[parent].children.append(first + j)
     for node in gltf.nodes[first:]:
@@ -160,8 +136,8 @@ def _add_skinned_mesh(gltf: GLTF2, buffer: _Buffer, animation: Animation, keyfra
     inverse_bind = np.tile(np.eye(4, dtype=np.float32), (J, 1, 1))
     inverse_bind[:, :3, 3] = -to_y_up(mesh.bind_positions.astype(np.float64))
     ibm = buffer.add(inverse_bind.transpose(0, 2, 1).reshape(J, 16), 16)  # glTF matrices are column-major
-    gltf.skins.append(Skin(name=mesh.name, inverseBindMatrices=ibm, skeleton=rig, joints=list(range(first, first + J))))
-    gltf.nodes.append(Node(name=mesh.name, mesh=len(gltf.meshes) - 1, skin=len(gltf.skins) - 1))
+    gltf.skins.append(gl.Skin(name=mesh.name, inverseBindMatrices=ibm, skeleton=rig, joints=list(range(first, first + J))))
+    gltf.nodes.append(gl.Node(name=mesh.name, mesh=len(gltf.meshes) - 1, skin=len(gltf.skins) - 1))
     gltf.scenes[0].nodes += [len(gltf.nodes) - 1, rig]
 
     rotations = gltf_quaternions(mesh.rotations)  # (T, J, 4)
@@ -175,6 +151,6 @@ def _add_skinned_mesh(gltf: GLTF2, buffer: _Buffer, animation: Animation, keyfra
             gltf.nodes[first + j].translation = translations[0, j].tolist()
         for path, values, width in channels:
             output = buffer.add(values, width)
-            animation.samplers.append(AnimationSampler(input=keyframes, output=output, interpolation="LINEAR"))
-            target = AnimationChannelTarget(node=first + j, path=path)
-            animation.channels.append(AnimationChannel(sampler=len(animation.samplers) - 1, target=target))
+            animation.samplers.append(gl.AnimationSampler(input=keyframes, output=output, interpolation="LINEAR"))
+            target = gl.AnimationChannelTarget(node=first + j, path=path)
+            animation.channels.append(gl.AnimationChannel(sampler=len(animation.samplers) - 1, target=target))
