@@ -130,7 +130,8 @@ def write_results(name: str, results: dict) -> Path:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--label", default=None, help="results file robustness-LABEL.json (default robustness.json)")
-    ap.add_argument("--only", default=None, metavar="PATTERN", help="cases whose name matches (a glob, or a word)")
+    ap.add_argument("--only", default=None, metavar="PATTERN",
+                    help="cases whose name matches (comma-separated globs or words)")
     ap.add_argument("--src", default=None, metavar="PATH", help="run the command line with PYTHONPATH=PATH (an older tree)")
     ap.add_argument("--workers", type=int, default=2, help="cases run at once (each a subprocess)")
     ap.add_argument("--work", default=None, help="scratch folder (default: a temporary one, removed afterwards)")

@@ -73,8 +73,8 @@ def body_cases() -> list[Case]:
         ext("body/shape-nan", b + ["--shape", "height=nan"], names=("height",)),
         bad("body/unsupported-output", ["body", "--out", "{tmp}/b.txt"], names=("b.txt",), absent=("{tmp}/b.txt",)),
         bad("body/motion-missing", b + ["--motion", "{tmp}/none.npz"], names=("none.npz",)),
-        bad("body/frame-out-of-range", b + ["--motion", "{motion}", "--frame", "999"], names=("frame", "999"),
-            absent=("{tmp}/b.obj",)),
+        bad("body/frame-out-of-range", b + ["--motion", "{motion}", "--frame", "999"], brief="inputs",
+            names=("frame", "999"), absent=("{tmp}/b.obj",)),
         bad("body/out-parent-is-file", ["body", "--out", "{tmp}/file/b.obj"], parent_file, brief="inputs",
             names=("file/b.obj",)),
         bad("body/out-in-proc", ["body", "--out", PROC + ".obj"], brief="inputs", names=("/proc",)),
@@ -200,7 +200,8 @@ def motion_cases() -> list[Case]:
         bad("motion-import/joint-map-duplicate-key", jm, joint_map(lambda t: t + "calibration: rest\n"),
             brief="inputs", defect=True, names=("map.yaml",)),
         bad("motion-import/joint-map-duplicate-joint", jm,
-            joint_map(lambda t: t.replace("  LeftLeg: CC_Base_L_Calf\n", "  LeftLeg: CC_Base_L_Calf\n  LeftLeg: CC_Base_L_Foot\n")),
+            joint_map(lambda t: t.replace("  LeftLeg: CC_Base_L_Calf\n",
+                                          "  LeftLeg: CC_Base_L_Calf\n  LeftLeg: CC_Base_L_Foot\n")),
             brief="inputs", names=("map.yaml",)),
         bad("motion-import/joint-map-yaml-syntax", jm, joint_map(lambda t: t + "joints: [unclosed\n"), names=("map.yaml",)),
         bad("motion-import/joint-map-unknown-key", jm, joint_map(lambda t: t + "up_axis: y\n"), names=("map.yaml",)),
@@ -211,7 +212,8 @@ def motion_cases() -> list[Case]:
         bad("motion-import/joint-map-for-npz", imp + ["{motion}", "--joint-map", "cc"], names=("joint map", "bvh")),
         # AMASS / SMPL-H .npz
         ok("motion-import/amass", amass, lambda t, s: craft.amass(t / "amass.npz"), check=wrote(OUT)),
-        bad("motion-import/amass-no-trans", amass, lambda t, s: craft.amass(t / "amass.npz", trans=None), names=("amass.npz",)),
+        bad("motion-import/amass-no-trans", amass, lambda t, s: craft.amass(t / "amass.npz", trans=None),
+            names=("amass.npz",)),
         bad("motion-import/amass-poses-shape", amass, lambda t, s: craft.amass(t / "amass.npz", poses=np.zeros((60, 10))),
             names=("amass.npz",)),
         ext("motion-import/amass-nan-poses", amass,
@@ -232,7 +234,8 @@ def motion_cases() -> list[Case]:
             brief="inputs", defect=True, names=("m.npz",)),
         bad("motion-import/npz-flipped-byte", npz, lambda t, s: craft.flip_byte(craft.npz_edit(s.motion, t / "m.npz")),
             brief="inputs", defect=True, names=("m.npz",)),
-        bad("motion-import/npz-empty-file", npz, lambda t, s: craft.write(t / "m.npz", b""), names=("m.npz",)),
+        bad("motion-import/npz-empty-file", npz, lambda t, s: craft.write(t / "m.npz", b""), brief="inputs",
+            names=("m.npz",)),
         bad("motion-import/npz-is-npy", npz, lambda t, s: np.save(open(t / "m.npz", "wb"), np.zeros(3)), names=("m.npz",)),
         bad("motion-import/npz-wrong-joint-count", npz, motion_edit(rotations=lambda r: r[:, :10]), names=("m.npz",)),
         ext("motion-import/npz-nan-rotations", npz, motion_edit(rotations=lambda r: r * np.nan), names=("m.npz",)),
@@ -270,6 +273,12 @@ def obj(edit=None, name: str = "g.obj", scale: float = 1.0):
             verts, faces = edit(verts.copy(), faces.copy())
         craft.write(tmp / name, craft.obj_text(verts * scale, faces))
     return setup
+
+
+def _vertex_7(v, value):
+    """The vertices with the 8th one's coordinates set to ``value``."""
+    v[7] = value
+    return v
 
 
 def _split_panels(v, f):
@@ -332,11 +341,12 @@ def garment_cases() -> list[Case]:
         bad("garment-import/one-triangle", imp + [g], obj(lambda v, f: tri), brief="inputs", defect=True, names=("g.obj",),
             absent=("{tmp}/out.obj",)),
         bad("garment-import/two-triangles-1cm", imp + [g],
-            obj(lambda v, f: (np.array([[0, 0, 1.0], [0.01, 0, 1.0], [0, 0, 0.99], [0.01, 0, 0.99]]), np.array([[0, 1, 2], [1, 3, 2]]))),
+            obj(lambda v, f: (np.array([[0, 0, 1.0], [0.01, 0, 1.0], [0, 0, 0.99], [0.01, 0, 0.99]]),
+                              np.array([[0, 1, 2], [1, 3, 2]]))),
             brief="inputs", names=("g.obj",)),
-        ext("garment-import/nan-vertex", imp + [g], obj(lambda v, f: (np.where(np.arange(len(v))[:, None] == 7, np.nan, v), f)),
+        ext("garment-import/nan-vertex", imp + [g], obj(lambda v, f: (_vertex_7(v, np.nan), f)),
             names=("g.obj",)),
-        ext("garment-import/inf-vertex", imp + [g], obj(lambda v, f: (np.where(np.arange(len(v))[:, None] == 7, np.inf, v), f)),
+        ext("garment-import/inf-vertex", imp + [g], obj(lambda v, f: (_vertex_7(v, np.inf), f)),
             names=("g.obj",)),
         ext("garment-import/scale-1e6", imp + [g], obj(scale=1e6), names=("g.obj",)),
         ext("garment-import/scale-1e-6", imp + [g], obj(scale=1e-6), names=("g.obj",)),
@@ -351,7 +361,8 @@ def garment_cases() -> list[Case]:
         bad("garment-import/garbage", imp + [g], lambda t, s: craft.garbage(t / "g.obj"), names=("g.obj",)),
         bad("garment-import/ply-truncated", imp + ["{tmp}/g.ply"], lambda t, s: (ply()(t, s), craft.truncate(t / "g.ply")),
             names=("g.ply",)),
-        bad("garment-import/ply-garbage-header", imp + ["{tmp}/g.ply"], ply(lambda x: x.replace("format ascii", "format wobbly")),
+        bad("garment-import/ply-garbage-header", imp + ["{tmp}/g.ply"],
+            ply(lambda x: x.replace("format ascii", "format wobbly")),
             names=("g.ply",)),
         bad("garment-import/ply-too-few-vertices", imp + ["{tmp}/g.ply"],
             ply(lambda x: x.replace("element vertex ", "element vertex 9")), names=("g.ply",)),

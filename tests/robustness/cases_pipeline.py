@@ -32,6 +32,13 @@ TINY_TRAIN = ["--set", "model.lf_hidden=16", "--set", "model.hf_hidden=16", "--s
 GARMENT = "skirt+average"
 
 
+def _two_more_motions(text: str) -> str:
+    """The quick plan with two more motions of a second: its writer holds the store for many seconds, long
+    enough for a second writer to start (several seconds of imports) while it runs."""
+    return text.replace("sim_params:", "  spin: {procedural: spin, seconds: 1.0, seed: 1}\n"
+                                       "  sway: {procedural: sway, seconds: 1.0, seed: 2}\nsim_params:")
+
+
 def plan(text: str, name: str = "plan.yaml"):
     return lambda t, s: craft.write(t / name, text)
 
@@ -141,14 +148,14 @@ def store_cases() -> list[Case]:
         bad("store/failed-plan-leaves-no-store", ["simulate", "{tmp}/plan.yaml", "--out", "{tmp}/s.zarr"],
             quick(edit=lambda t: t.replace("{procedural: walk, seconds: 0.3, seed: 0}", "{file: none.npz}")),
             brief="store", defect=True, names=("none.npz",), absent=("{tmp}/s.zarr",), cost=2),
-        bad("store/two-writers", [], also(quick(0, "a.yaml"), quick(5, "b.yaml")), brief="store", defect=True,
-            names=("pid",), cost=12, runner=two_writers(["simulate", "{tmp}/a.yaml", "--out", "{tmp}/s.zarr"],
-                                                        ["simulate", "{tmp}/b.yaml", "--out", "{tmp}/s.zarr"],
-                                                        wait_for="{tmp}/s.zarr")),
-        bad("store/two-creators", [], also(quick(0, "a.yaml"), quick(5, "b.yaml")), brief="store", defect=True,
-            names=("s.zarr",), cost=12, runner=two_writers(["simulate", "{tmp}/a.yaml", "--out", "{tmp}/s.zarr"],
-                                                           ["simulate", "{tmp}/b.yaml", "--out", "{tmp}/s.zarr"],
-                                                           wait_for=None)),
+        bad("store/two-writers", [], also(quick(0, "a.yaml", _two_more_motions), quick(5, "b.yaml")), brief="store",
+            defect=True, names=("pid",), cost=12,
+            runner=two_writers(["simulate", "{tmp}/a.yaml", "--out", "{tmp}/s.zarr"],
+                               ["simulate", "{tmp}/b.yaml", "--out", "{tmp}/s.zarr"], wait_for="{tmp}/s.zarr")),
+        bad("store/two-creators", [], also(quick(0, "a.yaml", _two_more_motions), quick(5, "b.yaml")), brief="store",
+            defect=True, names=("s.zarr",), cost=12,
+            runner=two_writers(["simulate", "{tmp}/a.yaml", "--out", "{tmp}/s.zarr"],
+                               ["simulate", "{tmp}/b.yaml", "--out", "{tmp}/s.zarr"], wait_for=None)),
     ]
 
 
@@ -176,8 +183,9 @@ def simulate_cases() -> list[Case]:
         bad("simulate/plan-unknown-key", p, quick(edit=lambda t: t + "garmets: {}\n"), names=("plan.yaml",),
             absent=no_store),
         bad("simulate/plan-unknown-template", p, quick(edit=lambda t: t.replace("template: skirt", "template: cape")),
-            names=("plan.yaml", "cape"), absent=no_store),
-        bad("simulate/plan-bad-garment-parameter", p, quick(edit=lambda t: t.replace("edge_length: 0.06", "edge_length: 0.5")),
+            brief="store", names=("plan.yaml", "cape"), absent=no_store),
+        bad("simulate/plan-bad-garment-parameter", p,
+            quick(edit=lambda t: t.replace("edge_length: 0.06", "edge_length: 0.5")),
             brief="inputs", names=("plan.yaml",), absent=no_store),
         bad("simulate/plan-a-list", p, plan("- walk\n- spin\n"), names=("plan.yaml",), absent=no_store),
         bad("simulate/plan-python-tag", p, quick(edit=lambda t: t.replace(

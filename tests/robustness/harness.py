@@ -99,8 +99,18 @@ class Result:
         return self.stdout + "\n" + self.stderr
 
     def first_stderr_line(self) -> str:
-        lines = [ln for ln in self.stderr.splitlines() if ln.strip() and not _noise(ln)]
+        """The error line, else the first line of stderr that is not chatter."""
+        lines = [ln.strip() for ln in self.stderr.splitlines() if not _noise(ln)]
         return self.error_line or (lines[0] if lines else "")
+
+    def exception(self) -> str:
+        """The last line of the last Python traceback in the output ("" without one)."""
+        text = self.output
+        if "Traceback (most recent call last)" not in text:
+            return ""
+        tail = text[text.rindex("Traceback (most recent call last)"):].splitlines()[1:]
+        lines = [ln.strip() for ln in tail if ln.strip() and not ln.startswith((" ", "\t")) and not _noise(ln)]
+        return lines[0] if lines else ""
 
     def describe(self) -> str:
         tail = "\n".join(self.stderr.strip().splitlines()[-12:])
@@ -110,7 +120,8 @@ class Result:
     def record(self) -> dict:
         return {"name": self.name, "command": self.command, "outcome": self.outcome, "exit": self.returncode,
                 "seconds": round(self.seconds, 1), "first_stderr_line": self.first_stderr_line()[:300],
-                **({"problem": self.problem} if self.problem else {}), **({"said": self.note[:300]} if self.note else {})}
+                **({"problem": self.problem} if self.problem else {}), **({"said": self.note[:300]} if self.note else {}),
+                **({"exception": self.exception()[:300]} if self.exception() else {})}
 
 
 Check = Callable[["Ctx"], "str | None"]
@@ -177,11 +188,16 @@ class Ctx:
     result: Result
 
 
+_ANSI = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
+
+
 def _noise(line: str) -> bool:
-    """Library chatter on stderr that is neither an error nor loosefit's (warp's start-up banner, bars)."""
-    s = line.strip()
-    return (s.startswith(("Warp ", "CUDA Toolkit", "Devices:", '"cpu"', "Kernel cache:", "Module ", "/root/.cache",
-                          "Warp CUDA warning")) or "it/s]" in s or "s/it]" in s or "%|" in s)
+    """Chatter on stderr that says nothing about the input: warp's start-up banner, progress bars, cursor
+    moves, socketserver's separator lines (a two-writer case prefixes each line with ``[A]`` / ``[B]``)."""
+    s = re.sub(r"^\[[AB]\]\s*", "", _ANSI.sub("", line).strip()).strip()
+    return (not s or set(s) <= {"-"} or "it/s]" in s or "s/it]" in s or "%|" in s or "?seq/s]" in s
+            or s.startswith(("Warp ", "CUDA Toolkit", "Devices:", '"cpu"', '"cuda', "Kernel cache:", "Module ",
+                             "/root/.cache", "Warp CUDA warning")))
 
 
 def tree_hash(path: Path) -> str:
@@ -266,12 +282,14 @@ def classify(case: Case, tmp: Path, result: Result, before: dict[str, str], shar
             result.outcome = "silent_wrong"
             result.problem = (f"exit 0 without saying {' / '.join(case.report)!r}" if case.report
                               else "exit 0 must not happen")
-    elif problem or written:
+    elif (problem and not case.fixes) or written:
         result.outcome = "silent_wrong"
         result.problem = problem or f"refused, but wrote {', '.join(written)}"
     else:
         result.outcome = "clear_errors"
-        if not result.error_line:
+        if problem:  # a command that repairs its input refused it: say what is left undone
+            result.problem = f"refused; {problem}"
+        elif not result.error_line:
             result.problem = "exit 2 without a `loosefit VERB: error:` line"
         else:
             names = fill_paths(case.names, tmp, shared)

@@ -78,6 +78,9 @@ def test_controls_and_fixes(tmp_path, shared):
     (tmp_path / "out.obj").unlink()
     assert classify(fixes, tmp_path, result(0), {}, shared).outcome == "silent_wrong"
     assert counts([classify(fixes, tmp_path, result(0), {}, shared)])["silent_wrong"] == 1
+    refused = classify(fixes, tmp_path, result(2, ERR, tmp=tmp_path), {}, shared)
+    assert (refused.outcome, refused.problem) == ("clear_errors", "refused; not re-made")
+    assert refused.outcome not in fixes.good()
 
 
 def test_crafted_payloads_do_run_code_when_loaded_unsafely(tmp_path):
