@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -48,7 +49,9 @@ def build_shared(root: Path, python: str, src: str | None, reuse: bool = False) 
                 python=python, src=src)
     if reuse and sh.seq.is_file() and sh.garment.is_file():
         return sh
-    root.mkdir(parents=True, exist_ok=True)
+    if root.exists():
+        shutil.rmtree(root)  # made again from scratch: an earlier run's store and run folder would be refused
+    root.mkdir(parents=True)
     sh.plan.write_text(TINY_PLAN)
     chains = [
         [["simulate", str(sh.plan), "--out", str(sh.store)],
