@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 CHROMIUM := /usr/bin/chromium
 SUDO := $(if $(filter 0,$(shell id -u)),,sudo)
 
-.PHONY: demo test clean package-check viewer-vendor
+.PHONY: demo test test-fast clean package-check viewer-vendor
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) (Python 3.11)"; exit 1; }
@@ -25,6 +25,10 @@ $(CHROMIUM):
 
 test: $(STAMP) $(CHROMIUM)
 	$(VENV)/bin/python -m pytest -q tests
+
+# The fast subset while developing (tests/fast_tests.txt, chosen by scripts/mark_fast_tests.py): a few minutes.
+test-fast: $(STAMP)
+	$(VENV)/bin/python -m pytest -q -m "not slow" tests
 
 # CI step of packaging: build the wheel, install it into a fresh venv, check the extras (about 10 s).
 package-check: $(STAMP)
