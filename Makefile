@@ -26,7 +26,7 @@ $(CHROMIUM):
 test: $(STAMP) $(CHROMIUM)
 	$(VENV)/bin/python -m pytest -q tests
 
-# The fast subset while developing (tests/fast_tests.txt, chosen by scripts/mark_fast_tests.py): a few minutes.
+# The fast subset while developing (tests/fast_tests.txt, chosen by scripts/mark_fast_tests.py).
 test-fast: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -m "not slow" tests
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -88,6 +89,7 @@ def main() -> int:
         times, wall, rc = measure(["tests"])
         suite = {"tests": len(times), "wall_s": round(wall, 1), "exit": rc}
         print(f"whole suite: {len(times)} tests in {wall:.0f} s (exit {rc})")
+        save(times, suite, {}, a)  # kept at once: choosing again (--from-json) needs no second whole run
     fast = choose(times, a.budget, a.cap)
     write_list(fast)
     fast_times, wall, rc = measure(["tests", "-m", "not slow"])
@@ -99,12 +101,16 @@ def main() -> int:
     subset = {"tests": len(fast_times), "test_files": len(files), "wall_s": round(wall, 1), "exit": rc,
               "measured_s": round(sum(fast_times.values()), 1), "dropped_after_check": sorted(moved)}
     print(f"fast subset: {subset['tests']} tests from {len(files)} files in {wall:.0f} s (exit {rc})")
+    save(times, suite, subset, a)
+    return rc
+
+
+def save(times: dict[str, float], suite: dict, subset: dict, a: argparse.Namespace) -> None:
     RESULTS.write_text(json.dumps({
-        "machine": {"platform": platform.platform(), "python": platform.python_version(), "cpus": __import__("os").cpu_count(),
+        "machine": {"platform": platform.platform(), "python": platform.python_version(), "cpus": os.cpu_count(),
                     "date": time.strftime("%Y-%m-%d %H:%M:%S")},
         "settings": {"budget_s": a.budget, "cap_s": a.cap}, "suite": suite, "fast_subset": subset,
         "times": times}, indent=1) + "\n")
-    return rc
 
 
 if __name__ == "__main__":
