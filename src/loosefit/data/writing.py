@@ -88,6 +88,15 @@ class StoreWriter:
             for key, value in arrays.items():
                 group.create_dataset(key, data=value, compressor=COMPRESSOR)
 
+    def _refuse_resizing_used(self, collection: str, key: str, name: str, array: str, length: int, unit: str) -> None:
+        """Refuse replacing entry ``name`` by one of another ``length`` (vertices, frames) while sequences use it."""
+        if self._entry_attrs(collection, name) is None or self._stored_length(collection, name, array) == length:
+            return
+        users = self._sequences_using(key, name)
+        if users:
+            raise InputError(f"{key} {name!r} is used by sequences {users[:5]}{'...' if len(users) > 5 else ''}; "
+                             f"replacing it with {length} {unit} would make them inconsistent", self._root)
+
     def _sequences_using(self, key: str, name: str) -> list[str]:
         return [s for s, attrs in self._entries("sequences").items() if attrs.get(key) == name]
 
@@ -128,15 +137,7 @@ class StoreWriter:
             raise InputError(f"garment {name!r}: vertices contain NaN or infinite values", self._root)
         if faces.size and (faces.min() < 0 or faces.max() >= verts.shape[0]):
             raise InputError(f"garment {name!r}: face indices outside [0, {verts.shape[0]})", self._root)
-        old = self._entry_attrs("garments", name)
-        if old is not None and self._stored_length("garments", name, "verts") != verts.shape[0]:
-            users = self._sequences_using("garment", name)
-            if users:
-                raise InputError(
-                    f"garment {name!r} is used by sequences {users[:5]}{'...' if len(users) > 5 else ''}; "
-                    f"replacing it with {verts.shape[0]} vertices would make them inconsistent",
-                    self._root,
-                )
+        self._refuse_resizing_used("garments", "garment", name, "verts", verts.shape[0], "vertices")
         attrs = {
             "kind": str(garment.kind),
             "params": jsonable(dict(garment.params), f"garment {name!r} params", self._root),
@@ -164,15 +165,7 @@ class StoreWriter:
         whose content changes)."""
         self._check_writable()
         self._check_name(name, "motion")
-        if self._entry_attrs("motions", name) is not None:
-            frames = self._stored_length("motions", name, "rotations")
-            users = self._sequences_using("motion", name)
-            if frames != motion.num_frames and users:
-                raise InputError(
-                    f"motion {name!r} is used by sequences {users[:5]}{'...' if len(users) > 5 else ''}; "
-                    f"replacing it with {motion.num_frames} frames would make them inconsistent",
-                    self._root,
-                )
+        self._refuse_resizing_used("motions", "motion", name, "rotations", motion.num_frames, "frames")
         attrs = {
             "fps": float(motion.fps),
             "rig": str(motion.rig),
