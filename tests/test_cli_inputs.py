@@ -202,3 +202,10 @@ def test_one_triangle_is_no_garment(tmp_path, capsys):
                  "simulate")
     assert f"{obj}: not a garment" in err  # the garment is imported before the motion (absent here) is read
     assert not (tmp_path / "g.obj").exists() and not (tmp_path / "s.npz").exists()
+
+
+def test_body_frame_outside_the_motion_is_refused(tmp_path, capsys):
+    """``body --frame`` past the motion's last frame (the rest pose has one) is an error, not an IndexError."""
+    assert main(["body", "--frame", "5", "--out", str(tmp_path / "b.obj")]) == 2
+    assert "--frame 5 is outside the motion's frames 0..0" in capsys.readouterr().err
+    assert not (tmp_path / "b.obj").exists()

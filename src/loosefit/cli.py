@@ -37,6 +37,8 @@ def cmd_body(args):
     posed = body.pose(motion)
     out = Path(args.out)
     if out.suffix == ".obj":
+        if not 0 <= args.frame < len(posed.verts):
+            raise InputError(f"--frame {args.frame} is outside the motion's frames 0..{len(posed.verts) - 1}")
         write_obj(out, posed.verts[args.frame], body.faces, header=f"loosefit body {body.name} frame {args.frame}")
     elif out.suffix == ".npz":
         MeshSequence(posed.verts, body.faces, motion.fps,
