@@ -25,26 +25,24 @@ def int_at_least(least: int, most: int | None = None):
     return parse
 
 
-def positive_float(text: str) -> float:
-    """An argparse ``type=``: a finite number > 0 (frame rates, durations, lengths)."""
+def _finite_float(text: str, zero_allowed: bool, rule: str) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    if not (0 <= value if zero_allowed else 0 < value) or not value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
     return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse ``type=``: a finite number > 0 (frame rates, durations, lengths)."""
+    return _finite_float(text, False, "a positive number")
 
 
 def nonnegative_float(text: str) -> float:
     """An argparse ``type=``: a finite number >= 0 (a start time)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text}")
-    return value
+    return _finite_float(text, True, "a number >= 0")
 
 
 def writable(path, folder: bool | None = None) -> None:
