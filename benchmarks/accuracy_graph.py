@@ -82,8 +82,10 @@ from loosefit.training import train_model  # noqa: E402
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
 #: Variant -> (method, overrides on top of the method's config): FitGar's full model and its Sec. 5.3
 #: ablations; SwinGar's full model, its global-descriptor ablation (Table I) and its GAT-LN ablation
-#: (Fig. 8, 9: plain GAT, and alpha 1 and 3 beside the paper's 2); and SwinGar with its skinning weights
-#: started from body-LBS (``model.skinning_prior``, ours: not in the paper, so not in ``swingar-all``).
+#: (Fig. 8, 9: plain GAT, and alpha 0, 1 and 3 beside the paper's 2); SwinGar with its skinning weights
+#: started from body-LBS (``model.skinning_prior``, ours: not in the paper, so not in ``swingar-all``); and
+#: SwinGar with the GAT-LN design of runs trained before the attention keys existed (``swingar-first-attention``:
+#: one normaliser per graph, raw scores, averaged heads, gates sharing a GAT-LN).
 VARIANTS = {
     "full": ("fitgar", []),
     "plain": ("fitgar", ["model.output=plain"]),
@@ -97,16 +99,20 @@ VARIANTS = {
     "swingar-pooling": ("swingar", ["model.global_descriptor=pooling"]),
     "swingar-euclidean": ("swingar", ["model.global_descriptor=euclidean"]),
     "swingar-plain-gat": ("swingar", ["model.alpha=null"]),
+    "swingar-alpha-0": ("swingar", ["model.alpha=0.0"]),
     "swingar-alpha-1": ("swingar", ["model.alpha=1.0"]),
     "swingar-alpha-3": ("swingar", ["model.alpha=3.0"]),
     "swingar-prior": ("swingar", ["model.skinning_prior=true"]),
+    "swingar-first-attention": ("swingar", ["model.attention_norm=graph", "model.attention_centred=false",
+                                            "model.concat_heads=false", "model.gate_attention=shared"]),
 }
 #: ``--variants`` shorthands.
 GROUPS = {
     "fitgar-all": [v for v, (m, _) in VARIANTS.items() if m == "fitgar"],
     "swingar-table1": ["swingar", "swingar-no-descriptor", "swingar-pooling", "swingar-euclidean"],
-    "swingar-alpha": ["swingar", "swingar-plain-gat", "swingar-alpha-1", "swingar-alpha-3"],
-    "swingar-all": [v for v, (m, _) in VARIANTS.items() if m == "swingar" and v != "swingar-prior"],
+    "swingar-alpha": ["swingar", "swingar-plain-gat", "swingar-alpha-0", "swingar-alpha-1", "swingar-alpha-3"],
+    "swingar-all": [v for v, (m, _) in VARIANTS.items()
+                    if m == "swingar" and v not in ("swingar-prior", "swingar-first-attention")],
 }
 #: ``--preset`` -> method -> config file.
 #: ``cpu``: the CPU-sized networks of ``configs/models/<method>-cpu.yaml`` (SwinGar's: about 13 minutes of

@@ -257,6 +257,32 @@ def test_checkpoint_round_trip(model, batch, tmp_path):
         assert torch.equal(other.predict_batch(batch[0]), before)
 
 
+FIRST_DESIGN = dict(attention_norm="graph", attention_centred=False, concat_heads=False, gate_attention="shared")
+
+
+def test_checkpoint_of_the_first_attention_design_loads_only_as_that_design(model, batch, tmp_path):
+    """A run trained before the attention keys existed (averaged heads, one normaliser per graph, raw scores, gates
+    sharing a GAT-LN) is refused by today's default model with a message naming the four settings that load it,
+    and loads with them; a checkpoint of today's design is refused by a model of the first one."""
+    first = SwinGarConfig(**SMALL, **FIRST_DESIGN)
+    torch.manual_seed(1)
+    old = SwinGar(model.sizes(), first)
+    state = {"model": old.state_dict(), "optimizer": None, "scheduler": None, "stages": ["all"], "stage_index": 0,
+             "epoch": 0, "global_step": 0, "best_metric": None, "rng": rng_state(), "config": {}, "history": [],
+             "elapsed_s": 0.0, "complete": True}
+    save_checkpoint(tmp_path / "old.pt", state)
+    with pytest.raises(InputError, match="attention_norm: graph, attention_centred: false") as err:
+        load_weights(SwinGar(model.sizes(), CONFIG), tmp_path / "old.pt")
+    assert "old.pt" in str(err.value)
+    again = SwinGar(model.sizes(), first)
+    load_weights(again, tmp_path / "old.pt")
+    with torch.no_grad():
+        assert torch.equal(again.predict_batch(batch[0]), old.predict_batch(batch[0]))
+    save_checkpoint(tmp_path / "new.pt", {**state, "model": model.state_dict()})
+    with pytest.raises(InputError, match="per-node norm, centred scores"):
+        load_weights(again, tmp_path / "new.pt")
+
+
 def test_bad_input(model, data):
     graph = data.graphs[0].tensors()
     s = data.sequences[0].sequences[0]

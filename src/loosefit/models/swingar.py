@@ -54,9 +54,13 @@ budget rose from 122 to 136 mm), so without the prior ``a`` is left as the paper
 
 Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather
 than axis-angles; the fit attribute ``a_i`` is each vertex's rest distance to the body (FitGar's
-quantity before its factor analysis, which describes a garment, not a vertex); heads are averaged and
-GAT-LN normalises once per graph (:mod:`loosefit.models.layers.gat_ln`); the LSTM-GAT-LN shares one GAT-LN per
-map across its four gates (:mod:`loosefit.models.layers.lstm_gat_ln`). In the losses, every term is a mean
+quantity before its factor analysis, which describes a garment, not a vertex). GAT-LN (by default; the config's
+four attention keys, :class:`SwinGarConfig`): scores from neighbourhood-centred features (ours: on raw positions
+and the smooth features after them every attention stayed a mean filter and ``alpha`` changed nothing), one
+normaliser per vertex (the Lipschitz normalisation SwinGar cites, where Eq. 4 reads as one per graph), heads
+concatenated with the width split among them (SwinGar's widths are not multiples of its head counts), and a
+GAT-LN per LSTM-GAT-LN gate as Eq. 6 writes (:mod:`loosefit.models.layers.gat_ln`,
+:mod:`loosefit.models.layers.lstm_gat_ln`). In the losses, every term is a mean
 (over vertices, edges, faces and frames) where SwinGar Eqs. 12 and 14 write squared norms, sums over the
 edges, faces and vertices: the terms' balance then does not move with a garment's resolution (summed, the
 edge term would add about 3 V squares against Eq. 11's mean over V vertices); and the bending term applies
@@ -77,7 +81,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.lbs import forward_kinematics, skinning_transforms
 from loosefit.geometry.normals import face_normals_torch
 from loosefit.geometry.rotations import sixd_to_matrix
-from loosefit.models.layers.gat_ln import GATLN
+from loosefit.models.layers.gat_ln import GATLN, NORMS
 from loosefit.models.layers.lstm_gat_ln import LSTMGATLN
 from loosefit.models.layers.mlp import MLP
 from loosefit.models.multi_garment import DEFAULT_DENSITY, MultiGarmentData, collate_by_graph
@@ -93,6 +97,11 @@ GRAVITY = 9.8  # m/s^2, along -Z
 OUTPUT_INIT = 1e-2
 #: Smallest prior weight whose log enters the skinning logits (a zero weight would be -inf for good).
 PRIOR_FLOOR = 1e-4
+#: Values of :attr:`SwinGarConfig.gate_attention`.
+GATE_ATTENTION = ("per_gate", "shared")
+#: What each flag of :attr:`SwinGarConfig.attention_design` means, set and unset.
+_DESIGN_WORDS = (("per-node norm", "per-graph norm"), ("centred scores", "raw scores"),
+                 ("concatenated heads", "averaged heads"), ("a GAT-LN per gate", "gates sharing a GAT-LN"))
 
 
 @dataclass(frozen=True)
@@ -121,6 +130,18 @@ class SwinGarConfig:
         density: fabric density for the vertex masses of the gravity term, kg/m^2 (ours).
         skinning_prior: start the dynamic skinning weights from the garment's body-LBS weights (ours; see the
             module doc). False: the paper's predictor alone.
+        attention_norm: GAT-LN's normaliser (:mod:`loosefit.models.layers.gat_ln`): ``node``, per vertex, as the
+            Lipschitz normalisation SwinGar cites; ``graph``, one per graph and head, as Eq. 4's matrix norms read.
+        attention_centred: GAT-LN scores from neighbourhood-centred features (ours; without it the attention of
+            every layer stays a neighbourhood mean: see the module doc).
+        concat_heads: concatenate each GAT-LN's heads (GAT's way; the width split among the heads) instead of
+            averaging them.
+        gate_attention: ``per_gate``, a GAT-LN per LSTM-GAT-LN gate (SwinGar Eq. 6; needs ``concat_heads``), or
+            ``shared``, one per map serving the four gates.
+
+    ``attention_norm: graph``, ``attention_centred: false``, ``concat_heads: false``, ``gate_attention: shared``
+    is the attention of runs trained before these keys existed: their ``method.yaml`` needs those four lines to
+    load (:meth:`SwinGar.load_state_dict` refuses them otherwise).
     """
 
     graph_hidden: list[int] = field(default_factory=lambda: [64, 128])
@@ -148,6 +169,10 @@ class SwinGarConfig:
     collision_eps: float = 0.002
     density: float = DEFAULT_DENSITY
     skinning_prior: bool = False
+    attention_norm: str = "node"
+    attention_centred: bool = True
+    concat_heads: bool = True
+    gate_attention: str = "per_gate"
 
     def __post_init__(self):
         sizes = [*self.graph_hidden, *self.graph_heads, *self.shape_mlp, self.motion_hidden, self.motion_frames,
@@ -168,9 +193,33 @@ class SwinGarConfig:
         weights = (self.k_vert, self.k_edge, self.k_bend, self.k_gravity, self.k_collision, self.collision_eps)
         if min(weights) < 0 or (self.alpha is not None and self.alpha < 0) or not self.density > 0:
             raise InputError("loss weights, collision_eps and alpha must be >= 0 and density > 0")
+        if self.attention_norm not in NORMS:
+            raise InputError(f"model.attention_norm must be one of {list(NORMS)}, got {self.attention_norm!r}")
+        if self.gate_attention not in GATE_ATTENTION:
+            raise InputError(f"model.gate_attention must be one of {list(GATE_ATTENTION)}, got {self.gate_attention!r}")
+        if self.gate_attention == "per_gate" and not self.concat_heads:
+            raise InputError("model.gate_attention per_gate needs model.concat_heads true")
+        if self.concat_heads:
+            narrow = [(w, h) for w, h in [*zip(self.graph_hidden, self.graph_heads), (self.state_hidden, self.state_heads),
+                                          *((b, self.blend_heads) for b in self.blend_hidden),
+                                          (self.corrective_hidden, self.corrective_heads)] if w < h]
+            if narrow:
+                raise InputError(f"with concatenated heads every GAT-LN needs at least one channel per head; "
+                                 f"(width, heads) {narrow}")
         if self.global_descriptor not in GLOBAL_DESCRIPTORS:
             raise InputError(f"model.global_descriptor must be one of {sorted(GLOBAL_DESCRIPTORS)}, "
                              f"got {self.global_descriptor!r}")
+
+    @property
+    def attention_design(self) -> tuple[int, int, int, int]:
+        """The GAT-LN design as four flags (per-node norm, centred, concatenated heads, a GAT-LN per gate); all
+        zero for the attention of runs trained before the four keys existed."""
+        return (int(self.attention_norm == "node"), int(self.attention_centred), int(self.concat_heads),
+                int(self.gate_attention == "per_gate"))
+
+    def attention_options(self) -> dict:
+        """:class:`~loosefit.models.layers.gat_ln.GATLN` keyword arguments of every GAT-LN layer."""
+        return {"norm": self.attention_norm, "centred": self.attention_centred, "concat": self.concat_heads}
 
     @property
     def descriptor_distance(self) -> str | None:
@@ -254,24 +303,28 @@ class SwinGar(nn.Module):
         self.register_buffer("joints_mean", torch.zeros(J - 1, 6))
         self.register_buffer("joints_std", torch.ones(J - 1, 6))
         pose = 11 + 6 * (J - 1)
-        a = c.alpha
+        a, att = c.alpha, c.attention_options()
+        if any(c.attention_design):  # marks the checkpoint: runs of the first design load only as that design
+            self.register_buffer("attention_design", torch.tensor(c.attention_design, dtype=torch.int64))
         chans = [7, *c.graph_hidden]
-        self.graph_encoder = nn.ModuleList(GATLN(i, o, h, a) for i, o, h in zip(chans[:-1], chans[1:], c.graph_heads))
+        self.graph_encoder = nn.ModuleList(GATLN(i, o, h, a, **att)
+                                           for i, o, h in zip(chans[:-1], chans[1:], c.graph_heads))
         if c.descriptor_distance is not None:
             self.shape_encoder = MLP([c.descriptor_samples, *c.shape_mlp], nn.ReLU, final_activation=True)
         elif c.global_descriptor == "pooling":
             self.pool = nn.Sequential(nn.Linear(c.graph_hidden[-1], c.shape_mlp[-1]), nn.ReLU())
         self.motion_encoder = nn.LSTM(pose, c.motion_hidden, batch_first=True)
         self.body_encoder = MLP([S + pose, *c.body_mlp], nn.ReLU, final_activation=True)  # SwinGar Sec. IV: ReLU after each
-        self.state_encoder = GATLN(c.graph_hidden[-1], c.state_hidden, c.state_heads, a)
+        self.state_encoder = GATLN(c.graph_hidden[-1], c.state_hidden, c.state_heads, a, **att)
         self.weight_state = nn.Linear(c.state_hidden, c.shape_mlp[-1])
         self.weight_out = nn.Linear(c.shape_mlp[-1], J)
         chans = [c.state_hidden, *c.blend_hidden]
-        self.blend_layers = nn.ModuleList(GATLN(i, o, c.blend_heads, a) for i, o in zip(chans[:-1], chans[1:]))
+        self.blend_layers = nn.ModuleList(GATLN(i, o, c.blend_heads, a, **att) for i, o in zip(chans[:-1], chans[1:]))
         self.blend_out = nn.Linear(c.blend_hidden[-1], 3)
-        self.corrective_lstm = LSTMGATLN(3 + J, c.corrective_hidden, c.corrective_heads, a)
+        self.corrective_lstm = LSTMGATLN(3 + J, c.corrective_hidden, c.corrective_heads, a,
+                                         per_gate=c.gate_attention == "per_gate", **att)
         chans = [c.corrective_hidden, *c.corrective_layers]
-        self.corrective_layers = nn.ModuleList(GATLN(i, o, 1, a) for i, o in zip(chans[:-1], chans[1:]))
+        self.corrective_layers = nn.ModuleList(GATLN(i, o, 1, a, **att) for i, o in zip(chans[:-1], chans[1:]))
         with torch.no_grad():
             for name, w in self.motion_encoder.named_parameters():
                 if name.startswith("weight"):
@@ -308,6 +361,23 @@ class SwinGar(nn.Module):
 
     def sizes(self) -> dict:
         return dict(self._sizes)
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        """``nn.Module.load_state_dict``, refusing (``RuntimeError``, which :func:`~loosefit.train.run.load_weights`
+        reports as the checkpoint not fitting) a checkpoint of another GAT-LN design than this model's: a run
+        trained before ``attention_norm`` and the three keys after it existed has the same parameter shapes as
+        some of the new designs, but other outputs."""
+        def words(design):
+            flags = [0, 0, 0, 0] if design is None else [int(v) for v in design]
+            return ", ".join(pair[0 if f else 1] for f, pair in zip(flags, _DESIGN_WORDS))
+
+        theirs, mine = state_dict.get("attention_design"), getattr(self, "attention_design", None)
+        if (theirs is None) != (mine is None) or (mine is not None and theirs.tolist() != mine.tolist()):
+            hint = ("; a run trained before model.attention_norm existed loads with model.attention_norm: graph, "
+                    "attention_centred: false, concat_heads: false, gate_attention: shared in its method.yaml"
+                    if theirs is None else "")
+            raise RuntimeError(f"the checkpoint's GAT-LN design is {words(theirs)}; this model's is {words(mine)}{hint}")
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     # ------------------------------------------------------------------ the garment, once
 

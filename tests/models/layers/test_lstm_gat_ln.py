@@ -27,11 +27,13 @@ def copy_lstm(cell: LSTMGATLN, ref: torch.nn.LSTMCell) -> None:
         cell.state_map.bias.copy_(ref.bias_hh)
 
 
-def test_identity_attention_equals_lstm_cell():
+@pytest.mark.parametrize("design", [{}, {"per_gate": True, "concat": True, "norm": "node", "centred": True}])
+def test_identity_attention_equals_lstm_cell(design):
+    """Shared or one GAT-LN per gate (SwinGar Eq. 6), one head each: the same weight layout as LSTMCell's."""
     torch.manual_seed(0)
     table, valid = self_only()
     ref = torch.nn.LSTMCell(IN, HID)
-    cell = LSTMGATLN(IN, HID, heads=1, alpha=2.0)
+    cell = LSTMGATLN(IN, HID, heads=1, alpha=2.0, **design)
     copy_lstm(cell, ref)
     x = torch.randn(2, 6, V, IN)  # (B, T, V, in)
     out, (h, c) = cell(x, table, valid)
@@ -66,6 +68,25 @@ def test_graph_couples_nodes_and_steps_equal_sequence():
     assert (out2[0, neighbour] - out[0, neighbour]).abs().max() > 1e-4
     with pytest.raises(InputError):
         cell(x[0, 0], table, valid)
+
+
+def test_per_gate_maps_give_each_gate_its_own_attention():
+    """``per_gate``: the input map is four GAT-LN layers side by side, one per gate (SwinGar Eq. 6): changing
+    the attention vectors of the forget gate's heads moves the forget gate's pre-activations only."""
+    verts, faces = tube(5, 8)
+    table, valid = map(torch.from_numpy, attention_table(faces, len(verts)))
+    torch.manual_seed(4)
+    cell = LSTMGATLN(IN, HID, heads=2, per_gate=True, concat=True, norm="node", centred=True)
+    assert cell.input_map.heads == 8 and cell.input_map.groups == 4
+    x = torch.randn(len(verts), IN)
+    with torch.no_grad():
+        before = cell.input_map(x, table, valid)
+        cell.input_map.att_src[HID:2 * HID] += 1.0  # the forget gate's block (torch's order i, f, g, o)
+        after = cell.input_map(x, table, valid)
+    moved = (after - before).abs().amax(0)
+    assert moved[HID:2 * HID].max() > 1e-4 and moved[:HID].max() == 0 and moved[2 * HID:].max() == 0
+    with pytest.raises(InputError, match="concatenated"):
+        LSTMGATLN(IN, HID, heads=2, per_gate=True)
 
 
 def test_gradients_are_finite_from_a_zero_state():

@@ -5,48 +5,71 @@ two endpoint features (SwinGar Eq. 2, the score function ``g``)::
 
     s_ij = a_dst_h . (W_h x_i) + a_src_h . (W_h x_j) = c_dst_h . x_i + c_src_h . x_j
 
-SwinGar Eq. 4 divides it, per graph and head, by the larger of two norms and scales it by ``alpha``::
+SwinGar Eq. 4 divides it by the larger of two norms and scales it by ``alpha``::
 
-    g*_ij = alpha s_ij / max( max_i ||s_i.||_2 ,  max_i ||x_i||_2 * ||[c_dst_h, c_src_h]||_2 )
+    g*_ij = alpha s_ij / max( ||s||_(2,inf) ,  ||X||_(inf,2) * ||[c_dst_h, c_src_h]||_2 )
 
-- ``max_i ||s_i.||_2``: the (2, inf)-norm of the masked score matrix (largest row norm over each
-  vertex's neighbourhood);
-- ``max_i ||x_i||_2``: the (inf, 2)-norm of the input features; ``||[c_dst, c_src]||_2``: the
-  spectral norm of the (linear) score function's parameters, its Lipschitz constant.
+- ``||s||_(2,inf)``: the largest row norm of the masked score matrix (each row: one vertex's scores over
+  its neighbourhood);
+- ``||X||_(inf,2)``: the largest feature norm; ``||[c_dst, c_src]||_2``: the spectral norm of the (linear)
+  score function's parameters, its Lipschitz constant.
 
-Every normalised score lies in ``[-alpha, alpha]`` and the scores no longer depend on the scale of the
-input, so the layer without its output activation is positively homogeneous: ``f(s X) = s f(X)`` for
-``s > 0`` (up to the bias). Its Lipschitz constant therefore does not grow with the input's scale
-(plain GAT's does: its softmax sharpens), and is set by ``alpha``: the smaller ``alpha``, the closer
-the attention to a plain neighbourhood mean (SwinGar Eq. 5 bounds the Fourier coefficients by
-``(e^alpha sqrt(b/N) + alpha sqrt(8)) / k^2``).
+``norm`` says over what the two norms are taken:
 
-After normalisation come GAT's LeakyReLU (slope 0.2, which keeps ``|g*| <= alpha``) and a softmax
-over each vertex's neighbours and itself. The heads' aggregated features ``sum_j P_ij W_h x_j`` are
-averaged (not concatenated: the output width is the hidden size SwinGar gives, at any head count),
-a bias is added and ``tanh`` applied (SwinGar Sec. IV: every GAT-LN layer uses tanh; ``activation=None``
-leaves it out, as the gate maps of :mod:`loosefit.models.layers.lstm_gat_ln` need). ``alpha=None``
-switches the normalisation off: the plain GAT layer of SwinGar's ablation (Fig. 8, 9).
+- ``"graph"``: over the whole graph, one normaliser per graph and head, as Eq. 4's matrix norms read;
+- ``"node"``: per vertex ``i``, its own row ``||s_i.||_2`` and the largest feature norm of its neighbourhood
+  ``max_{j in N(i)} ||x_j||``: the per-node Lipschitz normalisation of Dasoulas et al., which Eq. 4 cites. A
+  vertex's scores then no longer depend on the largest scores or features elsewhere in the graph.
 
-Departures, named: the normaliser is global, one per graph and head, as SwinGar Eq. 4's matrix norms read
-(the largest row norm over the whole graph, the largest feature norm over the whole graph), where the
-Lipschitz normalisation SwinGar cites (Dasoulas et al. 2021) divides each node's scores by a norm of its own;
-with one normaliser a vertex's scores also depend on the largest scores elsewhere in the graph. The heads are
-averaged, where GAT (and FitGar's blocks, :mod:`loosefit.models.layers.gat_block`) concatenate them: SwinGar
-gives each layer one hidden size and 24 heads without saying which; concatenated, a 128-wide layer of 24 heads
-would need a width divisible by 24.
+``centred=True`` (ours) computes the scores and the feature norms from each neighbourhood's features minus
+their mean, ``x_j - mu_i`` with ``mu_i`` the mean over ``i`` and its neighbours (edge-relative features). Why:
+the score differences between two neighbours ``j, k`` of ``i``, which alone move the softmax, are
+``c_src . (x_j - x_k)``; under Eq. 4 they are bounded by ``alpha |x_j - x_k| / max ||x||``. On mesh features
+that vary smoothly over the surface (positions in metres, soles at ``z = 0``, and the hidden features of the
+layers after them) that is a few hundredths of ``alpha``: every attention stays uniform and ``alpha`` is inert.
+Centred, the bound is ``alpha |x_j - x_k| / max_j |x_j - mu_i|``, of order ``alpha``. Subtracting the
+neighbourhood mean is linear, so the Lipschitz bound of Eq. 4 keeps its form.
 
-The graph is a padded neighbour table (:func:`attention_table`) rather than PyG's edge list: the
-forward pass then scatters nothing (the backward pass scatters one value per vertex, slot and input
-channel), which matters on CPUs where torch's scatter is slow with several threads. Since
-``sum_j P_ij W_h x_j = W_h sum_j P_ij x_j``, the inputs are aggregated per head first and projected once
-by all heads' stacked weights: the neighbour gather moves ``in`` channels instead of ``heads * out``
-(SwinGar at the paper's sizes on a 2.8k-vertex dress, one CPU thread: 2.7 s a frame the other way
-round, 0.2 s this way).
+Every normalised score lies in ``[-alpha, alpha]`` and the scores no longer depend on the scale of the input,
+so the layer without its output activation is positively homogeneous: ``f(s X) = s f(X)`` for ``s > 0`` (up to
+the bias). Its Lipschitz constant therefore does not grow with the input's scale (plain GAT's does: its softmax
+sharpens), and is set by ``alpha``: the smaller ``alpha``, the closer the attention to a plain neighbourhood
+mean (SwinGar Eq. 5 bounds the Fourier coefficients by ``(e^alpha sqrt(b/N) + alpha sqrt(8)) / k^2``).
+
+After normalisation come GAT's LeakyReLU (slope 0.2, which keeps ``|g*| <= alpha``) and a softmax over each
+vertex's neighbours and itself. The heads' aggregated features ``sum_j P_ij W_h x_j`` are then either
+
+- averaged (``concat=False``): every head projects to all ``out`` channels and the output is their mean; or
+- concatenated (``concat=True``, GAT's way): the ``out`` channels are split among the heads in contiguous
+  blocks, head ``h`` computes only its block. Where ``out`` is a multiple of ``heads`` each head is
+  ``out / heads`` wide; otherwise the block sizes differ by one (SwinGar's 128 channels over 24 heads: 8
+  heads of 6 and 16 of 5), so that the layer keeps the width the paper gives.
+
+``groups`` (concatenated heads only) splits the output into that many equal blocks, each with ``heads /
+groups`` heads of its own: ``groups`` independent GAT-LN layers in one, as the four gate maps of
+:mod:`loosefit.models.layers.lstm_gat_ln` need. A bias is added and ``tanh`` applied (SwinGar Sec. IV: every
+GAT-LN layer uses tanh; ``activation=None`` leaves it out). ``alpha=None`` switches the normalisation off: the
+plain GAT layer of SwinGar's ablation (Fig. 8, 9).
+
+The defaults (``norm="graph"``, ``centred=False``, ``concat=False``) are the layer as loosefit first built it:
+Eq. 4 as printed, heads averaged. :mod:`loosefit.models.swingar` chooses per model (its config says which,
+and why).
+
+The graph is a padded neighbour table (:func:`attention_table`) rather than PyG's edge list: the forward pass
+then scatters nothing (the backward pass scatters one value per vertex, slot and input channel), which matters
+on CPUs where torch's scatter is slow with several threads. Since ``sum_j P_ij W_h x_j = W_h sum_j P_ij x_j``,
+the inputs are aggregated per head first and projected once by all heads' stacked weights: the neighbour
+gather moves ``in`` channels instead of ``heads * out`` (SwinGar at the paper's sizes on a 2.8k-vertex dress,
+one CPU thread: 2.7 s a frame the other way round, 0.2 s this way). Concatenated heads use the same product,
+with each head's rows zero outside its block of columns.
+
+:func:`recording_attention` records each layer's mean attention entropy per vertex (and that of a uniform
+attention over the same neighbourhoods, its upper bound): how far the attention is from a mean filter.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -60,6 +83,8 @@ from loosefit.geometry.laplacian import edges
 SCORE_SLOPE = 0.2
 #: Smallest normaliser of the scores: an all-zero input (a zero recurrent state) gives zero scores.
 NORM_EPS = 1e-12
+#: Values of ``GATLN(norm=...)``.
+NORMS = ("graph", "node")
 
 
 def attention_table(faces: np.ndarray, num_verts: int) -> tuple[np.ndarray, np.ndarray]:
@@ -93,16 +118,43 @@ def attention_table(faces: np.ndarray, num_verts: int) -> tuple[np.ndarray, np.n
     return table, valid
 
 
+def head_columns(out_channels: int, heads: int, groups: int = 1) -> np.ndarray:
+    """The head of each output channel of concatenated heads, ``(out_channels,)`` int64: ``groups`` equal
+    blocks of channels, each split among its ``heads / groups`` heads in contiguous blocks whose sizes differ
+    by at most one."""
+    if heads % groups or out_channels % groups:
+        raise InputError(f"GAT-LN: {heads} heads and {out_channels} channels do not split into {groups} groups")
+    per_out, per_heads = out_channels // groups, heads // groups
+    if per_out < per_heads:
+        raise InputError(f"GAT-LN: {per_heads} concatenated heads need at least as many channels, got {per_out}")
+    within = np.arange(per_out) * per_heads // per_out
+    return np.concatenate([g * per_heads + within for g in range(groups)]).astype(np.int64)
+
+
+def attention_entropy(P: torch.Tensor, valid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean entropy (nats) of the attention distributions ``P (B, V, D, H)`` (zero on padding) over batches,
+    vertices and heads, and that of the uniform distribution over the same neighbourhoods, ``mean_i log |N(i)|``
+    (its maximum): equal when the layer is a neighbourhood mean."""
+    entropy = -(P * P.clamp_min(1e-30).log()).sum(2).mean()
+    return entropy, valid.sum(1).double().log().mean().to(P.dtype)
+
+
 class GATLN(nn.Module):
     """One GAT-LN layer ``(..., V, in) -> (..., V, out)`` over an attention table (SwinGar Eq. 4).
 
     Args:
         in_channels, out_channels: feature sizes.
-        heads: attention heads (averaged).
+        heads: attention heads (all groups together).
         alpha: the score scale of SwinGar Eq. 4 (2 in the paper); ``None``: no normalisation (plain GAT).
         activation: ``"tanh"`` (SwinGar) or ``None`` (linear output).
+        norm: ``"graph"`` (Eq. 4's norms over the graph) or ``"node"`` (per vertex; see the module doc).
+        centred: scores and norms from neighbourhood-centred features (see the module doc).
+        concat: concatenate the heads (each its block of ``out`` channels) instead of averaging them.
+        groups: independent layers side by side (concatenated heads only; see the module doc).
 
-    Parameters are initialised with Glorot's uniform rule (SwinGar Sec. IV), the bias with zeros.
+    Parameters are initialised with Glorot's uniform rule (SwinGar Sec. IV), the bias with zeros. Averaged heads:
+    ``weight (in, heads * out)``, ``att_dst``/``att_src (heads, out)``; concatenated: ``weight (in, out)``,
+    ``att_dst``/``att_src (out,)`` (each channel's attention vector entry, in its head's block).
 
     Shapes:
         x ``(..., V, in_channels)``, table and valid ``(V, D)`` (:func:`attention_table`) ->
@@ -110,53 +162,114 @@ class GATLN(nn.Module):
     """
 
     def __init__(self, in_channels: int, out_channels: int, heads: int = 1, alpha: float | None = 2.0,
-                 activation: str | None = "tanh"):
+                 activation: str | None = "tanh", norm: str = "graph", centred: bool = False,
+                 concat: bool = False, groups: int = 1):
         super().__init__()
-        if min(in_channels, out_channels, heads) < 1:
-            raise InputError(f"GAT-LN sizes must be >= 1, got in {in_channels}, out {out_channels}, heads {heads}")
+        if min(in_channels, out_channels, heads, groups) < 1:
+            raise InputError(f"GAT-LN sizes must be >= 1, got in {in_channels}, out {out_channels}, heads {heads}, "
+                             f"groups {groups}")
         if alpha is not None and not alpha >= 0:
             raise InputError(f"GAT-LN alpha must be >= 0 (or None for plain GAT), got {alpha}")
         if activation not in ("tanh", None):
             raise InputError(f"GAT-LN activation must be 'tanh' or None, got {activation!r}")
+        if norm not in NORMS:
+            raise InputError(f"GAT-LN norm must be one of {NORMS}, got {norm!r}")
+        if groups > 1 and not concat:
+            raise InputError("GAT-LN groups need concatenated heads (concat=True)")
         self.in_channels, self.out_channels, self.heads = in_channels, out_channels, heads
-        self.alpha, self.activation = alpha, activation
-        self.weight = nn.Parameter(torch.empty(in_channels, heads * out_channels))
-        self.att_dst = nn.Parameter(torch.empty(heads, out_channels))
-        self.att_src = nn.Parameter(torch.empty(heads, out_channels))
+        self.alpha, self.activation, self.norm, self.centred = alpha, activation, norm, bool(centred)
+        self.concat, self.groups = bool(concat), groups
+        if concat:
+            self._head_of = head_columns(out_channels, heads, groups)
+            self.weight = nn.Parameter(torch.empty(in_channels, out_channels))
+            self.att_dst = nn.Parameter(torch.empty(out_channels))
+            self.att_src = nn.Parameter(torch.empty(out_channels))
+            # (H, out) 1 where the channel belongs to the head; set by reset_parameters (the layer may be built undrawn)
+            self.register_buffer("head_mask", torch.empty(heads, out_channels), persistent=False)
+        else:
+            self.weight = nn.Parameter(torch.empty(in_channels, heads * out_channels))
+            self.att_dst = nn.Parameter(torch.empty(heads, out_channels))
+            self.att_src = nn.Parameter(torch.empty(heads, out_channels))
         self.bias = nn.Parameter(torch.zeros(out_channels))
+        self._record: list | None = None
         self.reset_parameters()
 
     def reset_parameters(self) -> None:
-        """Glorot uniform weights (per head for the projection), zero bias."""
-        bound = math.sqrt(6.0 / (self.in_channels + self.out_channels))
-        nn.init.uniform_(self.weight, -bound, bound)
-        bound = math.sqrt(6.0 / (1 + self.out_channels))
-        nn.init.uniform_(self.att_dst, -bound, bound)
-        nn.init.uniform_(self.att_src, -bound, bound)
+        """Glorot uniform weights (per head for the projection and the attention vectors), zero bias."""
+        if self.concat:
+            with torch.no_grad():
+                self.head_mask.copy_(torch.from_numpy(
+                    self._head_of[None] == np.arange(self.heads)[:, None]).to(self.head_mask))
+            nn.init.uniform_(self.weight, -1.0, 1.0)
+            nn.init.uniform_(self.att_dst, -1.0, 1.0)
+            nn.init.uniform_(self.att_src, -1.0, 1.0)
+            sizes = np.bincount(self._head_of, minlength=self.heads)[self._head_of]  # each channel's head size
+            with torch.no_grad():
+                self.weight.mul_(math.sqrt(6.0 / (self.in_channels + self.out_channels)))
+                att = torch.from_numpy(np.sqrt(6.0 / (1.0 + sizes))).to(self.att_dst)
+                self.att_dst.mul_(att)
+                self.att_src.mul_(att)
+        else:
+            bound = math.sqrt(6.0 / (self.in_channels + self.out_channels))
+            nn.init.uniform_(self.weight, -bound, bound)
+            bound = math.sqrt(6.0 / (1 + self.out_channels))
+            nn.init.uniform_(self.att_dst, -bound, bound)
+            nn.init.uniform_(self.att_src, -bound, bound)
         nn.init.zeros_(self.bias)
 
     def extra_repr(self) -> str:
-        return f"{self.in_channels}, {self.out_channels}, heads={self.heads}, alpha={self.alpha}, activation={self.activation}"
+        return (f"{self.in_channels}, {self.out_channels}, heads={self.heads}, alpha={self.alpha}, "
+                f"activation={self.activation}, norm={self.norm}, centred={self.centred}, concat={self.concat}, "
+                f"groups={self.groups}")
 
     def score_vectors(self) -> tuple[torch.Tensor, torch.Tensor]:
         """``c_dst, c_src (H, in)``: the score function as linear forms on the input features."""
+        if self.concat:
+            return (self.head_mask * self.att_dst) @ self.weight.T, (self.head_mask * self.att_src) @ self.weight.T
         W = self.weight.view(self.in_channels, self.heads, self.out_channels)
         return torch.einsum("chk,hk->hc", W, self.att_dst), torch.einsum("chk,hk->hc", W, self.att_src)
 
-    def attention(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-        """Attention weights ``P (B, V, D, H)`` (rows sum to 1 over the valid slots) of ``x (B, V, in)``."""
+    def projection(self) -> torch.Tensor:
+        """``(H * in, out)``: the heads' stacked projections, applied to the per-head aggregates ``(H, in)``
+        flattened (averaged heads: each head's full projection over ``H``; concatenated: zero outside its block)."""
+        if self.concat:
+            return (self.head_mask[:, None, :] * self.weight[None]).reshape(self.heads * self.in_channels, -1)
+        W = self.weight.view(self.in_channels, self.heads, self.out_channels).transpose(0, 1)
+        return W.reshape(self.heads * self.in_channels, self.out_channels) / self.heads
+
+    def attention(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
+                  gathered: torch.Tensor | None = None) -> torch.Tensor:
+        """Attention weights ``P (B, V, D, H)`` (rows sum to 1 over the valid slots) of ``x (B, V, in)``;
+        ``gathered``: ``x`` at the table's slots ``(B, V, D, in)`` when already computed."""
         c_dst, c_src = self.score_vectors()
         u_dst, u_src = x @ c_dst.T, x @ c_src.T  # (B, V, H)
-        s = u_dst[:, :, None] + u_src[:, table]  # (B, V, D, H) linear scores
+        src = u_src[:, table]  # (B, V, D, H)
         mask = valid[None, :, :, None]
+        if self.centred:
+            if gathered is None:
+                gathered = x.index_select(1, table.reshape(-1)).unflatten(1, table.shape)
+            count = valid.sum(1).to(x.dtype)[None, :, None]  # (1, V, 1)
+            # c . mu_i: the neighbourhood mean of the projections (they are linear)
+            mean_dst = (u_dst[:, table] * mask).sum(2) / count
+            mean_src = (src * mask).sum(2) / count
+            s = (u_dst - mean_dst)[:, :, None] + (src - mean_src[:, :, None])
+        else:
+            s = u_dst[:, :, None] + src  # (B, V, D, H) linear scores
         if self.alpha is not None:
             s = s * mask
             # square roots clamped away from 0: their gradient there is infinite (a zero recurrent state)
             tiny = NORM_EPS * NORM_EPS
-            row = s.square().sum(2).clamp_min(tiny).sqrt().amax(1)  # (B, H): (2, inf)-norm of the score matrix
+            rows = s.square().sum(2).clamp_min(tiny).sqrt()  # (B, V, H): each vertex's score row norm
             lip = (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(tiny).sqrt()  # (H,)
-            feat = x.square().sum(-1).clamp_min(tiny).sqrt().amax(1, keepdim=True)  # (B, 1): (inf, 2)-norm of the features
-            s = self.alpha * s / torch.maximum(row, feat * lip)[:, None, None]
+            if self.centred:
+                mu = (gathered * valid[None, :, :, None]).sum(2, keepdim=True) / count[..., None]
+                feats = (gathered - mu).square().sum(-1).clamp_min(tiny).sqrt()  # (B, V, D) ||x_j - mu_i||
+            else:
+                feats = x.square().sum(-1).clamp_min(tiny).sqrt()[:, table]  # (B, V, D) ||x_j||
+            feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
+            if self.norm == "graph":
+                rows, feat = rows.amax(1, keepdim=True), feat.amax(1, keepdim=True)  # (B, 1, H), (B, 1)
+            s = self.alpha * s / torch.maximum(rows, feat[..., None] * lip)[:, :, None]
         s = nn.functional.leaky_relu(s, SCORE_SLOPE).masked_fill(~mask, float("-inf"))
         return torch.softmax(s, 2)
 
@@ -166,13 +279,30 @@ class GATLN(nn.Module):
             raise InputError(f"GAT-LN expects (..., {table.shape[0]}, {self.in_channels}) features, got {tuple(x.shape)}")
         lead = x.shape[:-2]
         x = x.reshape(-1, *x.shape[-2:])
-        P = self.attention(x, table, valid)  # (B, V, D, H)
-        # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j): aggregate the inputs per head, then one product with
-        # the heads' stacked projections (which also averages them)
         gathered = x.index_select(1, table.reshape(-1)).unflatten(1, table.shape)  # (B, V, D, in)
+        P = self.attention(x, table, valid, gathered)  # (B, V, D, H)
+        if self._record is not None:
+            self._record.append(tuple(float(v) for v in attention_entropy(P.detach(), valid)))
+        # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j): aggregate the inputs per head, then one product with
+        # the heads' stacked projections
         z = torch.einsum("bvdh,bvdc->bvhc", P, gathered)  # (B, V, H, in)
-        W = self.weight.view(self.in_channels, self.heads, self.out_channels).transpose(0, 1)
-        out = z.flatten(-2) @ W.reshape(self.heads * self.in_channels, self.out_channels) / self.heads + self.bias
+        out = z.flatten(-2) @ self.projection() + self.bias
         if self.activation == "tanh":
             out = torch.tanh(out)
         return out.reshape(*lead, *out.shape[-2:])
+
+
+@contextlib.contextmanager
+def recording_attention(module: nn.Module):
+    """While active, every :class:`GATLN` inside ``module`` records its attention entropy on each call: yields
+    ``{layer name: [(entropy, uniform entropy), ...]}`` (nats, means over batch, vertices and heads; see
+    :func:`attention_entropy`), one pair per call."""
+    layers = {name: m for name, m in module.named_modules() if isinstance(m, GATLN)}
+    log: dict[str, list] = {name: [] for name in layers}
+    for name, m in layers.items():
+        m._record = log[name]
+    try:
+        yield log
+    finally:
+        for m in layers.values():
+            m._record = None

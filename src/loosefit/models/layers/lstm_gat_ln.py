@@ -8,20 +8,24 @@ For node features ``X^t (V, in)`` of a fixed graph, hidden state ``H`` and cell 
     C^t = i^t o tanh(A_g(X^t) + S_g(H^{t-1})) + f^t o C^{t-1}
     H^t = o^t o tanh(C^t)
 
-``A`` (input-to-state) and ``S`` (state-to-state) are GAT-LN layers (:mod:`loosefit.models.layers.gat_ln`)
-without output activation, each giving the four gates' pre-activations at once (``4 * hidden`` channels
-in torch's gate order i, f, g, o, sharing one attention per head), and ``w_i, w_f, w_o (hidden,)`` are the
-peephole weights on the previous cell state, as SwinGar Eq. 6 writes them (all three on ``C^{t-1}``).
+``A`` (input-to-state) and ``S`` (state-to-state) are GAT-LN maps (:mod:`loosefit.models.layers.gat_ln`)
+without output activation, each giving the four gates' pre-activations at once (``4 * hidden`` channels in
+torch's gate order i, f, g, o), and ``w_i, w_f, w_o (hidden,)`` are the peephole weights on the previous cell
+state, as SwinGar Eq. 6 writes them (all three on ``C^{t-1}``).
 
-The peepholes start at zero, so with every node attending only to itself and one head the cell is
+``per_gate=True`` gives each gate a GAT-LN of its own, as Eq. 6 writes (``A_i, A_f, A_g, A_o``, each with
+``heads`` heads and its own attention): one layer of ``4 * heads`` concatenated heads in four groups
+(:class:`~loosefit.models.layers.gat_ln.GATLN`'s ``groups``), which computes exactly the four layers side by
+side with one neighbour gather. ``per_gate=False`` (the layer as loosefit first built it) shares one attention
+per head across the four gates (their projections are separate columns of the one layer).
+
+The peepholes start at zero, so with every node attending only to itself and one head (per gate) the cell is
 exactly ``torch.nn.LSTMCell`` applied per node (``A``'s weight and bias are ``weight_ih.T`` and
 ``bias_ih``, ``S``'s are ``weight_hh.T`` and ``bias_hh``).
 
 Departures from SwinGar Eq. 6, named:
 
-- one GAT-LN per map serves all four gates, where Eq. 6 writes a GAT-LN per gate: the gates share the
-  attention weights of each head (their projections are separate columns of the one layer), so a step runs two
-  graph attentions instead of eight;
+- with ``per_gate=False`` one GAT-LN per map serves all four gates, where Eq. 6 writes a GAT-LN per gate;
 - Eq. 6 prints ``C^t = i^t o tanh(A(X^t) + S(H^{t-1}) + f^t o C^{t-1})``, the forget term inside the tanh;
   here it is outside, ``C^t = i^t o tanh(A_g + S_g) + f^t o C^{t-1}``, the standard LSTM cell update, which
   the parenthesis most likely misprints (inside, a closed input gate would erase the cell whatever the forget
@@ -47,19 +51,26 @@ class LSTMGATLN(nn.Module):
         hidden: hidden and cell state size per node.
         heads: attention heads of both maps.
         alpha: GAT-LN score scale (SwinGar Eq. 4); None for plain GAT maps.
+        per_gate: one GAT-LN per gate (SwinGar Eq. 6; concatenated heads) instead of one per map.
+        attention: further :class:`~loosefit.models.layers.gat_ln.GATLN` options of both maps (``norm``,
+            ``centred``, ``concat``).
 
     Shapes:
         x ``(..., T, V, in_channels)``, table and valid ``(V, D)``, state ``(H, C)`` each ``(..., V, hidden)`` or
         None -> hidden states ``(..., T, V, hidden)`` and the last ``(H, C)``.
     """
 
-    def __init__(self, in_channels: int, hidden: int, heads: int = 1, alpha: float | None = 2.0):
+    def __init__(self, in_channels: int, hidden: int, heads: int = 1, alpha: float | None = 2.0,
+                 per_gate: bool = False, **attention):
         super().__init__()
         if hidden < 1:
             raise InputError(f"LSTM-GAT-LN hidden size must be >= 1, got {hidden}")
-        self.hidden = hidden
-        self.input_map = undrawn(GATLN, in_channels, 4 * hidden, heads, alpha, activation=None)
-        self.state_map = undrawn(GATLN, hidden, 4 * hidden, heads, alpha, activation=None)
+        if per_gate and not attention.get("concat", False):
+            raise InputError("LSTM-GAT-LN: a GAT-LN per gate needs concatenated heads (concat=True)")
+        self.hidden, self.per_gate = hidden, bool(per_gate)
+        maps = dict(heads=4 * heads, groups=4) if per_gate else dict(heads=heads)
+        self.input_map = undrawn(GATLN, in_channels, 4 * hidden, alpha=alpha, activation=None, **maps, **attention)
+        self.state_map = undrawn(GATLN, hidden, 4 * hidden, alpha=alpha, activation=None, **maps, **attention)
         self.peephole = nn.Parameter(torch.empty(3, hidden))  # w_i, w_f, w_o
         self.reset_parameters()
 
@@ -70,7 +81,7 @@ class LSTMGATLN(nn.Module):
         nn.init.zeros_(self.peephole)
 
     def extra_repr(self) -> str:
-        return f"hidden={self.hidden}"
+        return f"hidden={self.hidden}, per_gate={self.per_gate}"
 
     def cell(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
              state: tuple[torch.Tensor, torch.Tensor] | None = None,

@@ -1,0 +1,319 @@
+"""SwinGar's attention and capacity on a small simulated multi-garment store, on a CPU.
+
+Three measurements, each a subcommand writing ``benchmarks/results/<name>.json``:
+
+- ``entropy``: each GAT-LN layer's mean attention entropy per vertex (nats), next to that of a uniform
+  attention over the same neighbourhoods (its maximum: equal means the layer is a neighbourhood mean), for
+  each attention design of :data:`DESIGNS` at initialisation, on the training garments' first window. For the
+  garment encoder also with the garment's positions taken relative to its centroid (``first+centroid``): the
+  input-scaling alternative to centred scores.
+- ``curve``: the alpha curve of SwinGar Fig. 9 (alpha 0, 1, 2, 3 and plain GAT) with two seeds each, trained on
+  the store's training garments with ``configs/models/swingar-cpu.yaml`` (and the budget below), scored on the
+  held-out garments (RMSE over every frame, animated from the rest garment, next to body-LBS) with each layer's
+  attention entropy on them; ``--design`` picks the attention design.
+- ``memorise``: :func:`memorise`: a handful of training frames learnt by heart (Adam on them alone), the
+  RMSE on them over the steps, with the coarse stage's share; ``--set`` / ``--patch`` for the hypotheses.
+
+Store (see ``/work/stores/swingar-attention.yaml`` for the plan used)::
+
+    .venv/bin/loosefit simulate PLAN.yaml --out STORE.zarr
+    .venv/bin/python benchmarks/swingar_attention.py entropy --data STORE.zarr
+    .venv/bin/python benchmarks/swingar_attention.py curve --data STORE.zarr --runs RUNS
+    .venv/bin/python benchmarks/swingar_attention.py memorise --data STORE.zarr --garment skirt-0+average
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import save_results  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+CPU_CONFIG = ROOT / "configs" / "models" / "swingar-cpu.yaml"
+#: GAT-LN designs (:class:`loosefit.models.swingar.SwinGarConfig`'s four attention keys).
+DESIGNS = {
+    "first": {"attention_norm": "graph", "attention_centred": False, "concat_heads": False, "gate_attention": "shared"},
+    "graph-raw": {"attention_norm": "graph", "attention_centred": False, "concat_heads": True,
+                  "gate_attention": "per_gate"},
+    "node-raw": {"attention_norm": "node", "attention_centred": False, "concat_heads": True, "gate_attention": "per_gate"},
+    "graph-centred": {"attention_norm": "graph", "attention_centred": True, "concat_heads": True,
+                      "gate_attention": "per_gate"},
+    "node-centred": {"attention_norm": "node", "attention_centred": True, "concat_heads": True,
+                     "gate_attention": "per_gate"},
+}
+ALPHAS = {"alpha-0": "0.0", "alpha-1": "1.0", "alpha-2": "2.0", "alpha-3": "3.0", "plain-gat": "null"}
+#: The curve's training budget on top of the CPU preset (small store: more epochs of fewer windows).
+CURVE_SETTINGS = ["data.window=5", "data.stride=14", "train.stages.supervised.epochs=8", "train.stages.all.epochs=2",
+                  "train.batch_size=4", "train.progress=false", "train.tensorboard=false", "train.device=cpu"]
+
+
+def design_overrides(design: str) -> list[str]:
+    return [f"model.{k}={str(v).lower()}" for k, v in DESIGNS[design].items()]
+
+
+def load_cfg(overrides):
+    from loosefit.config import load_config
+    from loosefit.models.swingar import Config
+
+    return load_config(Config, CPU_CONFIG, list(overrides))
+
+
+def windows_of(data, cfg, window: int, stride: int):
+    from loosefit.models.multi_garment import MultiWindowDataset
+
+    history = cfg.model.motion_frames - 1 + cfg.model.corrective_frames - 1
+    return MultiWindowDataset(data, window, stride, history)
+
+
+def entropy_table(model, groups) -> dict:
+    """``{layer: {"entropy", "uniform", "ratio"}}``: each GAT-LN's attention entropy over ``groups`` (collated
+    batches, one forward pass each), as :func:`loosefit.models.layers.gat_ln.recording_attention` records it."""
+    from loosefit.models.layers.gat_ln import recording_attention
+
+    with torch.no_grad(), recording_attention(model) as log:
+        for group in groups:
+            model.predict_batch(group)
+    table = {}
+    for name, values in log.items():
+        if values:
+            e, u = np.mean([v[0] for v in values]), np.mean([v[1] for v in values])
+            table[name] = {"entropy": float(e), "uniform": float(u), "ratio": float(e / u)}
+    return table
+
+
+def _collate(items):
+    from loosefit.models.multi_garment import collate_by_graph
+
+    return collate_by_graph(items)
+
+
+def entropy_at_init(store: Path, designs, alpha: str = "2.0", seed: int = 0) -> dict:
+    """Each design's per-layer attention entropy at initialisation on the first window of every training garment."""
+    from loosefit.models.multi_garment import MultiGarmentData
+    from loosefit.models.swingar import SwinGar
+
+    out = {}
+    data = None
+    for design in designs:
+        cfg = load_cfg([*design_overrides(design), f"model.alpha={alpha}"])
+        if data is None:
+            data = MultiGarmentData(store, "train", **cfg.model.graph_settings())
+            ds = windows_of(data, cfg, 4, 10_000)
+            firsts = {}
+            for k, (gi, _, _) in enumerate(ds.index):
+                firsts.setdefault(gi, k)
+            groups = [_collate([ds[k]])[0] for k in firsts.values()]
+        torch.manual_seed(seed)
+        model = SwinGar.from_data(data, cfg.model)
+        out[design] = entropy_table(model, groups)
+        if design == "first":  # the input-scaling alternative: positions relative to each garment's centroid
+            from loosefit.models.layers.gat_ln import recording_attention
+
+            with torch.no_grad(), recording_attention(model.graph_encoder) as log:
+                for group in groups:
+                    g = dict(group["graph_tensors"])
+                    g["rest"] = g["rest"] - g["rest"].mean(0)
+                    model.garment_features(g)
+            out["first+centroid"] = {f"graph_encoder.{k}": {
+                "entropy": float(np.mean([v[0] for v in vals])), "uniform": float(np.mean([v[1] for v in vals])),
+                "ratio": float(np.mean([v[0] for v in vals]) / np.mean([v[1] for v in vals]))}
+                for k, vals in log.items() if vals}
+    return out
+
+
+def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: int = 1, steps: int = 600,
+             lr: float = 1e-3, stage: str = "supervised", seed: int = 0, every: int = 50, patch: dict | None = None,
+             threads: int = 1) -> dict:
+    """SwinGar learning ``windows`` windows of ``frames`` frames of one training garment by heart.
+
+    The model (``swingar-cpu.yaml`` with ``overrides``) is trained with Adam at a constant ``lr`` on those
+    windows alone for ``steps`` steps (loss of ``stage``), and scored on the same frames: the RMSE of the output,
+    of the coarse stage alone (LBS of the blend shapes with the dynamic weights) and the gradient norm of each
+    top-level module at the first step. ``patch``: module constants of :mod:`loosefit.models.swingar` set for the
+    run (e.g. ``{"OUTPUT_INIT": 1.0}``), restored after.
+
+    Returns ``{"curve": [{step, rmse_mm, coarse_rmse_mm, loss}], "final_rmse_mm", "grad_norms", ...}``.
+    """
+    import loosefit.models.swingar as sw
+    from loosefit.models.multi_garment import MultiGarmentData
+
+    saved = {k: getattr(sw, k) for k in (patch or {})}
+    for k, v in (patch or {}).items():
+        setattr(sw, k, v)
+    try:
+        torch.set_num_threads(threads)
+        cfg = load_cfg(overrides)
+        data = MultiGarmentData(store, "train", [garment], **cfg.model.graph_settings())
+        ds = windows_of(data, cfg, frames, 17)
+        picks = np.linspace(0, len(ds) - 1, windows).round().astype(int)
+        batch = _collate([ds[int(k)] for k in picks])
+        torch.manual_seed(seed)
+        model = sw.SwinGar.from_data(data, cfg.model)
+        opt = torch.optim.Adam(model.parameters(), lr)
+        curve, grads, t0 = [], {}, time.time()
+
+        def score(step, loss):
+            with torch.no_grad():
+                sq = csq = n = 0.0
+                for group in batch:
+                    out = model(group["graph_tensors"], group["root"], group["joints"],
+                                state={"root": group["history_root"], "joints": group["history_joints"]})
+                    err = out["verts"] - group["verts"]
+                    # the coarse mesh in the same frame as the output: it lacks only the correction
+                    cerr = err - out["correction"]
+                    sq += float(err.square().sum(-1).mean(-1).sum())
+                    csq += float(cerr.square().sum(-1).mean(-1).sum())
+                    n += err.shape[0] * err.shape[1]
+            curve.append({"step": step, "rmse_mm": (sq / n) ** 0.5 * 1e3, "coarse_rmse_mm": (csq / n) ** 0.5 * 1e3,
+                          "loss": loss, "seconds": time.time() - t0})
+
+        for step in range(steps + 1):
+            loss, _ = model.training_loss(batch, stage)
+            if step % every == 0 or step == steps:
+                score(step, float(loss))
+                print(curve[-1], flush=True)
+            if step == steps:
+                break
+            opt.zero_grad()
+            loss.backward()
+            if step == 0:
+                for name, module in model.named_children():
+                    g = [p.grad.norm() ** 2 for p in module.parameters() if p.grad is not None]
+                    grads[name] = float(torch.stack(g).sum().sqrt()) if g else None
+            opt.step()
+        verts = sum(int(g["graph_tensors"]["rest"].shape[0]) for g in batch[:1])
+        return {"garment": garment, "vertices": verts, "frames": frames * windows, "steps": steps, "lr": lr,
+                "stage": stage, "overrides": list(overrides), "patch": patch or {}, "curve": curve,
+                "final_rmse_mm": curve[-1]["rmse_mm"], "best_rmse_mm": min(c["rmse_mm"] for c in curve),
+                "grad_norms_step0": grads}
+    finally:
+        for k, v in saved.items():
+            setattr(sw, k, v)
+
+
+def held_out_scores(store: Path, run: Path, body, baseline: dict | None = None) -> dict:
+    """RMSE (mm, every frame, animated from the rest garment) of a run on each test sequence, and the attention
+    entropy of its layers on the held-out garments' first windows."""
+    from loosefit.animate import Animator, load_run
+    from loosefit.data.store import DatasetStore
+    from loosefit.models.multi_garment import MultiGarmentData
+
+    store_ = DatasetStore.open(store)
+    rows, animators = {}, {}
+    for name in sorted(store_.sequence_names()):
+        seq = store_.sequence(name)
+        if seq.split != "test":
+            continue
+        garment, motion, truth = store_.garment(seq.garment), store_.motion(seq.motion), seq.verts[:]
+        if seq.garment not in animators:
+            animators[seq.garment] = Animator(run, garment=garment, body=body)
+        pred = animators[seq.garment].animate(motion)
+        rows[name] = float(np.sqrt(((pred - truth) ** 2).sum(-1).mean()) * 1e3)
+    _, model, cfg = load_run(run)
+    data = MultiGarmentData(store, "test", body=False, **cfg.model.graph_settings())
+    ds = windows_of(data, cfg, 4, 10_000)
+    firsts = {}
+    for k, (gi, _, _) in enumerate(ds.index):
+        firsts.setdefault(gi, k)
+    groups = [_collate([ds[k]])[0] for k in firsts.values()]
+    return {"rmse_mm": rows, "mean_rmse_mm": float(np.mean(list(rows.values()))),
+            "entropy": entropy_table(model, groups)}
+
+
+def body_lbs_scores(store: Path, body) -> dict:
+    from loosefit.data.store import DatasetStore
+    from loosefit.sim.attach import body_lbs
+
+    store_ = DatasetStore.open(store)
+    rows = {}
+    for name in sorted(store_.sequence_names()):
+        seq = store_.sequence(name)
+        if seq.split == "test":
+            garment, motion = store_.garment(seq.garment), store_.motion(seq.motion)
+            rows[name] = float(np.sqrt(((body_lbs(garment.verts, body, motion) - seq.verts[:]) ** 2).sum(-1).mean()) * 1e3)
+    return rows
+
+
+def cmd_curve(args) -> None:
+    from loosefit.body import AnnyBody
+    from loosefit.training import train_model
+
+    torch.set_num_threads(1)
+    body = AnnyBody()
+    runs = Path(args.runs)
+    lbs = body_lbs_scores(Path(args.data), body)
+    results = {"design": args.design, "settings": CURVE_SETTINGS, "body_lbs_mm": lbs,
+               "body_lbs_mean_mm": float(np.mean(list(lbs.values()))), "variants": {}}
+    for variant in args.variants.split(","):
+        for seed in args.seeds.split(","):
+            run = runs / f"{args.design}-{variant}-seed-{seed}"
+            if not (run / "run.json").exists():
+                t0 = time.time()
+                train_model("swingar", args.data, None, run, CPU_CONFIG,
+                            [*CURVE_SETTINGS, *design_overrides(args.design), f"model.alpha={ALPHAS[variant]}",
+                             f"train.seed={seed}", *args.set], val_split=None)
+                print(f"{run.name}: trained in {time.time() - t0:.0f} s", flush=True)
+            with open(run / "metrics.csv", newline="") as f:
+                train_curve = [float(r["train_loss"]) for r in csv.DictReader(f) if r.get("train_loss")]
+            scores = held_out_scores(Path(args.data), run, body)
+            scores["train_loss_by_epoch"] = train_curve
+            scores["ratio_to_body_lbs"] = scores["mean_rmse_mm"] / results["body_lbs_mean_mm"]
+            results["variants"].setdefault(variant, {})[f"seed-{seed}"] = scores
+            print(variant, seed, scores["mean_rmse_mm"], flush=True)
+    for variant, seeds in results["variants"].items():
+        values = [s["mean_rmse_mm"] for s in seeds.values()]
+        results["variants"][variant]["summary"] = {"mean_rmse_mm": float(np.mean(values)),
+                                                   "spread_mm": float(np.max(values) - np.min(values))}
+    save_results(args.name, results)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    sp = sub.add_parser("entropy")
+    sp.add_argument("--data", required=True)
+    sp.add_argument("--designs", default=",".join(DESIGNS))
+    sp.add_argument("--name", default="swingar-attention-entropy")
+    sp = sub.add_parser("curve")
+    sp.add_argument("--data", required=True)
+    sp.add_argument("--runs", required=True)
+    sp.add_argument("--design", default="node-centred", choices=list(DESIGNS))
+    sp.add_argument("--variants", default=",".join(ALPHAS))
+    sp.add_argument("--seeds", default="0,1")
+    sp.add_argument("--set", action="append", default=[])
+    sp.add_argument("--name", default="swingar-alpha-curve")
+    sp = sub.add_parser("memorise")
+    sp.add_argument("--data", required=True)
+    sp.add_argument("--garment", required=True)
+    sp.add_argument("--frames", type=int, default=4)
+    sp.add_argument("--windows", type=int, default=1)
+    sp.add_argument("--steps", type=int, default=600)
+    sp.add_argument("--lr", type=float, default=1e-3)
+    sp.add_argument("--stage", default="supervised")
+    sp.add_argument("--set", action="append", default=[])
+    sp.add_argument("--patch", action="append", default=[], help="NAME=VALUE: a module constant of models/swingar.py")
+    sp.add_argument("--name", default="swingar-memorise")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    if args.command == "entropy":
+        save_results(args.name, {"store": args.data, "at_init": entropy_at_init(Path(args.data),
+                                                                                 args.designs.split(","))})
+    elif args.command == "curve":
+        cmd_curve(args)
+    else:
+        patch = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.patch)}
+        save_results(args.name, memorise(Path(args.data), args.garment, args.set, args.frames, args.windows,
+                                         args.steps, args.lr, args.stage, patch=patch))
+
+
+if __name__ == "__main__":
+    main()

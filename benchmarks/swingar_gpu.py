@@ -1,0 +1,188 @@
+"""SwinGar's alpha curve on a GPU machine that has torch but not loosefit's data stack (Blender, Zarr, Anny,
+libigl): the store's windows are exported here as tensors, and the training and scoring run there on them.
+
+    # here: every training window and every held-out sequence whole, as tensors
+    .venv/bin/python benchmarks/swingar_gpu.py export --data STORE.zarr --out gpu/windows.pt
+    # there (plain python3 with torch; loosefit's own modules from src/, its third-party imports stubbed)
+    python3 benchmarks/swingar_gpu.py curve --windows gpu/windows.pt --out $OUT/curve.json
+
+``curve`` trains each variant (alpha 0, 1, 2, 3, plain GAT; ``--seeds``) as ``loosefit train`` does (Adam, the
+config's stages and epochs, cosine per stage over its epochs, batches of ``train.batch_size`` windows
+shuffled each epoch) and scores it on the held-out garments' sequences whole, from their first frame (what
+animating the rest garment gives, in the canonical frame), with each GAT-LN layer's attention entropy there.
+The held-out RMSE is then put beside body-LBS by ``swingar_attention.py`` (which needs the body model).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+import time
+import types
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parent.parent
+ALPHAS = {"alpha-0": 0.0, "alpha-1": 1.0, "alpha-2": 2.0, "alpha-3": 3.0, "plain-gat": None}
+#: Third-party modules loosefit imports at module level that a torch-only machine may lack; stubbed there
+#: (the model never calls them: the exported windows carry everything it reads).
+OPTIONAL = ("igl", "zarr", "anny", "bpy", "potpourri3d", "trimesh", "pyvista", "dem_bones", "py_dem_bones", "ray",
+            "newton", "warp", "pygltflib", "pxr", "imageio", "imageio_ffmpeg", "numcodecs", "roma", "smplx", "tqdm",
+            "rich", "tensorboard")
+
+
+def stub_missing() -> list[str]:
+    """Put an empty stand-in module in ``sys.modules`` for each of :data:`OPTIONAL` that does not import."""
+    from unittest import mock
+
+    stubbed = []
+    for name in OPTIONAL:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 (missing, or broken against this numpy)
+            sys.modules[name] = mock.MagicMock(spec=types.ModuleType(name), name=name)
+            stubbed.append(name)
+    return stubbed
+
+
+def export(store: Path, out: Path, config: Path, overrides: list[str]) -> None:
+    from loosefit.config import load_config
+    from loosefit.models.multi_garment import MultiGarmentData, MultiWindowDataset
+    from loosefit.models.swingar import Config, SwinGar
+
+    cfg = load_config(Config, config, overrides)
+    history = cfg.model.motion_frames - 1 + cfg.model.corrective_frames - 1
+    train = MultiGarmentData(store, "train", **cfg.model.graph_settings())
+    test = MultiGarmentData(store, "test", body=False, **cfg.model.graph_settings())
+    sizes = SwinGar.data_sizes(train)
+    stats = train.feature_stats()
+    windows = MultiWindowDataset(train, cfg.data.window, cfg.data.stride, history)
+    whole = MultiWindowDataset(test, 10_000, 10_000, history)  # every held-out sequence as one window
+
+    def plain(item):
+        return {k: v for k, v in item.items() if k != "graph_tensors"}
+
+    payload = {"sizes": sizes, "stats": {k: [torch.from_numpy(np.asarray(v)) for v in stats[k]] for k in ("root", "joints")},
+               "train_graphs": [g.tensors() for g in train.graphs], "test_graphs": [g.tensors() for g in test.graphs],
+               "test_names": [g.name for g in test.graphs],
+               "train": [plain(windows[k]) for k in range(len(windows))],
+               "test": [plain(whole[k]) for k in range(len(whole))],
+               "config": str(config), "overrides": overrides}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(payload, out)
+    print(f"{len(payload['train'])} training windows, {len(payload['test'])} held-out sequences -> {out}")
+
+
+def train_and_score(payload: dict, cfg, device: torch.device, seed: int) -> dict:
+    from loosefit.models.layers.gat_ln import recording_attention
+    from loosefit.models.multi_garment import collate_by_graph
+    from loosefit.models.swingar import SwinGar
+
+    torch.manual_seed(seed)
+    model = SwinGar(payload["sizes"], cfg.model)
+    with torch.no_grad():
+        for key in ("root", "joints"):
+            getattr(model, f"{key}_mean").copy_(payload["stats"][key][0])
+            getattr(model, f"{key}_std").copy_(payload["stats"][key][1])
+    model.to(device)
+
+    def on_device(item, graphs):
+        out = {k: (v.to(device) if torch.is_tensor(v) else v) for k, v in item.items()}
+        out["graph_tensors"] = graphs[item["graph"]]
+        return out
+
+    train_graphs = [{k: v.to(device) for k, v in g.items()} for g in payload["train_graphs"]]
+    test_graphs = [{k: v.to(device) for k, v in g.items()} for g in payload["test_graphs"]]
+    items = [on_device(it, train_graphs) for it in payload["train"]]
+    opt = torch.optim.Adam(model.parameters(), cfg.train.lr)
+    rng = np.random.default_rng(seed)
+    curve, t0 = [], time.time()
+    for stage, stage_cfg in cfg.train.stages.items():
+        sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(stage_cfg.epochs, 1), eta_min=cfg.train.min_lr)
+        for g in opt.param_groups:
+            g["lr"] = cfg.train.lr
+        for epoch in range(stage_cfg.epochs):
+            order, total, count = rng.permutation(len(items)), 0.0, 0
+            for a in range(0, len(order), cfg.train.batch_size):
+                batch = collate_by_graph([items[k] for k in order[a:a + cfg.train.batch_size]])
+                loss, logged = model.training_loss(batch, stage)
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                total, count = total + float(loss), count + 1
+            sched.step()
+            curve.append({"stage": stage, "epoch": epoch, "train_loss": total / count, "seconds": time.time() - t0})
+    model.eval()
+    rows = {}
+    with torch.no_grad(), recording_attention(model) as log:
+        for item in payload["test"]:
+            group = collate_by_graph([on_device(item, test_graphs)])[0]
+            err = model.predict_batch(group) - group["verts"]
+            name = f"{payload['test_names'][item['graph']]}/{item['sequence']}"
+            rows[name] = float(err.square().sum(-1).mean().sqrt()) * 1e3
+    entropy = {k: {"entropy": float(np.mean([v[0] for v in vals])), "uniform": float(np.mean([v[1] for v in vals]))}
+               for k, vals in log.items() if vals}
+    for v in entropy.values():
+        v["ratio"] = v["entropy"] / v["uniform"]
+    return {"rmse_mm": rows, "mean_rmse_mm": float(np.mean(list(rows.values()))), "entropy": entropy,
+            "train_curve": curve}
+
+
+def curve(windows: Path, out: Path, designs: list[str], variants: list[str], seeds: list[int], overrides: list[str]):
+    stubbed = stub_missing()
+    from loosefit.config import load_config
+    from loosefit.models.swingar import Config
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from swingar_attention import design_overrides
+
+    payload = torch.load(windows, weights_only=False)
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    config = ROOT / "configs" / "models" / "swingar-cpu.yaml"
+    results = {"device": torch.cuda.get_device_name() if device.type == "cuda" else "cpu", "stubbed": stubbed,
+               "export_overrides": payload["overrides"], "overrides": overrides, "runs": {}}
+    for design in designs:
+        for variant in variants:
+            alpha = "null" if ALPHAS[variant] is None else str(ALPHAS[variant])
+            for seed in seeds:
+                cfg = load_config(Config, config, [*payload["overrides"], *design_overrides(design),
+                                                   f"model.alpha={alpha}", f"train.seed={seed}", *overrides])
+                t0 = time.time()
+                scores = train_and_score(payload, cfg, device, seed)
+                scores["seconds"] = time.time() - t0
+                results["runs"][f"{design}/{variant}/seed-{seed}"] = scores
+                print(design, variant, seed, round(scores["mean_rmse_mm"], 2), f"{scores['seconds']:.0f} s", flush=True)
+                out.parent.mkdir(parents=True, exist_ok=True)
+                out.write_text(json.dumps(results, indent=1))  # after every run: a cut-off call keeps what it did
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    sp = sub.add_parser("export")
+    sp.add_argument("--data", required=True)
+    sp.add_argument("--out", required=True)
+    sp.add_argument("--config", default=str(ROOT / "configs" / "models" / "swingar-cpu.yaml"))
+    sp.add_argument("--set", action="append", default=[])
+    sp = sub.add_parser("curve")
+    sp.add_argument("--windows", required=True)
+    sp.add_argument("--out", required=True)
+    sp.add_argument("--designs", default="node-centred")
+    sp.add_argument("--variants", default=",".join(ALPHAS))
+    sp.add_argument("--seeds", default="0,1")
+    sp.add_argument("--set", action="append", default=[])
+    args = parser.parse_args()
+    sys.path.insert(0, str(ROOT / "src"))
+    if args.command == "export":
+        export(Path(args.data), Path(args.out), Path(args.config), args.set)
+    else:
+        curve(Path(args.windows), Path(args.out), args.designs.split(","), args.variants.split(","),
+              [int(s) for s in args.seeds.split(",")], args.set)
+
+
+if __name__ == "__main__":
+    main()
