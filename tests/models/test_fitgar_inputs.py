@@ -1,4 +1,5 @@
-"""FitGar's per-frame inputs (models/fitgar_inputs.py) against the whole posed body."""
+"""FitGar's per-frame inputs (models/fitgar_inputs.py) against the whole posed body, for both anchors: the closest
+body vertex and the closest point on the body surface."""
 
 from __future__ import annotations
 
@@ -6,9 +7,9 @@ import numpy as np
 import pytest
 
 from loosefit.errors import InputError
-from loosefit.geometry.features import relative_skinning_features
+from loosefit.geometry.features import closest_body_points, relative_skinning_features
 from loosefit.geometry.normals import vertex_normals
-from loosefit.models.fitgar_inputs import GarmentBodyPair, graph_edges, pose_vector
+from loosefit.models.fitgar_inputs import GarmentBodyPair, graph_edges, pose_vector, shared_anchor_fraction
 from loosefit.models.motion_features import to_canonical
 
 
@@ -19,7 +20,8 @@ def case(body):
 
     garment = make_garment("skirt", body, seed=0, edge_length=0.06)
     motion = generate("spin", 1.0, 2, body)
-    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3])
+    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3],
+                                 anchor="vertex")
     return body, garment, motion, pair, pair.frames(motion), body.pose(motion)
 
 
@@ -68,3 +70,65 @@ def test_bad_input(case):
     body, garment, motion, pair, inputs, posed = case
     with pytest.raises(InputError):
         GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [np.nan])
+    with pytest.raises(InputError, match="anchor must be one of"):
+        GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1], anchor="nearest")
+
+
+@pytest.fixture(scope="module")
+def surface(case):
+    body, garment, motion, _, _, posed = case
+    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3])
+    return pair, pair.frames(motion)
+
+
+def test_surface_anchor_is_the_closest_point_of_the_body(case, surface):
+    """Against brute force: a fine barycentric grid on every body triangle near a few garment vertices."""
+    body, garment, *_ = case
+    pair, _ = surface
+    assert pair.anchor == "surface"
+    rest, faces = body.rest_verts().astype(np.float64), np.asarray(body.faces)
+    anchors = pair.rest_anchors()
+    dist = np.linalg.norm(garment.verts - anchors, axis=1)
+    to_vertex = np.linalg.norm(garment.verts[:, None] - rest[None], axis=-1).min(1)
+    assert (dist <= to_vertex + 1e-7).all() and (dist < to_vertex - 1e-4).mean() > 0.5
+    n = 40
+    u, v = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
+    keep = u + v <= n
+    grid = np.stack([u[keep], v[keep], n - u[keep] - v[keep]], 1) / n  # (P, 3) barycentric
+    for i in np.linspace(0, len(anchors) - 1, 6).round().astype(int):
+        near = np.linalg.norm(rest - garment.verts[i], axis=1) < to_vertex[i] + 0.03
+        tri = rest[faces[near[faces].any(1)]]  # (K, 3, 3)
+        samples = np.einsum("pk,fkc->fpc", grid, tri).reshape(-1, 3)
+        brute = np.linalg.norm(samples - garment.verts[i], axis=1).min()
+        assert dist[i] <= brute + 1e-7 and dist[i] > brute - 2e-3, (i, dist[i], brute)
+
+
+def test_surface_anchor_follows_the_posed_surface(case, surface):
+    """The anchor, its normal and skinning weights interpolated on the posed body's triangle."""
+    body, garment, motion, _, _, posed = case
+    pair, inputs = surface
+    face, bary = closest_body_points(garment.verts, body.rest_verts(), body.faces)
+    np.testing.assert_allclose(pair.bary, bary, atol=1e-12)
+    corners = np.asarray(body.faces)[face]
+    expected = np.einsum("vk,tvkc->tvc", bary, posed.verts[:, corners])
+    np.testing.assert_allclose(inputs["anchor"], to_canonical(expected, inputs["rot"], inputs["origin"]), atol=1e-5)
+    normal = np.einsum("vk,tvkc->tvc", bary, vertex_normals(posed.verts, body.faces)[:, corners])
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    np.testing.assert_allclose(inputs["body_normal"], normal @ inputs["rot"], atol=1e-4)
+    weights = np.einsum("vk,vkj->vj", bary, body.skinning_weights()[corners])
+    np.testing.assert_allclose(pair.weights, weights, atol=1e-6)
+    root = body.rest_joints()[0]
+    world = relative_skinning_features(garment.verts, weights, posed.joint_transforms, body.rest_joints())
+    np.testing.assert_allclose(inputs["garment_rel"], (world - [root[0], root[1], 0.0]) @ inputs["rot"], atol=1e-5)
+
+
+def test_shared_anchor_fraction(case, surface):
+    """Closest-vertex anchors: the share of vertices whose body vertex another one also has (counted directly);
+    surface anchors share far fewer."""
+    pair = case[3]
+    count = np.bincount(pair.nearest)
+    shared = shared_anchor_fraction(pair)
+    assert shared["fraction"] == pytest.approx((count[pair.nearest] > 1).mean())
+    assert shared["largest"] == count.max() and shared["vertices"] == pair.num_verts
+    on_surface = shared_anchor_fraction(surface[0])
+    assert on_surface["fraction"] < 0.5 * shared["fraction"], (on_surface, shared)

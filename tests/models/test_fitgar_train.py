@@ -156,6 +156,30 @@ def test_animate_any_garment_frame_by_frame(run, heavy_case):
         animator.animate(pair, motion, output="lf")
 
 
+def test_a_run_recorded_before_surface_anchors_is_refused(run, heavy_case, tmp_path):
+    """Its sizes name no anchor: it was trained on closest-vertex anchors, and frames built on the surface are
+    refused with a clear error; built on vertices, they animate."""
+    import shutil
+
+    from loosefit.animate_any import AnyGarmentAnimator
+    from loosefit.models.fitgar_inputs import GarmentBodyPair
+
+    assert json.loads((run / "model.json").read_text())["sizes"]["anchor"] == "surface"
+    old = tmp_path / "old"
+    shutil.copytree(run, old)
+    meta = json.loads((old / "model.json").read_text())
+    del meta["sizes"]["anchor"]
+    (old / "model.json").write_text(json.dumps(meta))
+    shape, heavy, garment, motion = heavy_case
+    animator = AnyGarmentAnimator(old)
+    pair = animator.pair(garment.verts, garment.faces, heavy)
+    with pytest.raises(InputError, match="trained on 'vertex' anchors .*recorded before"):
+        animator.animate(pair, motion)
+    alpha = pair.alpha
+    vertex = GarmentBodyPair.build(garment.verts, garment.faces, heavy, heavy.shape.to_array(), alpha, anchor="vertex")
+    assert np.isfinite(animator.animate(vertex, motion)).all()
+
+
 def test_loosefit_animate_cli(run, heavy_case, tmp_path):
     from loosefit.cli import main
     from loosefit.io.mesh_sequence import MeshSequence

@@ -4,6 +4,8 @@
   ``I in {0, 1}^(Ng x Nb)``, one 1 per garment row at the closest body vertex (rest pose), so that
   ``I @ body_verts`` follows the body (``M_coarse = I M_b + Delta``).
 - :func:`vertex_joint_distances`: distance from every vertex to every joint, ``x_i`` in FitGar.
+- :func:`closest_body_points`: the closest point on the body surface (a triangle and barycentric
+  coordinates), a one-to-one alternative to the closest vertex for FitGar's anchors.
 - :func:`relative_skinning_features`: ``p_i = sum_s w_si G_s(theta) G_s(theta*)^-1 pbar_i``: the
   linearly blend-skinned rest position without the root's translation, so a body translated without
   rotation keeps the same features.
@@ -86,3 +88,36 @@ def relative_skinning_features(
     A[..., :3, 3] -= (G[:, root, :3, 3] - rj_t[root])[:, None]
     out = linear_blend_skinning(torch.from_numpy(rest.astype(np.float64)), torch.from_numpy(weights.astype(np.float64)), A)
     return out.numpy().astype(np.float32)
+
+
+def closest_body_points(garment_verts: np.ndarray, body_verts: np.ndarray, body_faces: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Each garment vertex's closest point on the body surface (exact, libigl's AABB tree).
+
+    Args:
+        garment_verts: ``(Vg, 3)`` metres. body_verts: ``(Vb, 3)`` metres. body_faces: ``(F, 3)`` int.
+
+    Returns:
+        ``face (Vg,)`` int64, the body triangle holding the point, and ``bary (Vg, 3)`` float64, its
+        barycentric coordinates there (each in [0, 1], summing to 1): the point is
+        ``sum_k bary[:, k] * body_verts[body_faces[face, k]]``.
+    """
+    import igl
+
+    g = _points(garment_verts, "garment vertices")
+    b = _points(body_verts, "body vertices")
+    faces = np.asarray(body_faces)
+    if g.ndim != 2 or b.ndim != 2 or faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise InputError(f"closest_body_points takes one garment (Vg, 3), one body (Vb, 3) and its faces (F, 3), "
+                         f"got {g.shape}, {b.shape}, {faces.shape}")
+    if faces.min() < 0 or faces.max() >= len(b):
+        raise InputError(f"body faces index vertices outside [0, {len(b)})")
+    V = np.ascontiguousarray(b, np.float64)
+    F = np.ascontiguousarray(faces, np.int64)
+    _, face, close = igl.point_mesh_squared_distance(np.ascontiguousarray(g, np.float64), V, F)
+    tri = V[F[face]]
+    bary = igl.barycentric_coordinates(np.ascontiguousarray(close), tri[:, 0].copy(), tri[:, 1].copy(),
+                                       tri[:, 2].copy())
+    # rounding leaves points on an edge a hair outside their triangle
+    bary = np.clip(bary, 0.0, 1.0)
+    return face.astype(np.int64), bary / bary.sum(1, keepdims=True)

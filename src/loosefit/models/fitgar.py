@@ -69,6 +69,7 @@ from torch import nn
 from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals_torch
 from loosefit.models.fitgar_data import GarmentFrames, check_frame_choice, collate_frames
+from loosefit.models.fitgar_inputs import check_anchor_mode
 from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput
 from loosefit.models.layers.edge_pool import EdgeContractionPooling
 from loosefit.models.layers.gat_block import GATBlock
@@ -257,6 +258,11 @@ class FitGar(nn.Module):
         super().__init__()
         self._sizes = dict(sizes)
         self.config = c = config
+        # Sizes from a store record the anchors (data_sizes); a run recorded before they were (it has a fit seed,
+        # no anchor) was trained on body vertices; sizes made by hand (no fit seed) are not checked.
+        self.anchor = sizes.get("anchor", "vertex" if "fit_seed" in sizes else None)
+        if self.anchor is not None:
+            check_anchor_mode(self.anchor)
         J, S, F, P = (int(sizes[k]) for k in ("num_joints", "num_shape", "num_fit_factors", "pose_features"))
         n = int(sizes["fit_length"])
         for name, shape in [("rel_mean", (3,)), ("shape_mean", (S,)), ("alpha_mean", (F,)), ("dist_mean", ())]:
@@ -282,7 +288,8 @@ class FitGar(nn.Module):
 
     @classmethod
     def data_sizes(cls, data: GarmentFrames) -> dict:
-        return {**data.sizes, "fit_length": int(data.fit_model.length), "fit_seed": int(data.fit_model.seed)}
+        return {**data.sizes, "fit_length": int(data.fit_model.length), "fit_seed": int(data.fit_model.seed),
+                "anchor": data.anchor}
 
     @classmethod
     def from_data(cls, data: GarmentFrames, config: FitGarConfig) -> "FitGar":
@@ -349,7 +356,20 @@ class FitGar(nn.Module):
             h = torch.cat([h, self.encoding(batch)[idx]], -1)
         return self.detail(h, batch["edge_index"], idx)
 
+    def check_anchor(self, batch: dict) -> None:
+        """Refuse frames whose garment-body pairs were anchored otherwise than this model's training frames."""
+        flag = batch.get("surface_anchor")
+        if self.anchor is None or flag is None or len(flag) == 0:
+            return
+        given = "surface" if bool(flag[0] > 0.5) else "vertex"
+        if given != self.anchor or bool(((flag > 0.5) != (flag[0] > 0.5)).any()):
+            old = "" if "anchor" in self._sizes else " (a run recorded before anchors were: its sizes name none)"
+            raise InputError(f"this FitGar was trained on {self.anchor!r} anchors{old}, the frames were built with "
+                             f"{given!r} ones: build the garment-body pairs with GarmentBodyPair.build(..., "
+                             f"anchor={self.anchor!r}), or train the model again")
+
     def forward(self, batch: dict) -> dict[str, torch.Tensor]:
+        self.check_anchor(batch)
         coarse_disp = self.coarse_displacement(batch)
         coarse = batch["anchor"] + coarse_disp  # FitGar Eq. 5
         detail_disp = self.detail_displacement(batch, coarse)

@@ -8,6 +8,7 @@ holds the frame's inputs (:mod:`loosefit.models.fitgar_inputs`) and its targets,
 - ``verts (V, 3)``: the simulated garment, metres;
 - ``smooth (V, 3)``: the same smoothed by the ``fitgar`` preset (FitGar Sec. 5.1: diffusion 0.12, 40
   iterations; pinned vertices kept), the coarse generator's target.
+- ``surface_anchor ()``: which anchors the pair was built with (:func:`surface_flag`).
 
 :func:`collate_frames` batches frames of any garments into one disjoint graph (nodes of every frame one
 after the other, edges and faces shifted): node arrays ``(N, ...)`` with ``batch (N,)`` naming each
@@ -24,13 +25,13 @@ from torch.utils.data import Dataset
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.smoothing import get_preset, smoothing_operator
-from loosefit.models.fitgar_inputs import GarmentBodyPair, PosedSkeleton, pose_motion
+from loosefit.models.fitgar_inputs import DEFAULT_ANCHOR, GarmentBodyPair, PosedSkeleton, check_anchor_mode, pose_motion
 from loosefit.models.motion_features import to_canonical
 
 #: Per-node arrays of an item and of a batch.
 NODE_KEYS = ("anchor", "body_normal", "body_rel", "garment_rel", "verts", "smooth")
 #: Per-frame arrays.
-FRAME_KEYS = ("joints", "pose", "shape", "alpha")
+FRAME_KEYS = ("joints", "pose", "shape", "alpha", "surface_anchor")
 #: Smallest standard deviation of an input normalised per feature (body shape values, fit factors).
 STD_FLOOR = 1e-2
 
@@ -81,14 +82,16 @@ class GarmentFrames(Dataset):
         frame_offset: the first frame kept, ``0 <= frame_offset < frame_stride`` (a held-pose plan's settled
             frames: stride ``transition + frames``, offset one less; :mod:`loosefit.motion.hold`).
         smoothing: preset of the coarse target.
+        anchor: where garment vertices are anchored on the body (:data:`~loosefit.models.fitgar_inputs.ANCHOR_MODES`).
     """
 
     def __init__(self, store, split: str | None = "train", body=None, sim_params: dict | None = None,
                  names: list[str] | None = None, frame_stride: int = 1, frame_offset: int = 0,
-                 smoothing: str = "fitgar"):
+                 smoothing: str = "fitgar", anchor: str = DEFAULT_ANCHOR):
         from loosefit.rig.prepare import load_fit_attribute
 
         check_frame_choice(frame_stride, frame_offset)
+        self.anchor = check_anchor_mode(anchor)
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         self.fit_model, alphas = load_fit_attribute(self.store)
         selected = [n for n in self.store.sequence_names(split=split)
@@ -112,7 +115,7 @@ class GarmentFrames(Dataset):
                     body = load_body(str(self.store.read_attrs(f"bodies/{seq.body}").get("model", "anny")))
                 garment = self.store.garment(seq.garment)
                 self.pairs[key] = GarmentBodyPair.build(garment.verts, garment.faces, body, self.store.body(seq.body),
-                                                        alphas[key])
+                                                        alphas[key], anchor=anchor)
                 if seq.garment not in self.smoothers:
                     self.smoothers[seq.garment] = Smoother(garment.faces, len(garment.verts), garment.pinned, smoothing)
             pose_key = (seq.body, seq.motion)
@@ -135,7 +138,7 @@ class GarmentFrames(Dataset):
         item = {key: value[0] for key, value in pair.inputs(posed).items() if key not in ("rot", "origin")}
         verts = to_canonical(s["verts"][t:t + 1], posed.rot, posed.origin)[0]
         item.update(verts=verts, smooth=self.smoothers[s["garment"]](verts), shape=pair.shape, alpha=pair.alpha,
-                    edges=pair.edges, faces=pair.faces)
+                    edges=pair.edges, faces=pair.faces, surface_anchor=surface_flag(pair))
         return item
 
     def feature_stats(self, samples: int = 256) -> dict[str, np.ndarray]:
@@ -182,7 +185,7 @@ def collate_frames(items: list[dict]) -> dict:
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     out = {key: torch.from_numpy(np.concatenate([it[key] for it in items]).astype(np.float32))
            for key in NODE_KEYS if key in items[0]}
-    for key in FRAME_KEYS:
+    for key in (k for k in FRAME_KEYS if k in items[0]):
         out[key] = torch.from_numpy(np.stack([it[key] for it in items]).astype(np.float32))
     out["edge_index"] = torch.from_numpy(np.concatenate([it["edges"] + s for it, s in zip(items, starts)], 1))
     out["faces"] = torch.from_numpy(np.concatenate([it["faces"] + s for it, s in zip(items, starts)]))
@@ -191,8 +194,15 @@ def collate_frames(items: list[dict]) -> dict:
     return out
 
 
+def surface_flag(pair: GarmentBodyPair) -> np.ndarray:
+    """An item's ``surface_anchor ()``: 1 when its pair anchors on the body surface, 0 on body vertices (the model
+    refuses frames built with anchors other than those it was trained on)."""
+    return np.float32(pair.anchor == "surface")
+
+
 def frame_items(pair: GarmentBodyPair, inputs: dict[str, np.ndarray]) -> list[dict]:
     """The frames of ``pair.frames(motion)`` as items for :func:`collate_frames` (no targets): animation."""
     T = len(inputs["anchor"])
     return [{**{k: inputs[k][t] for k in ("anchor", "body_normal", "body_rel", "garment_rel", "joints", "pose")},
-             "shape": pair.shape, "alpha": pair.alpha, "edges": pair.edges, "faces": pair.faces} for t in range(T)]
+             "shape": pair.shape, "alpha": pair.alpha, "edges": pair.edges, "faces": pair.faces,
+             "surface_anchor": surface_flag(pair)} for t in range(T)]

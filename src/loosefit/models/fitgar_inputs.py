@@ -35,10 +35,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 import torch
+from scipy.spatial import cKDTree
 
 from loosefit.errors import InputError
-from loosefit.geometry.features import nearest_body_vertex
+from loosefit.geometry.features import closest_body_points, nearest_body_vertex
 from loosefit.geometry.laplacian import edges as mesh_edges
 from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
 from loosefit.geometry.normals import vertex_normals
@@ -63,19 +65,39 @@ def pose_vector(motion: Motion) -> np.ndarray:
     return np.concatenate([feats["root"][:, ROOT_TILT], feats["joints"].reshape(T, -1)], 1).astype(np.float32)
 
 
+#: Where a garment vertex is anchored on the body (FitGar Eq. 5's ``I M_b``): ``"surface"``, its closest point
+#: on the body surface (one-to-one at 3 cm garment edges, see the module docstring); ``"vertex"``, its closest
+#: body vertex (many-to-one on Anny), the behaviour of runs that record no anchor.
+ANCHOR_MODES = ("surface", "vertex")
+DEFAULT_ANCHOR = "surface"
+#: Anchors closer than this (metres) in the rest pose count as shared (:func:`shared_anchor_fraction`).
+SHARED_ANCHOR_DISTANCE = 1e-3
+
+
+def check_anchor_mode(anchor: str) -> str:
+    """``anchor`` if it is one of :data:`ANCHOR_MODES`, else :class:`InputError`."""
+    if anchor not in ANCHOR_MODES:
+        raise InputError(f"the anchor must be one of {ANCHOR_MODES}, got {anchor!r}")
+    return anchor
+
+
 @dataclass
 class GarmentBodyPair:
     """A garment in the rest pose of a body shape (see the module docstring).
 
     Attributes:
         garment_verts: ``(V, 3)`` float32 rest garment, metres. faces: ``(F, 3)`` int64. edges: ``(2, E)`` int64.
-        nearest: ``(V,)`` int64 indicator: the closest rest body vertex of each garment vertex.
-        ring_rest: ``(U, 3)`` float32 rest positions of the body vertices in the faces around the indicated
-            ones; ring_weights: ``(U, J)`` float32 their skinning weights; ring_faces: ``(K, 3)`` int64 those
-            faces in that numbering; ring_index: ``(V,)`` int64 where each garment vertex's body vertex is.
-        weights: ``(V, J)`` float32 skinning weights of the indicated body vertices (borrowed by the garment).
+        nearest: ``(V,)`` int64: the closest rest body vertex of each garment vertex (``"vertex"`` anchors), or
+            the corner of its anchor's triangle with the largest barycentric coordinate (``"surface"``).
+        ring_rest: ``(U, 3)`` float32 rest positions of the body vertices in the faces around the anchors'
+            corners; ring_weights: ``(U, J)`` float32 their skinning weights; ring_faces: ``(K, 3)`` int64 those
+            faces in that numbering; ring_tri: ``(V, 3)`` int64 where each anchor's three corners are (one
+            vertex three times for ``"vertex"`` anchors); bary: ``(V, 3)`` float64 the anchor's barycentric
+            coordinates on them (``1, 0, 0`` for ``"vertex"`` anchors).
+        weights: ``(V, J)`` float32 skinning weights at the anchors (interpolated; borrowed by the garment).
         rest_joints: ``(J, 3)`` float32. parents: ``(J,)`` int64.
         shape: ``(S,)`` float32 body shape ``beta``. alpha: ``(F,)`` float32 fit attribute.
+        anchor: ``"surface"`` or ``"vertex"`` (:data:`ANCHOR_MODES`).
     """
 
     garment_verts: np.ndarray
@@ -85,17 +107,22 @@ class GarmentBodyPair:
     ring_rest: np.ndarray
     ring_weights: np.ndarray
     ring_faces: np.ndarray
-    ring_index: np.ndarray
+    ring_tri: np.ndarray
+    bary: np.ndarray
     weights: np.ndarray
     rest_joints: np.ndarray
     parents: np.ndarray
     shape: np.ndarray
     alpha: np.ndarray
+    anchor: str = DEFAULT_ANCHOR
 
     @classmethod
-    def build(cls, garment_verts: np.ndarray, faces: np.ndarray, body, shape, alpha: np.ndarray) -> "GarmentBodyPair":
+    def build(cls, garment_verts: np.ndarray, faces: np.ndarray, body, shape, alpha: np.ndarray,
+              anchor: str = DEFAULT_ANCHOR) -> "GarmentBodyPair":
         """The pair of a garment ``(V, 3)`` fitted to ``body`` (a :class:`~loosefit.body.base.BodyModel`) of
-        ``shape`` (the body's shape values, e.g. Anny's six), with fit attribute ``alpha (F,)``."""
+        ``shape`` (the body's shape values, e.g. Anny's six), with fit attribute ``alpha (F,)``, anchored
+        by ``anchor`` (:data:`ANCHOR_MODES`)."""
+        check_anchor_mode(anchor)
         garment_verts = np.asarray(garment_verts, np.float32)
         faces = np.asarray(faces, np.int64)
         shape = np.asarray(shape, np.float32).reshape(-1)
@@ -103,19 +130,32 @@ class GarmentBodyPair:
         if not (np.isfinite(alpha).all() and np.isfinite(shape).all()):
             raise InputError("the fit attribute and the body shape must be finite")
         rest = body.rest_verts(shape)
-        nearest = nearest_body_vertex(garment_verts, rest)
         body_faces = np.asarray(body.faces, np.int64)
-        around = body_faces[np.isin(body_faces, nearest).any(1)]
+        if anchor == "vertex":
+            nearest = nearest_body_vertex(garment_verts, rest)
+            corners = np.repeat(nearest[:, None], 3, 1)
+            bary = np.tile([1.0, 0.0, 0.0], (len(nearest), 1))
+        else:
+            face, bary = closest_body_points(garment_verts, rest, body_faces)
+            corners = body_faces[face]
+            nearest = corners[np.arange(len(corners)), bary.argmax(1)]
+        around = body_faces[np.isin(body_faces, corners).any(1)]
         ring, local = np.unique(around, return_inverse=True)
         weights = body.skinning_weights()
+        anchored = np.einsum("vk,vkj->vj", bary, weights[corners])
         return cls(garment_verts, faces, graph_edges(faces), nearest, rest[ring].astype(np.float32),
                    weights[ring].astype(np.float32), local.reshape(-1, 3).astype(np.int64),
-                   np.searchsorted(ring, nearest).astype(np.int64), weights[nearest].astype(np.float32),
-                   body.rest_joints(shape).astype(np.float32), np.asarray(body.parents, np.int64), shape, alpha)
+                   np.searchsorted(ring, corners).astype(np.int64), bary.astype(np.float64),
+                   anchored.astype(np.float32), body.rest_joints(shape).astype(np.float32),
+                   np.asarray(body.parents, np.int64), shape, alpha, anchor)
 
     @property
     def num_verts(self) -> int:
         return len(self.garment_verts)
+
+    def rest_anchors(self) -> np.ndarray:
+        """``(V, 3)`` float64 the anchors on the rest body, metres."""
+        return np.einsum("vk,vkc->vc", self.bary, self.ring_rest[self.ring_tri].astype(np.float64))
 
     def frames(self, motion: Motion) -> dict[str, np.ndarray]:
         """The per-frame inputs of ``motion`` (keys and shapes in the module docstring), float32."""
@@ -128,8 +168,11 @@ class GarmentBodyPair:
         A = torch.from_numpy(posed.transforms)
         ring = linear_blend_skinning(torch.from_numpy(self.ring_rest).double(),
                                      torch.from_numpy(self.ring_weights).double(), A).numpy()
-        body = ring[:, self.ring_index]
-        normal = vertex_normals(ring, self.ring_faces)[:, self.ring_index].astype(np.float64)
+        # the anchor on the posed body's surface, and its normal interpolated from the corners' normals
+        body = np.einsum("vk,tvkc->tvc", self.bary, ring[:, self.ring_tri])
+        corner_normals = vertex_normals(ring, self.ring_faces).astype(np.float64)[:, self.ring_tri]
+        normal = np.einsum("vk,tvkc->tvc", self.bary, corner_normals)
+        normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
         garment = linear_blend_skinning(torch.from_numpy(self.garment_verts).double(),
                                         torch.from_numpy(self.weights).double(), A).numpy()
         rot, origin = posed.rot, posed.origin
@@ -148,6 +191,23 @@ class GarmentBodyPair:
             "rot": rot,
             "origin": origin,
         }
+
+
+def shared_anchor_fraction(pair: GarmentBodyPair, distance: float = SHARED_ANCHOR_DISTANCE) -> dict:
+    """How many garment vertices share their anchor: ``fraction``, the share of vertices whose rest anchor
+    another vertex's is within ``distance`` metres of; ``largest``, the most vertices in one such group
+    (connected through pairs within ``distance``); ``vertices``."""
+    from scipy.sparse.csgraph import connected_components
+
+    anchors = pair.rest_anchors()
+    close = cKDTree(anchors).query_pairs(distance, output_type="ndarray")
+    V = len(anchors)
+    shared = np.zeros(V, bool)
+    shared[close.ravel()] = True
+    graph = sp.coo_matrix((np.ones(len(close)), (close[:, 0], close[:, 1])), shape=(V, V)) if len(close) else \
+        sp.coo_matrix((V, V))
+    _, label = connected_components(graph, directed=False)
+    return {"fraction": float(shared.mean()), "largest": int(np.bincount(label).max()), "vertices": int(V)}
 
 
 @dataclass

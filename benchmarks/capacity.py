@@ -1,0 +1,263 @@
+"""Can a method fit what it has seen? Anchor sharing, memorisation and a small scale curve.
+
+Three measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
+replaces only itself, so the sections can be run one at a time):
+
+1. ``anchors`` (FitGar, no store needed): ``shared_anchor_fraction`` of the seed-0 template of every kind
+   (skirt, dress, long_shirt, jumpsuit) at ``--edge-length`` (3 cm) on the average Anny body, for each
+   anchor (:data:`loosefit.models.fitgar_inputs.ANCHOR_MODES`): the share of garment vertices whose rest
+   anchor another vertex's is within 1 mm of, and the largest group of such vertices;
+2. ``memorise`` (``--method``, :data:`MEMORISE`): the method trained on a handful of training frames
+   (``--samples`` spread over ``--sequences``) with the whole handful as one batch, and its error on exactly
+   those frames after each of ``--steps`` steps. FitGar: its coarse stage then its detail stage (coarse
+   frozen), mean per-vertex errors in mm of the coarse mesh against its target (the ``fitgar``-smoothed
+   simulation) and of the detail mesh against the simulation; beside them what no training can change: the
+   error of the anchors alone (a zero displacement) and the error of the best displacement that is one
+   value per group of vertices sharing an anchor (a network that reads a node's own features alone can do
+   no better);
+3. ``scale`` (FitGar): trained on every ``k``-th training frame (``--strides``, e.g. 8, 4, 2: x1, x2, x4
+   samples) in minibatches of ``--batch`` for ``--scale-steps`` steps a stage, the coarse and detail errors on
+   the training frames used and on every ``--test-stride``-th frame of the test split, after each of
+   ``--scale-checkpoints`` steps of the coarse stage and at the end of the detail stage.
+
+Every run uses one torch thread, the config file's widths (``configs/models/fitgar-cpu.yaml`` by default),
+its learning rate and gradient clip (``--set train.lr=...`` and model keys override), Adam, seed 0.
+
+Run:
+    .venv/bin/python benchmarks/capacity.py anchors --name capacity-fitgar
+    .venv/bin/python benchmarks/capacity.py memorise --method fitgar --data S.zarr --sequences skirt-0+average+walk+default \
+        --samples 4 --steps 50,100,200,400 --anchor surface --label surface --name capacity-fitgar
+    .venv/bin/python benchmarks/capacity.py scale --data S.zarr --strides 8,4,2 --name capacity-fitgar
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, save_results  # noqa: E402
+
+from loosefit.config import load_config  # noqa: E402
+from loosefit.models.fitgar import Config, FitGar  # noqa: E402
+from loosefit.models.fitgar_data import GarmentFrames, collate_frames  # noqa: E402
+from loosefit.models.fitgar_inputs import ANCHOR_MODES, GarmentBodyPair, shared_anchor_fraction  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+KINDS = ("skirt", "dress", "long_shirt", "jumpsuit")
+
+
+# ---------------------------------------------------------------------- anchors
+
+def anchor_sharing(edge_length: float = 0.03, seed: int = 0, kinds=KINDS) -> dict:
+    """``{kind: {anchor: {"fraction", "largest", "vertices"}}}`` for the templates on the average Anny body."""
+    from loosefit.body import AnnyBody
+    from loosefit.garment import make_garment
+
+    body = AnnyBody()
+    out = {}
+    for kind in kinds:
+        garment = make_garment(kind, body, seed=seed, edge_length=edge_length)
+        out[kind] = {}
+        for anchor in ANCHOR_MODES:
+            pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), np.zeros(1),
+                                         anchor=anchor)
+            out[kind][anchor] = shared_anchor_fraction(pair)
+            print(f"{kind} {anchor}: {out[kind][anchor]}", flush=True)
+    return out
+
+
+# ---------------------------------------------------------------------- FitGar training pieces
+
+def fitgar_model(data: GarmentFrames, config: Path, overrides) -> tuple[FitGar, Config]:
+    cfg = load_config(Config, config, overrides)
+    torch.manual_seed(cfg.train.seed)
+    np.random.seed(cfg.train.seed)
+    return FitGar.from_data(data, cfg.model), cfg
+
+
+def errors_mm(model: FitGar, batches: list[dict]) -> dict[str, float]:
+    """Mean per-vertex errors (mm) over the frames of ``batches``: ``coarse_mm`` (coarse against the smoothed
+    simulation), ``coarse_sim_mm`` and ``detail_mm`` (against the simulation), weighted by vertex count."""
+    sums = {"coarse_mm": 0.0, "coarse_sim_mm": 0.0, "detail_mm": 0.0}
+    n = 0
+    model.eval()
+    with torch.no_grad():
+        for b in batches:
+            out = model(b)
+            k = len(b["verts"])
+            sums["coarse_mm"] += float((out["coarse"] - b["smooth"]).norm(dim=-1).sum()) * 1e3
+            sums["coarse_sim_mm"] += float((out["coarse"] - b["verts"]).norm(dim=-1).sum()) * 1e3
+            sums["detail_mm"] += float((out["verts"] - b["verts"]).norm(dim=-1).sum()) * 1e3
+            n += k
+    model.train()
+    return {key: value / n for key, value in sums.items()}
+
+
+def reference_floors(data: GarmentFrames, indices, batches: list[dict]) -> dict[str, float]:
+    """What training cannot change, mm: ``zero_displacement_mm`` (the anchors against the coarse target) and
+    ``anchor_group_floor_mm`` (the best displacement that is constant over each group of vertices sharing an
+    anchor, frame by frame: its group's mean target)."""
+    zero, floor, n = 0.0, 0.0, 0
+    frames = [data[int(k)] for k in indices]
+    for k, item in zip(indices, frames):
+        pair = data.pairs[data.sequences[data.index[int(k)][0]]["pair"]]
+        target = item["smooth"] - item["anchor"]
+        zero += float(np.linalg.norm(target, axis=1).sum())
+        # groups: vertices whose rest anchors coincide to 1 mm (rounded positions, as shared_anchor_fraction)
+        _, group = np.unique(np.round(pair.rest_anchors() / 1e-3).astype(np.int64), axis=0, return_inverse=True)
+        group = group.reshape(-1)
+        sums = np.zeros((group.max() + 1, 3))
+        np.add.at(sums, group, target)
+        mean = sums / np.bincount(group)[:, None]
+        floor += float(np.linalg.norm(target - mean[group], axis=1).sum())
+        n += len(target)
+    return {"zero_displacement_mm": zero / n * 1e3, "anchor_group_floor_mm": floor / n * 1e3}
+
+
+def train_stage(model: FitGar, stage: str, batches: list[dict], steps: int, lr: float, clip: float,
+                checkpoints, evaluate, log: list) -> None:
+    """``steps`` Adam steps of ``stage`` cycling over ``batches``; ``evaluate()`` appended to ``log`` at each
+    step count in ``checkpoints``."""
+    params = list(model.stage_parameters(stage))
+    for p in model.parameters():
+        p.requires_grad_(False)
+    for p in params:
+        p.requires_grad_(True)
+    opt = torch.optim.Adam(params, lr=lr)
+    start = time.perf_counter()
+    for step in range(1, steps + 1):
+        loss, terms = model.training_loss(batches[(step - 1) % len(batches)], stage)
+        opt.zero_grad()
+        loss.backward()
+        if clip:
+            torch.nn.utils.clip_grad_norm_(params, clip)
+        opt.step()
+        if step in checkpoints:
+            row = {"stage": stage, "step": step, "loss": float(loss.detach()), "seconds": time.perf_counter() - start,
+                   **evaluate()}
+            log.append(row)
+            print(row, flush=True)
+
+
+def dead_magnitude_fraction(model: FitGar, batch: dict) -> float:
+    """Share of the coarse generator's output vertices whose magnitude is exactly zero (ReLU closed)."""
+    with torch.no_grad():
+        seen = {}
+        hook = model.coarse.output.magnitude.register_forward_hook(lambda m, i, o: seen.setdefault("m", o))
+        model.coarse_displacement(batch)
+        hook.remove()
+    return float((seen["m"] <= 0).float().mean())
+
+
+# ---------------------------------------------------------------------- memorise
+
+def fitgar_memorise(args) -> dict:
+    """Section 2 for FitGar (see the module docstring)."""
+    names = args.sequences.split(",") if args.sequences else None
+    data = GarmentFrames(args.data, "train", names=names, anchor=args.anchor)
+    picks = np.unique(np.linspace(0, len(data) - 1, args.samples).round().astype(int))
+    model, cfg = fitgar_model(data, args.config, args.set or [])
+    batch = collate_frames([data[int(k)] for k in picks])
+    steps = sorted(int(s) for s in args.steps.split(","))
+    log: list = []
+    evaluate = lambda: errors_mm(model, [batch])  # noqa: E731
+    train_stage(model, "coarse", [batch], steps[-1], cfg.train.lr, cfg.train.grad_clip, set(steps), evaluate, log)
+    dead = dead_magnitude_fraction(model, batch)
+    train_stage(model, "detail", [batch], steps[-1], cfg.train.lr, cfg.train.grad_clip, set(steps), evaluate, log)
+    return {"method": "fitgar", "anchor": args.anchor, "config": str(args.config), "overrides": args.set or [],
+            "sequences": data.sequence_names, "samples": [list(map(int, data.index[int(k)])) for k in picks],
+            "vertices": int(batch["counts"].sum()), "lr": cfg.train.lr, "steps": log,
+            "dead_coarse_magnitude_fraction": dead, **reference_floors(data, picks, [batch])}
+
+
+#: Memorisation per method: ``function(args) -> dict`` (a SwinGar entry is added beside FitGar's).
+MEMORISE = {"fitgar": fitgar_memorise}
+
+
+# ---------------------------------------------------------------------- scale
+
+def batches_of(data: GarmentFrames, indices, size: int) -> list[dict]:
+    return [collate_frames([data[int(k)] for k in indices[i:i + size]]) for i in range(0, len(indices), size)]
+
+
+def fitgar_scale(args) -> dict:
+    """Section 3 (see the module docstring)."""
+    rows = []
+    test = GarmentFrames(args.data, "test", anchor=args.anchor)
+    test_batches = batches_of(test, np.arange(0, len(test), args.test_stride), 8)
+    checkpoints = sorted(int(s) for s in args.scale_checkpoints.split(","))
+    for stride in (int(s) for s in args.strides.split(",")):
+        data = GarmentFrames(args.data, "train", anchor=args.anchor, frame_stride=stride)
+        model, cfg = fitgar_model(data, args.config, args.set or [])
+        rng = np.random.default_rng(0)
+        order = rng.permutation(len(data))
+        batches = batches_of(data, order, args.batch)
+        seen = batches_of(data, np.arange(len(data)), 8)
+        log: list = []
+        evaluate = lambda: {**{f"train_{k}": v for k, v in errors_mm(model, seen).items()},  # noqa: E731
+                            **{f"test_{k}": v for k, v in errors_mm(model, test_batches).items()}}
+        steps = checkpoints[-1]
+        train_stage(model, "coarse", batches, steps, cfg.train.lr, cfg.train.grad_clip, set(checkpoints), evaluate, log)
+        train_stage(model, "detail", batches, steps, cfg.train.lr, cfg.train.grad_clip, {steps}, evaluate, log)
+        rows.append({"frame_stride": stride, "samples": len(data), "batch": args.batch, "steps": log})
+    return {"method": "fitgar", "anchor": args.anchor, "config": str(args.config), "overrides": args.set or [],
+            "test_frames": int(sum(len(b["counts"]) for b in test_batches)), "test_stride": args.test_stride,
+            "curve": rows}
+
+
+# ---------------------------------------------------------------------- script
+
+def merge(name: str, section: str, value, label: str | None) -> dict:
+    """The JSON's results so far with ``section`` (or ``section[label]``) replaced."""
+    path = RESULTS / f"{name}.json"
+    results = json.loads(path.read_text())["results"] if path.exists() else {}
+    if label is None:
+        results[section] = value
+    else:
+        results.setdefault(section, {})[label] = value
+    return results
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("section", choices=["anchors", "memorise", "scale"])
+    p.add_argument("--method", default="fitgar", choices=sorted(MEMORISE))
+    p.add_argument("--data", default=None, help="a simulated, prepared store (memorise, scale)")
+    p.add_argument("--config", type=Path, default=ROOT / "configs" / "models" / "fitgar-cpu.yaml")
+    p.add_argument("--set", action="append", help="config override, e.g. train.lr=3e-4 (repeatable)")
+    p.add_argument("--anchor", default="surface", choices=ANCHOR_MODES)
+    p.add_argument("--edge-length", type=float, default=0.03)
+    p.add_argument("--sequences", default=None, help="memorise: comma-separated training sequences (default all)")
+    p.add_argument("--samples", type=int, default=4)
+    p.add_argument("--steps", default="50,100,200,400")
+    p.add_argument("--strides", default="8,4,2")
+    p.add_argument("--batch", type=int, default=4)
+    p.add_argument("--scale-checkpoints", default="100,200")
+    p.add_argument("--test-stride", type=int, default=6)
+    p.add_argument("--label", default=None, help="key of this run inside its section (default: the anchor)")
+    p.add_argument("--name", default="capacity-fitgar")
+    args = p.parse_args(argv)
+    torch.set_num_threads(1)
+    if args.section != "anchors" and not args.data:
+        p.error(f"{args.section} needs --data")
+    start = time.perf_counter()
+    if args.section == "anchors":
+        value, label = {"edge_length": args.edge_length, "body": "Anny, average", "seed": 0,
+                        "kinds": anchor_sharing(args.edge_length)}, None
+    elif args.section == "memorise":
+        value, label = MEMORISE[args.method](args), args.label or f"{args.method}-{args.anchor}"
+    else:
+        value, label = fitgar_scale(args), args.label or args.anchor
+    value = {**value, "wall_seconds": time.perf_counter() - start} if isinstance(value, dict) else value
+    save_results(args.name, merge(args.name, args.section, value, label))
+
+
+if __name__ == "__main__":
+    main()
