@@ -93,3 +93,22 @@ def test_shape_parsing_and_errors(body):
     short = Motion(np.zeros((2, 5, 3)), np.zeros((2, 3)), rig="cmu_mb")
     with pytest.raises(InputError, match="5 joints"):
         body.pose(short)
+
+
+def test_loading_waits_for_another_process_on_the_cache_lock():
+    """While another process holds the cache's lock (it may be writing the cache), loading waits; it goes on
+    as soon as the lock is free."""
+    import fcntl
+    import threading
+
+    from loosefit.body.anny_body import load_anny
+    from loosefit.paths import anny_cache_dir
+
+    done = threading.Event()
+    with open(anny_cache_dir() / ".loosefit-lock", "a") as held:  # a second open file: flock excludes it too
+        fcntl.flock(held, fcntl.LOCK_EX)
+        worker = threading.Thread(target=lambda: (load_anny.__wrapped__("cmu_mb", "notoes_collapse10pc"), done.set()))
+        worker.start()
+        assert not done.wait(1.5)
+    worker.join(60)
+    assert done.is_set()

@@ -8,6 +8,7 @@ resolution collision proxy shares that frame exactly.
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import functools
 import logging
 from dataclasses import dataclass
@@ -80,13 +81,18 @@ class AnnyShape:
 @functools.lru_cache(maxsize=4)
 def load_anny(rig: str = "cmu_mb", topology: str = "anny"):
     """Anny's torch model (cached per process). The first call ever builds Anny's cache under
-    :func:`loosefit.paths.anny_cache_dir` (40-70 s, ~790 MB); later calls take ~0.3 s."""
+    :func:`loosefit.paths.anny_cache_dir` (40-70 s, ~790 MB); later calls take ~0.3 s. Processes loading at
+    the same time (parallel tests, several plan workers on a fresh machine) take turns on the cache's lock
+    file, so that none reads a cache another is still writing."""
     import anny
     import anny.paths
 
-    anny.paths.set_anny_cache_path(anny_cache_dir())
-    log.info("loading Anny rig=%s topology=%s (cache %s)", rig, topology, anny_cache_dir())
-    model = anny.Anny(rig=rig, topology=topology)
+    cache = anny_cache_dir()
+    anny.paths.set_anny_cache_path(cache)
+    log.info("loading Anny rig=%s topology=%s (cache %s)", rig, topology, cache)
+    with open(cache / ".loosefit-lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        model = anny.Anny(rig=rig, topology=topology)
     if model.reference_bone_orientations is not None:
         raise RuntimeError(f"Anny rig {rig!r} has reference orientations; loosefit expects world-aligned joints")
     return model.eval()
