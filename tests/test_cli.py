@@ -2,6 +2,7 @@
 
 import json
 
+import imageio.v3 as imageio
 import numpy as np
 import pytest
 import trimesh
@@ -10,6 +11,8 @@ import torch
 from loosefit.cli import main
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.motion import Motion
+from loosefit.viz.inputs import load_panels
+from loosefit.viz.render import render_frames
 
 
 def test_body_motion_garment_render(tmp_path, body, capsys):
@@ -33,7 +36,13 @@ def test_body_motion_garment_render(tmp_path, body, capsys):
 
     png = tmp_path / "frame.png"
     assert main(["render", str(tmp_path / "body.npz"), "--out", str(png), "--width", "64", "--height", "48"]) == 2
-    assert "one frame" in capsys.readouterr().err  # a PNG holds one frame; 15 were given
+    assert "--frame K" in capsys.readouterr().err  # a PNG holds one frame; 15 were given
+    assert main(["render", str(tmp_path / "body.npz"), "--out", str(png), "--frame", "14", "--width", "64",
+                 "--height", "48", "--backend", "matplotlib"]) == 0
+    last = render_frames(load_panels(tmp_path / "body.npz"), size=(64, 48), frames=[14], backend="matplotlib")[0]
+    assert np.array_equal(imageio.imread(png)[..., :3], last)  # the frame asked for, as render_frames draws it
+    assert main(["render", str(tmp_path / "body.npz"), "--out", str(png), "--frame", "15"]) == 2
+    assert "out of range" in capsys.readouterr().err
     assert main(["render", str(tmp_path / "body.npz"), "--out", str(tmp_path / "body.gif"),
                  "--width", "64", "--height", "48", "--backend", "matplotlib"]) == 0
     assert (tmp_path / "body.gif").stat().st_size > 0

@@ -140,10 +140,17 @@ def cmd_info(args):
 def cmd_render(args):
     from loosefit.viz.inputs import load_panels
     from loosefit.viz.render import render_video
+    from loosefit.viz.scene import check_panels
 
     writable(args.out)  # a path without a suffix is a folder of PNGs
     panels = [panel for path in args.input for panel in load_panels(path, sequence=args.sequence)]
-    render_video(panels, args.out, fps=args.fps, size=(args.width, args.height), backend=args.backend)
+    if args.frame is None and Path(args.out).suffix.lower() == ".png":
+        frames = check_panels(panels)
+        if frames != 1:
+            raise InputError(f"a .png output holds one frame and the input has {frames}: choose one with --frame K "
+                             "(0 is the first) or write a .mp4, .gif or a folder", args.out)
+    render_video(panels, args.out, fps=args.fps, size=(args.width, args.height), backend=args.backend,
+                 frames=args.frame)
     print(f"wrote {args.out}")
 
 
@@ -442,6 +449,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, or DATA.zarr with --sequence; several side by side")
     sp.add_argument("--sequence", default=None, help="sequence name inside a dataset store")
     sp.add_argument("--out", required=True, help="out.mp4, out.gif, out.png or a folder")
+    sp.add_argument("--frame", type=int_at_least(0), action="append", default=None,
+                    help="render only frame K (0 is the first; repeat for several); a .png output needs exactly one")
     sp.add_argument("--fps", type=positive_float, default=30.0)
     sp.add_argument("--width", type=int_at_least(1), default=640)
     sp.add_argument("--height", type=int_at_least(1), default=480)
