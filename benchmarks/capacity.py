@@ -25,7 +25,8 @@ its learning rate and gradient clip (``--set train.lr=...`` and model keys overr
 
 Run:
     .venv/bin/python benchmarks/capacity.py anchors --name capacity-fitgar
-    .venv/bin/python benchmarks/capacity.py memorise --method fitgar --data S.zarr --sequences skirt-0+average+walk+default \
+    .venv/bin/python benchmarks/capacity.py memorise --method fitgar --data S.zarr \
+        --sequences skirt-0+average+walk+default \
         --samples 4 --steps 50,100,200,400 --anchor surface --label surface --name capacity-fitgar
     .venv/bin/python benchmarks/capacity.py scale --data S.zarr --strides 8,4,2 --name capacity-fitgar
 """
@@ -45,12 +46,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, save_results  # noqa: E402
 
 from loosefit.config import load_config  # noqa: E402
+from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.models.fitgar import Config, FitGar  # noqa: E402
 from loosefit.models.fitgar_data import GarmentFrames, collate_frames  # noqa: E402
 from loosefit.models.fitgar_inputs import ANCHOR_MODES, GarmentBodyPair, shared_anchor_fraction  # noqa: E402
+from loosefit.train.protocol import to_device  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 KINDS = ("skirt", "dress", "long_shirt", "jumpsuit")
+#: Where the networks train (``--device``; the widths and steps do not depend on it).
+DEVICE = torch.device("cpu")
 
 
 # ---------------------------------------------------------------------- anchors
@@ -79,17 +84,19 @@ def fitgar_model(data: GarmentFrames, config: Path, overrides) -> tuple[FitGar, 
     cfg = load_config(Config, config, overrides)
     torch.manual_seed(cfg.train.seed)
     np.random.seed(cfg.train.seed)
-    return FitGar.from_data(data, cfg.model), cfg
+    return FitGar.from_data(data, cfg.model).to(DEVICE), cfg
 
 
 def errors_mm(model: FitGar, batches: list[dict]) -> dict[str, float]:
     """Mean per-vertex errors (mm) over the frames of ``batches``: ``coarse_mm`` (coarse against the smoothed
     simulation), ``coarse_sim_mm`` and ``detail_mm`` (against the simulation), weighted by vertex count."""
+    device = next(model.parameters()).device
     sums = {"coarse_mm": 0.0, "coarse_sim_mm": 0.0, "detail_mm": 0.0}
     n = 0
     model.eval()
     with torch.no_grad():
         for b in batches:
+            b = to_device(b, device)
             out = model(b)
             k = len(b["verts"])
             sums["coarse_mm"] += float((out["coarse"] - b["smooth"]).norm(dim=-1).sum()) * 1e3
@@ -133,7 +140,7 @@ def train_stage(model: FitGar, stage: str, batches: list[dict], steps: int, lr: 
     opt = torch.optim.Adam(params, lr=lr)
     start = time.perf_counter()
     for step in range(1, steps + 1):
-        loss, terms = model.training_loss(batches[(step - 1) % len(batches)], stage)
+        loss, terms = model.training_loss(to_device(batches[(step - 1) % len(batches)], params[0].device), stage)
         opt.zero_grad()
         loss.backward()
         if clip:
@@ -151,7 +158,7 @@ def dead_magnitude_fraction(model: FitGar, batch: dict) -> float:
     with torch.no_grad():
         seen = {}
         hook = model.coarse.output.magnitude.register_forward_hook(lambda m, i, o: seen.setdefault("m", o))
-        model.coarse_displacement(batch)
+        model.coarse_displacement(to_device(batch, DEVICE))
         hook.remove()
     return float((seen["m"] <= 0).float().mean())
 
@@ -164,7 +171,7 @@ def fitgar_memorise(args) -> dict:
     data = GarmentFrames(args.data, "train", names=names, anchor=args.anchor)
     picks = np.unique(np.linspace(0, len(data) - 1, args.samples).round().astype(int))
     model, cfg = fitgar_model(data, args.config, args.set or [])
-    batch = collate_frames([data[int(k)] for k in picks])
+    batch = to_device(collate_frames([data[int(k)] for k in picks]), DEVICE)
     steps = sorted(int(s) for s in args.steps.split(","))
     log: list = []
     evaluate = lambda: errors_mm(model, [batch])  # noqa: E731
@@ -184,17 +191,22 @@ MEMORISE = {"fitgar": fitgar_memorise}
 # ---------------------------------------------------------------------- scale
 
 def batches_of(data: GarmentFrames, indices, size: int) -> list[dict]:
-    return [collate_frames([data[int(k)] for k in indices[i:i + size]]) for i in range(0, len(indices), size)]
+    return [to_device(collate_frames([data[int(k)] for k in indices[i:i + size]]), DEVICE)
+            for i in range(0, len(indices), size)]
 
 
 def fitgar_scale(args) -> dict:
     """Section 3 (see the module docstring)."""
     rows = []
-    test = GarmentFrames(args.data, "test", anchor=args.anchor)
+    store = DatasetStore.open(args.data, mode="r")
+    garments = None if not args.sequences else {store.sequence(n).garment for n in args.sequences.split(",")}
+    tests = [n for n in store.sequence_names(split="test") if garments is None or store.sequence(n).garment in garments]
+    test = GarmentFrames(store, "test", names=tests, anchor=args.anchor)
     test_batches = batches_of(test, np.arange(0, len(test), args.test_stride), 8)
     checkpoints = sorted(int(s) for s in args.scale_checkpoints.split(","))
     for stride in (int(s) for s in args.strides.split(",")):
-        data = GarmentFrames(args.data, "train", anchor=args.anchor, frame_stride=stride)
+        names = args.sequences.split(",") if args.sequences else None
+        data = GarmentFrames(args.data, "train", names=names, anchor=args.anchor, frame_stride=stride)
         model, cfg = fitgar_model(data, args.config, args.set or [])
         rng = np.random.default_rng(0)
         order = rng.permutation(len(data))
@@ -206,8 +218,11 @@ def fitgar_scale(args) -> dict:
         steps = checkpoints[-1]
         train_stage(model, "coarse", batches, steps, cfg.train.lr, cfg.train.grad_clip, set(checkpoints), evaluate, log)
         train_stage(model, "detail", batches, steps, cfg.train.lr, cfg.train.grad_clip, {steps}, evaluate, log)
-        rows.append({"frame_stride": stride, "samples": len(data), "batch": args.batch, "steps": log})
+        rows.append({"frame_stride": stride, "samples": len(data), "sequences": data.sequence_names,
+                     "batch": args.batch,
+                     "steps": log})
     return {"method": "fitgar", "anchor": args.anchor, "config": str(args.config), "overrides": args.set or [],
+            "test_sequences": test.sequence_names,
             "test_frames": int(sum(len(b["counts"]) for b in test_batches)), "test_stride": args.test_stride,
             "curve": rows}
 
@@ -234,7 +249,7 @@ def main(argv=None) -> None:
     p.add_argument("--set", action="append", help="config override, e.g. train.lr=3e-4 (repeatable)")
     p.add_argument("--anchor", default="surface", choices=ANCHOR_MODES)
     p.add_argument("--edge-length", type=float, default=0.03)
-    p.add_argument("--sequences", default=None, help="memorise: comma-separated training sequences (default all)")
+    p.add_argument("--sequences", default=None, help="comma-separated training sequences (default: all)")
     p.add_argument("--samples", type=int, default=4)
     p.add_argument("--steps", default="50,100,200,400")
     p.add_argument("--strides", default="8,4,2")
@@ -242,8 +257,11 @@ def main(argv=None) -> None:
     p.add_argument("--scale-checkpoints", default="100,200")
     p.add_argument("--test-stride", type=int, default=6)
     p.add_argument("--label", default=None, help="key of this run inside its section (default: the anchor)")
+    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--name", default="capacity-fitgar")
     args = p.parse_args(argv)
+    global DEVICE
+    DEVICE = torch.device(args.device)
     torch.set_num_threads(1)
     if args.section != "anchors" and not args.data:
         p.error(f"{args.section} needs --data")

@@ -82,6 +82,8 @@ from loosefit.train.losses import masked_errors_mm
 COARSE_FEATURES = 7
 #: Output reconstructions: FitGar Eq. 4, and the two direct outputs of its ablation.
 OUTPUT_MODES = ("decomposed", *DIRECT_MODES)
+#: Last activation of the magnitude branches: FitGar Sec. 5.1's ReLU, or a softplus that never closes.
+MAGNITUDE_ACTIVATIONS = ("relu", "softplus")
 #: How the attributes reach the detail generator: FitGar Eq. 7, and the two ablations.
 PARSER_MODES = ("multiply", "concat", "nodes")
 
@@ -109,6 +111,9 @@ class FitGarConfig:
         pooling: False drops the pooling (the paper's "w/o pooling" ablation).
         detail_dense: hidden sizes of each detail branch's fully connected layers.
         magnitude_bias: initial bias of the magnitude branches' last layer (their ReLU starts open).
+        magnitude_activation: the magnitude branches' last activation: ``"relu"`` (FitGar Sec. 5.1, after every
+            layer) or ``"softplus"`` (positive too, but never closed: a vertex whose ReLU output closes gets no
+            gradient and stays on its anchor; see ``benchmarks/capacity.py``).
         coarse_weight, detail_weight: weights of the two loss terms.
         output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no FitGar Eq. 4):
             ``"plain"`` (a 3-vector, unbounded) and ``"limited"`` (within plus or minus ``limit_factor``
@@ -134,6 +139,7 @@ class FitGarConfig:
     pooling: bool = True
     detail_dense: tuple[int, ...] = (128, 64)
     magnitude_bias: float = 0.5
+    magnitude_activation: str = "relu"
     coarse_weight: float = 1.0
     detail_weight: float = 1.0
     output: str = "decomposed"
@@ -145,6 +151,9 @@ class FitGarConfig:
         if self.output not in OUTPUT_MODES or self.parser_mode not in PARSER_MODES:
             raise InputError(f"output must be one of {OUTPUT_MODES} and parser_mode one of {PARSER_MODES}, "
                              f"got {self.output!r}, {self.parser_mode!r}")
+        if self.magnitude_activation not in MAGNITUDE_ACTIVATIONS:
+            raise InputError(f"magnitude_activation must be one of {MAGNITUDE_ACTIVATIONS}, "
+                             f"got {self.magnitude_activation!r}")
         if not self.limit_factor > 0:
             raise InputError(f"limit_factor must be > 0, got {self.limit_factor}")
         sizes = (self.heads, self.coarse_first, self.detail_first, *self.coarse_blocks, *self.detail_blocks,
@@ -225,6 +234,8 @@ class Generator(nn.Module):
         self.direction = Branch(in_channels, widths, nn.Tanh, c.heads, c.self_fraction, **where)
         if c.output == "decomposed":
             self.output = DecomposedOutput(widths[-1], widths[-1], dense, magnitude_bias=c.magnitude_bias)
+            if c.magnitude_activation == "softplus":
+                self.output.magnitude[-1] = nn.Softplus()  # the last layer's ReLU
         else:
             self.output = DirectOutput(widths[-1], dense, c.output, limit=c.limit_factor)
 
