@@ -323,12 +323,14 @@ def test_grouped_gru_takes_a_strided_hidden_state():
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
-@pytest.mark.parametrize("order", ["joint_by_joint", "all_joints_per_frame"])
-def test_grouped_gru_on_cuda_equals_cpu(order):
+@pytest.mark.parametrize("frames", [1, 6])
+def test_grouped_gru_on_cuda_equals_cpu(frames):
+    """Streaming (one frame) and batched calls on CUDA give the CPU's numbers (cuDNN's TF32 GRU, 2e-5 off on an
+    H100, is not used)."""
     torch.manual_seed(0)
     gru = JointGRU(3, 5, 7)
-    x, h0 = torch.randn(2, 6, 3, 5), torch.randn(3, 2, 7).transpose(0, 1)
+    x, h0 = torch.randn(2, frames, 3, 5), torch.randn(3, 2, 7).transpose(0, 1)
     with torch.no_grad():
-        expected = getattr(gru, order)(x, h0)
-        got = getattr(gru.cuda(), order)(x.cuda(), h0.cuda())
-    assert all((g.cpu() - e).abs().max() < 1e-5 for g, e in zip(got, expected))
+        expected = gru(x, h0)
+        got = gru.cuda()(x.cuda(), h0.cuda())
+    assert all((g.cpu() - e).abs().max() < 5e-6 for g, e in zip(got, expected))
