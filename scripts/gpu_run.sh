@@ -10,7 +10,7 @@ PY=${PY:-python3}
 OUT=${OUT:-/tmp/loosefit-gpu-out}
 BUDGET=${BUDGET:-500}
 SITE=${SITE:-/tmp/loosefit-site}
-G=$PWD/.gpu
+G=${G:-$PWD/.gpu}  # the bundle; set G to run from another checkout (e.g. a copy of HEAD inside it)
 mkdir -p "$OUT"
 LOG=$OUT/run.log
 START=$SECONDS
