@@ -60,8 +60,22 @@ DEVICE = torch.device("cpu")
 
 # ---------------------------------------------------------------------- anchors
 
+def subdivided_sharing(garment_verts: np.ndarray, body) -> dict:
+    """The paper's way (FitGar Sec. 5.1), for comparison: the closest vertex of the body subdivided once (each
+    triangle into four at its edge midpoints); the same statistics as :func:`shared_anchor_fraction`."""
+    import igl
+    from scipy.spatial import cKDTree
+
+    verts, _ = igl.upsample(body.rest_verts().astype(np.float64), np.asarray(body.faces, np.int64))
+    nearest = cKDTree(verts).query(garment_verts)[1]
+    count = np.bincount(nearest)
+    return {"fraction": float((count[nearest] > 1).mean()), "largest": int(count.max()),
+            "vertices": int(len(garment_verts)), "body_vertices": int(len(verts))}
+
+
 def anchor_sharing(edge_length: float = 0.03, seed: int = 0, kinds=KINDS) -> dict:
-    """``{kind: {anchor: {"fraction", "largest", "vertices"}}}`` for the templates on the average Anny body."""
+    """``{kind: {anchor: {"fraction", "largest", "vertices"}}}`` for the templates on the average Anny body, and
+    ``subdivided_vertex`` (:func:`subdivided_sharing`)."""
     from loosefit.body import AnnyBody
     from loosefit.garment import make_garment
 
@@ -75,6 +89,8 @@ def anchor_sharing(edge_length: float = 0.03, seed: int = 0, kinds=KINDS) -> dic
                                          anchor=anchor)
             out[kind][anchor] = shared_anchor_fraction(pair)
             print(f"{kind} {anchor}: {out[kind][anchor]}", flush=True)
+        out[kind]["subdivided_vertex"] = subdivided_sharing(garment.verts, body)
+        print(f"{kind} subdivided_vertex: {out[kind]['subdivided_vertex']}", flush=True)
     return out
 
 
@@ -227,6 +243,34 @@ def fitgar_scale(args) -> dict:
             "curve": rows}
 
 
+# ---------------------------------------------------------------------- pose twins
+
+def pose_twins(args) -> dict:
+    """Is the garment a function of the pose? Per sequence (every 3rd frame): for each frame, the frame at least
+    ``--twin-gap`` frames away whose pose features (FitGar's ``theta`` and the root joint's canonical position) are
+    closest; the mean per-vertex distance (mm) between their ``fitgar``-smoothed garments, and that pose distance."""
+    data = GarmentFrames(args.data, None, frame_stride=3, anchor=args.anchor)
+    by: dict = {}
+    for k, (i, t) in enumerate(data.index):
+        by.setdefault(data.sequences[i]["name"], []).append(k)
+    out = {}
+    for name, ks in by.items():
+        items = [data[k] for k in ks]
+        pose = np.stack([np.concatenate([it["pose"], it["joints"][0]]) for it in items])
+        smooth = np.stack([it["smooth"] for it in items])
+        gap, garment = [], []
+        for a in range(len(items)):
+            far = [b for b in range(len(items)) if abs(b - a) * 3 >= args.twin_gap]
+            d = np.linalg.norm(pose[far] - pose[a], axis=1)
+            b = far[int(d.argmin())]
+            gap.append(float(d.min()))
+            garment.append(float(np.linalg.norm(smooth[a] - smooth[b], axis=1).mean() * 1e3))
+        out[name] = {"frames": len(items), "pose_distance_median": float(np.median(gap)),
+                     "garment_difference_mm": float(np.mean(garment))}
+        print(name, out[name], flush=True)
+    return {"twin_gap": args.twin_gap, "sequences": out}
+
+
 # ---------------------------------------------------------------------- script
 
 def merge(name: str, section: str, value, label: str | None) -> dict:
@@ -242,7 +286,7 @@ def merge(name: str, section: str, value, label: str | None) -> dict:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("section", choices=["anchors", "memorise", "scale"])
+    p.add_argument("section", choices=["anchors", "memorise", "scale", "twins"])
     p.add_argument("--method", default="fitgar", choices=sorted(MEMORISE))
     p.add_argument("--data", default=None, help="a simulated, prepared store (memorise, scale)")
     p.add_argument("--config", type=Path, default=ROOT / "configs" / "models" / "fitgar-cpu.yaml")
@@ -256,6 +300,7 @@ def main(argv=None) -> None:
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--scale-checkpoints", default="100,200")
     p.add_argument("--test-stride", type=int, default=6)
+    p.add_argument("--twin-gap", type=int, default=15, help="twins: frames between a frame and its pose twin")
     p.add_argument("--label", default=None, help="key of this run inside its section (default: the anchor)")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--name", default="capacity-fitgar")
@@ -271,6 +316,8 @@ def main(argv=None) -> None:
                         "kinds": anchor_sharing(args.edge_length)}, None
     elif args.section == "memorise":
         value, label = MEMORISE[args.method](args), args.label or f"{args.method}-{args.anchor}"
+    elif args.section == "twins":
+        value, label = pose_twins(args), None
     else:
         value, label = fitgar_scale(args), args.label or args.anchor
     value = {**value, "wall_seconds": time.perf_counter() - start} if isinstance(value, dict) else value

@@ -52,9 +52,10 @@ Departures from the paper, named:
 - the parser's ReLU follows every layer, its last included (Sec. 5.1: three layers "and ReLU"), so the
   encoding is never negative and FitGar Eq. 7's product can only gate a feature (scale it down, up or shut
   it), never flip its sign;
-- the anchors ``I M_b`` are many-to-one: each garment vertex takes the nearest of the body's rest vertices
-  (Anny: 13,718; :mod:`loosefit.models.fitgar_inputs` measures how many share one), where the paper
-  subdivides SMPL to 27,554 vertices for a one-to-one correspondence;
+- the anchors ``I M_b`` are each garment vertex's closest point on the body surface (a triangle and barycentric
+  coordinates, the normal and skinning weights interpolated), where the paper subdivides SMPL to 27,554 vertices
+  and takes the closest vertex; :mod:`loosefit.models.fitgar_inputs` measures both (the closest Anny vertex stays
+  selectable, ``anchor="vertex"``, for runs recorded before);
 - ``beta`` is the body model's shape vector and ``theta`` 6D rotations (SMPL: 10 and 72 axis-angle values).
 """
 

@@ -1,15 +1,15 @@
 """FitGar's per-frame inputs for one garment-body pair (Li et al. 2023, Sec. 4.1-4.4).
 
 A :class:`GarmentBodyPair` holds what does not change with the pose: the garment's rest mesh and
-graph, the indicator (each garment vertex's closest body vertex in the rest pose, FitGar Eq. 5's
-``I``), the body's skinning weights, rest positions and rest normals at those vertices, the body
+graph, the indicator (each garment vertex's anchor on the rest body, FitGar Eq. 5's
+``I``: see the departure below), the body's skinning weights, rest positions and normals there, the body
 shape ``beta`` and the fit attribute ``alpha``. :meth:`GarmentBodyPair.frames` turns a motion into the
 inputs of every frame, all in the heading frame of that frame (:mod:`loosefit.models.motion_features`:
 the body faces -Y, its root above the origin), ``T`` frames, ``V`` garment vertices, ``J`` joints:
 
-- ``anchor (T, V, 3)``: ``I M_b``, the posed body vertex under each garment vertex (FitGar Eq. 5), metres;
-- ``body_normal (T, V, 3)``: the posed body's area-weighted vertex normal there;
-- ``body_rel (T, V, 3)``: the relative skinning feature of that body vertex (FitGar Sec. 4.3): its
+- ``anchor (T, V, 3)``: ``I M_b``, the posed body point under each garment vertex (FitGar Eq. 5), metres;
+- ``body_normal (T, V, 3)``: the posed body's area-weighted vertex normal there (interpolated, unit);
+- ``body_rel (T, V, 3)``: the relative skinning feature of that body point (FitGar Sec. 4.3): its
   skinned position without the root's translation, metres;
 - ``garment_rel (T, V, 3)``: the same for the garment's rest vertices, skinned with the weights of their
   body vertex (FitGar Sec. 4.4's ``p_i``);
@@ -21,13 +21,29 @@ the body faces -Y, its root above the origin), ``T`` frames, ``V`` garment verti
 Only the indicated body vertices and their one-ring (for the normals) are skinned, not the whole body:
 the cost follows the garment.
 
-Departure from the paper, named: the indicator is many-to-one. FitGar subdivides SMPL once (6,890 to 27,554
-vertices) so that every garment vertex has a body vertex of its own (Sec. 4.1, 4.3, 5.1); here each garment vertex
-takes the nearest vertex of the body as it is (Anny: 13,718), and neighbouring garment vertices often share
-one, with the same body normal and skinning feature on their coarse nodes. Measured on the seed-0 templates
-at 2 cm edges on the average Anny body: the skirt's 1,775 vertices have 776 distinct anchors (84 % of the
-vertices share theirs, up to 14 on one), the dress's 5,716 have 1,374 (90 %, up to 57), the long shirt's
-3,833 have 2,134 (72 %, up to 11).
+Departure from the paper, named: the anchors are points of the body surface, not body vertices. FitGar
+subdivides SMPL once (6,890 to 27,554 vertices) so that every garment vertex has a body vertex of its own
+(Sec. 4.1, 4.3, 5.1). Here each garment vertex is anchored at its closest point on the rest body's surface
+(``anchor="surface"``, the default): a triangle and barycentric coordinates, with which the posed triangle's
+corners, their area-weighted normals (renormalised) and skinning weights are interpolated, so the anchor stays
+on the posed surface. Chosen by measurement (``benchmarks/capacity.py anchors``, seed-0 templates at 3 cm edges
+on the average Anny body; share of garment vertices whose anchor another one's is within 1 mm, largest group):
+
+=========== ======== ====================== ============================ ==================
+kind        vertices closest Anny vertex    closest vertex, subdivided   closest surface
+                     (13,718)               once (54,848; the paper's)   point (default)
+=========== ======== ====================== ============================ ==================
+skirt       781      45 %, 6                10 %, 3                      0.5 %, 2
+dress       2,615    76 %, 28               56 %, 22                     23 %, 19
+long shirt  1,807    25 %, 4                3.8 %, 3                     0.4 %, 2
+jumpsuit    2,455    58 %, 9                25 %, 9                      5.8 %, 9
+=========== ======== ====================== ============================ ==================
+
+What the surface leaves shared is low on the garment and far from the body (the dress: mean height 0.45 m, 28 cm from
+the body, against 0.76 m and 15 cm for the rest; the jumpsuit's trouser ends, 0.19 m and 13 cm), two thirds of it at a
+body vertex itself: every point in the cone of normals at a convex vertex has that vertex as its closest point.
+``anchor="vertex"`` (the closest body vertex, ``nearest``) is kept: runs recorded before anchors were (their sizes
+name none) were trained on it.
 """
 
 from __future__ import annotations
