@@ -170,6 +170,7 @@ def cmd_evaluate(args):
 
 def cmd_simulate(args):
     from loosefit.sim import SimParams, run_plan, simulate_file
+    from loosefit.sim.runner import summary_line
 
     if args.plan is not None:
         if args.garment or args.motion:
@@ -186,6 +187,7 @@ def cmd_simulate(args):
         writable(args.out, folder=True)
         summary = run_plan(args.plan, args.out, workers=args.workers, address=args.address)
         print(json.dumps({k: v for k, v in summary.items() if k != "sequences"}, indent=2))
+        print(summary_line(summary, args.out))
         return
     if not (args.garment and args.motion):
         raise LoosefitError("simulate needs PLAN.yaml, or --garment G.obj and --motion M.npz")
@@ -196,6 +198,7 @@ def cmd_simulate(args):
     print(json.dumps(result.stats, indent=2, default=str))
     if result.status != "ok":
         raise LoosefitError(f"{args.out}: the simulation failed the quality gate: {result.reason}")
+    print(f"{args.out}: simulated ok ({result.verts.shape[0]} frames, passed the quality gate)")
 
 
 def cmd_prepare(args):

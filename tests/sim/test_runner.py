@@ -88,11 +88,15 @@ def test_a_crash_does_not_stop_the_others_and_is_retried(plan_path, tmp_path, mo
     monkeypatch.setattr(runner, "simulate_sequence", crash_on_spin)
     summary = run_plan(plan_path, out, progress=False)
     assert (summary["ok"], summary["crashed"]) == (2, 1)
+    line = runner.summary_line(summary, out)
+    assert line.startswith(f"{summary['plan']}: 2 of 3 sequences simulated ok, 0 failed the quality gate and 1 crashed")
+    assert "skirt+average+spin+quick: " + CRASHED in line
     seq = DatasetStore.open(out).sequence("skirt+average+spin+quick")
     assert seq.status == "failed" and seq.reason.startswith(CRASHED) and "Blender fell over" in seq.reason
     monkeypatch.undo()
     summary = run_plan(plan_path, out, progress=False)
     assert (summary["skipped"], summary["ok"]) == (2, 1)
+    assert runner.summary_line(summary, out) == f"{summary['plan']}: 1 of 1 sequences simulated ok (2 of 3 were done before)"
     assert DatasetStore.open(out).sequence("skirt+average+spin+quick").status == "ok"
 
 

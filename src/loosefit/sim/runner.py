@@ -204,6 +204,23 @@ def run_plan(
         store.close()
 
 
+def summary_line(summary: dict[str, Any], store) -> str:
+    """One line saying how a plan run (:func:`run_plan`'s summary) ended, for people: how many sequences are ok,
+    how many failed the quality gate or crashed (the first few named, with their reason), how many were done
+    before."""
+    done = summary["ok"] + summary["failed"] + summary["crashed"]
+    line = f"{summary['plan']}: {summary['ok']} of {done} sequences simulated ok"
+    if summary["skipped"]:
+        line += f" ({summary['skipped']} of {summary['jobs']} were done before)"
+    bad = [(name, s["reason"]) for name, s in summary["sequences"].items() if s["status"] != "ok"]
+    if bad:
+        shown = "; ".join(f"{name}: {reason}" for name, reason in bad[:3])
+        more = f"; and {len(bad) - 3} more" if len(bad) > 3 else ""
+        line += (f", {summary['failed']} failed the quality gate and {summary['crashed']} crashed ({shown}{more}); "
+                 f"they are kept in {store} with status failed (loosefit info lists them)")
+    return line
+
+
 def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bool, start: float) -> dict[str, Any]:
     """Simulate the plan's jobs that are not done into the open ``store``; see :func:`run_plan`."""
     todo = [job for job in plan.jobs if not _done(store, job)]
