@@ -1,10 +1,12 @@
 """``loosefit train`` end to end on a real simulated, prepared dataset."""
 
 import json
+import logging
 import shutil
 
 import numpy as np
 import pytest
+import torch
 
 from loosefit.animate import Animator
 from loosefit.errors import InputError
@@ -16,16 +18,61 @@ SMALL_JOINTNET = ["model.gru_hidden=16", "model.features=16", "model.bone_mlp=[3
                   "train.progress=false", "train.tensorboard=false", "data.window=20", "data.stride=10", "data.burn_in=4"]
 
 
-def test_train_writes_a_self_contained_run(tiny_store, tmp_path):
+def test_train_writes_a_self_contained_run(tiny_store, tmp_path, caplog):
+    """The tiny store has no val split: the run trains without validation, says so, and keeps no best.pt."""
     run = tmp_path / "jn"
-    result = train_model("jointnet", tiny_store, "skirt+average", run, overrides=SMALL_JOINTNET)
+    with caplog.at_level(logging.WARNING, logger="loosefit.train.validation"):
+        result = train_model("jointnet", tiny_store, "skirt+average", run, overrides=SMALL_JOINTNET)
+    assert "training without validation" in caplog.text
     meta = json.loads((run / MODEL_META).read_text())
     assert meta["method"] == "jointnet" and meta["sizes"]["num_verts"] > 100
-    assert meta["train_sequences"] and meta["val_sequences"] == ["skirt+average+sway+default"]
+    assert meta["train_sequences"] == ["skirt+average+spin+default", "skirt+average+walk+default"]
+    assert meta["val_sequences"] == [] and meta["validation"]["source"] == "none"
     assert (run / METHOD_CONFIG).exists() and (run / "checkpoints" / "last.pt").exists()
-    assert np.isfinite(result.val_metrics["rmse_mm"])
-    # The run folder alone rebuilds the model (no dataset needed).
+    assert result.val_metrics == {} and not (run / "checkpoints" / "best.pt").exists()
+    # The run folder alone rebuilds the model (no dataset needed); "best" falls back to the last checkpoint.
     assert Animator(run).faces.shape[1] == 3
+
+
+def _weights(model):
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+
+def test_carved_validation_selects_the_checkpoint_animation_uses(tiny_store, tmp_path):
+    """``loosefit train --val-motions spin``: spin validates instead of training, never the test motion sway;
+    animation loads best.pt by default and last.pt when asked."""
+    from loosefit.cli import main
+    from loosefit.train.run import load_checkpoint
+
+    run = tmp_path / "jn"
+    options = ["train", "--method", "jointnet", "--data", str(tiny_store), "--garment", "skirt+average"]
+    sets = [x for o in SMALL_JOINTNET for x in ("--set", o)]
+    assert main([*options, "--out", str(run), *sets, "--set", "train.stages.stage2.epochs=3", "--val-motions", "spin"]) == 0
+    meta = json.loads((run / MODEL_META).read_text())
+    assert meta["train_sequences"] == ["skirt+average+walk+default"]
+    assert meta["val_sequences"] == ["skirt+average+spin+default"]
+    assert meta["validation"]["source"] == "carved" and meta["validation"]["motions"] == ["spin"]
+    best, last = (load_checkpoint(run / "checkpoints" / f"{n}.pt") for n in ("best", "last"))
+    rows = [r for r in last["history"] if r["stage"] == "stage2"]  # best.pt is chosen within the last stage
+    val = [r["val_rmse_mm"] for r in rows]
+    assert best["best_metric"] == min(val) and best["epoch"] == rows[val.index(min(val))]["epoch"]
+    for checkpoint, state in (("best", best), (None, best), ("last", last)):
+        animator = Animator(run) if checkpoint is None else Animator(run, checkpoint=checkpoint)
+        loaded = _weights(animator.model)
+        assert all(torch.equal(loaded[k], state["model"][k]) for k in state["model"]), checkpoint
+    # a test motion never validates unless the test split is named
+    assert main([*options, "--out", str(tmp_path / "bad"), *sets, "--val-motions", "sway"]) == 2
+    assert not (tmp_path / "bad" / "model.json").exists()
+
+
+def test_the_test_split_validates_only_when_named(tiny_store, tmp_path, caplog):
+    run = tmp_path / "jn"
+    with caplog.at_level(logging.WARNING, logger="loosefit.train.validation"):
+        result = train_model("jointnet", tiny_store, "skirt+average", run, val_split="test",
+                             overrides=[*SMALL_JOINTNET, "train.stages.stage1.epochs=1"])
+    assert "TEST split" in caplog.text
+    assert json.loads((run / MODEL_META).read_text())["val_sequences"] == ["skirt+average+sway+default"]
+    assert np.isfinite(result.val_metrics["rmse_mm"])
 
 
 def test_fixed_baseline_gets_a_checkpoint(tiny_store, tmp_path):

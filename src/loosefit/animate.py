@@ -27,10 +27,11 @@ from loosefit.training import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
 
 
-def load_run(run_dir: str | Path, checkpoint: str = "last"):
+def load_run(run_dir: str | Path, checkpoint: str = "best"):
     """The trained model of a run folder: ``(meta (model.json), model with the checkpoint's weights, config)``.
 
-    ``checkpoint``: ``"last"``, ``"best"`` (falls back to ``"last"``) or a checkpoint path.
+    ``checkpoint``: ``"best"`` (the epoch the validation chose; ``"last"`` when the run validated on nothing),
+    ``"last"`` (the end of training) or a checkpoint path.
     """
     run = RunDir(run_dir)
     meta = read_run_meta(run.path)
@@ -80,9 +81,9 @@ class Animator:
 
     Args:
         run_dir: a folder written by :func:`loosefit.training.train_model`.
-        checkpoint: ``"last"`` (the end of training), ``"best"`` (the best validation epoch; it falls back to
-            ``"last"`` when absent) or a checkpoint path. ``"last"`` is the default because validation runs on
-            the held-out motions: picking the epoch by them would flatter any accuracy measured on them.
+        checkpoint: ``"best"`` (the best validation epoch; ``"last"`` when the run validated on nothing),
+            ``"last"`` (the end of training) or a checkpoint path. Validation never sees a test motion unless
+            the run was told to (:mod:`loosefit.train.validation`), so the best epoch flatters no test score.
         threads: torch CPU threads used while animating (1 is fastest for the graph layers here).
         device: ``"cpu"``, ``"cuda"`` or ``"auto"`` (:func:`loosefit.device.resolve_device`).
         garment: for a multi-garment method (SwinGar): the garment to animate, a
@@ -91,7 +92,7 @@ class Animator:
         body: the body the garment is worn on (its shape), for a multi-garment method; None: the average Anny body.
     """
 
-    def __init__(self, run_dir: str | Path, checkpoint: str = "last", threads: int | None = 1, garment=None,
+    def __init__(self, run_dir: str | Path, checkpoint: str = "best", threads: int | None = 1, garment=None,
                  body=None, device: str = "cpu"):
         self.meta, model, cfg = load_run(run_dir, checkpoint)
         cls = type(model)

@@ -236,7 +236,8 @@ def cmd_train(args):
     if args.device and hasattr(run_config_class(args.method)(), "train"):  # body-lbs has nothing to train
         overrides.append(f"train.device={args.device}")
     result = launch(train_model, args.nproc, args.method, args.data, args.garment, args.out, config=args.config,
-                    overrides=overrides, resume=args.resume)
+                    overrides=overrides, resume=args.resume, val_split=args.val_split,
+                    val_motions=args.val_motions, val_fraction=args.val_fraction)
     if not is_main():  # under torchrun every process runs this command: rank 0 reports
         return
     if result is None:
@@ -492,6 +493,13 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--config", default=None, help="method config YAML (configs/models/<method>.yaml)")
     sp.add_argument("--set", action="append", help="config override, e.g. train.epochs=5 (repeatable)")
     sp.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    sp.add_argument("--val-split", choices=["val", "test", "none"], default="val",
+                    help="what selects checkpoints/best.pt: the store's val split (default; none there: no validation), "
+                    "test (model selection then sees the test motions: warned) or none")
+    sp.add_argument("--val-motions", default=None, metavar="NAME,...",
+                    help="validate on these training motions instead of training on them (never a test motion)")
+    sp.add_argument("--val-fraction", type=positive_float, default=None,
+                    help="validate on this share of the training motions, chosen by name (e.g. 0.2)")
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default=None,
                     help="where to train (default: the config's train.device); an error when CUDA is asked but absent")
     sp.add_argument("--nproc", type=int, default=1, help="training processes on this machine (DistributedDataParallel: "
@@ -508,7 +516,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
     sp.add_argument("--with-body", action="store_true", help="export the posed body too (always in an .npz)")
-    sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
+    sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
+                    "nothing), last or a checkpoint path")
     sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the model runs")
     sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
@@ -528,7 +537,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", required=True, help="dress.glb (skinned glTF) or dress.usdc / .usda (UsdSkel)")
     sp.add_argument("--influences", type=int, choices=[4, 8], default=4, help="skinning weights kept per vertex")
     sp.add_argument("--no-body", action="store_true", help="write the garment only")
-    sp.add_argument("--checkpoint", default="last", help="last, best (by validation) or a checkpoint path")
+    sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
+                    "nothing), last or a checkpoint path")
     sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.set_defaults(func=cmd_export_rig)
 

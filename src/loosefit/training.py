@@ -7,9 +7,14 @@ no garment; a dynamic one (SwinGar) on windows of its sequences
 (:class:`loosefit.models.multi_garment.MultiWindowDataset`), on every garment or the named ones.
 
 The run folder holds, besides the trainer's files (:mod:`loosefit.train.run`), ``model.json`` (method,
-garment, sizes, dataset, the range of the training motions' root: :mod:`loosefit.motion_range`) and
-``method.yaml`` (the method's full config: model, train and data sections), so that
-:mod:`loosefit.animate` rebuilds the model from the folder alone.
+garment, sizes, dataset, the training and validation sequences and how the validation was chosen
+(``validation``: :mod:`loosefit.train.validation`), the range of the training motions' root:
+:mod:`loosefit.motion_range`) and ``method.yaml`` (the method's full config: model, train and data
+sections), so that :mod:`loosefit.animate` rebuilds the model from the folder alone.
+
+Validation never sees a test motion unless asked to: the store's ``val`` split, or training motions
+carved out by name, or none (:func:`loosefit.train.validation.choose_validation`). It selects
+``checkpoints/best.pt``, which animation uses by default.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import json
 from pathlib import Path
 
 from loosefit.config import load_config, save_config
+from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.registry import model_class, run_config_class
@@ -27,6 +33,7 @@ from loosefit.train import distributed
 from loosefit.train.run import RunDir, save_checkpoint
 from loosefit.train.seeding import rng_state, seed_everything
 from loosefit.train.settings import TrainResult
+from loosefit.train.validation import choose_validation
 from loosefit.train.trainer import train
 
 MODEL_META = "model.json"
@@ -41,11 +48,14 @@ def train_model(
     config: str | Path | None = None,
     overrides: tuple[str, ...] | list[str] = (),
     resume: bool = False,
-    val_split: str | None = "test",
+    val_split: str | None = "val",
     sim_params: dict | None = None,
+    val_motions: list[str] | str | None = None,
+    val_fraction: float | None = None,
 ) -> TrainResult | None:
     """Train ``method`` on the training sequences of ``garment`` in dataset ``data`` (every garment for a
-    multi-garment method, which takes ``garment=None``); validate on ``val_split``.
+    multi-garment method, which takes ``garment=None``), validating as :mod:`loosefit.train.validation`
+    chooses: the store's ``val`` split, training motions carved out, or nothing.
 
     Args:
         garment: the store garment of a per-garment method; for a multi-garment method (SwinGar) a
@@ -53,6 +63,12 @@ def train_model(
         config: the method's YAML config (``configs/models/<method>.yaml``); None: the built-in defaults
             (on ``resume``: the run folder's own ``method.yaml``).
         overrides: ``"section.key=value"`` strings, e.g. ``"train.epochs=5"``, ``"model.hidden=64"``.
+        val_split: ``"val"`` (the store's validation sequences; none: no validation), ``"test"`` (only
+            when asked for: the best checkpoint is then chosen by the test motions, and a warning says
+            so) or ``"none"``/None.
+        val_motions: training motions (store names, a list or a comma-separated string) that validate
+            instead of training; or ``val_fraction``: that share of the training motions, chosen by name
+            (:func:`loosefit.train.validation.carve_motions`). Never a test motion. Not for SwinGar.
         sim_params: train only on sequences simulated with these parameters (pivot networks).
 
     Returns:
@@ -65,29 +81,37 @@ def train_model(
     if config is None and resume and saved.exists():
         config = saved
     cfg = load_config(run_config_class(method), config, overrides)
+    if isinstance(val_motions, str):
+        val_motions = [m.strip() for m in val_motions.split(",") if m.strip()]
+    carve = {"val_split": val_split, "val_motions": val_motions, "val_fraction": val_fraction}
     if getattr(cls, "static", False):
         if garment is not None:
             raise InputError(f"{method} trains on every garment of the store: give no garment (got {garment!r})")
-        return _train_garment_frames(method, cls, cfg, data, run, resume, val_split, sim_params)
+        return _train_garment_frames(method, cls, cfg, data, run, resume, carve, sim_params)
     if getattr(cls, "multi_garment", False):
-        return _train_garment_windows(cls, method, data, garment, run, cfg, resume, val_split)
+        return _train_garment_windows(cls, method, data, garment, run, cfg, resume, carve)
     if garment is None:
         raise InputError(f"{method} is trained per garment: name one (loosefit info lists them)", Path(data))
     trained = hasattr(cfg, "train")
     if trained:
         seed_everything(cfg.train.seed)
-    train_data = GarmentSequences(data, garment, "train", sim_params=sim_params, bones=cls.needs_rig)
+    store = DatasetStore.open(data, mode="r")
+    if garment not in store.garment_names():
+        raise InputError(f"no garment {garment!r} in the store (has {store.garment_names()})", store.path)
+    # a method without trainable weights (body-lbs) has no checkpoint to select: no validation
+    validation = choose_validation(store, _uses(store, garment, sim_params), what=f"garment {garment!r}",
+                                   **(carve if trained else {"val_split": "none"}))
+    train_data = GarmentSequences(store, garment, "train", sim_params=sim_params, bones=cls.needs_rig,
+                                  names=validation.train)
     val_data = None
-    if val_split is not None:
-        try:
-            val_data = GarmentSequences(data, garment, val_split, sim_params=sim_params, bones=False, body=False)
-        except InputError:
-            val_data = None  # no held-out sequences of this garment: train without validation
+    if validation.val:
+        val_data = GarmentSequences(store, garment, None, sim_params=sim_params, bones=False, body=False,
+                                    names=validation.val)
     model = cls.from_data(train_data, cfg.model)
     meta = {"method": method, "garment": garment, "data": str(Path(data).resolve()), "sizes": model.sizes(),
             "sim_params": sim_params, "train_sequences": [s.name for s in train_data.sequences],
             "val_sequences": [s.name for s in val_data.sequences] if val_data else [],
-            "rig": train_data.rig_settings}
+            "validation": validation.to_json(), "rig": train_data.rig_settings}
     _write_run(run, meta, cfg, resume, motion_range=trained)  # body-lbs follows any motion
     if not trained:
         _save_fixed(model, run)
@@ -96,48 +120,61 @@ def train_model(
                  cfg.train, run.path, resume=resume)
 
 
-def _train_garment_frames(method, cls, cfg, data, run: RunDir, resume: bool, val_split, sim_params) -> TrainResult:
+def _uses(store: DatasetStore, garment: str | None, sim_params: dict | None):
+    """Which sequence names of ``store`` a run may use: those of ``garment`` (None: any) simulated with
+    ``sim_params`` (None: any)."""
+
+    def keep(name: str) -> bool:
+        seq = store.sequence(name)
+        return (garment is None or seq.garment == garment) and (sim_params is None or seq.sim_params == sim_params)
+
+    return keep
+
+
+def _train_garment_frames(method, cls, cfg, data, run: RunDir, resume: bool, carve: dict, sim_params) -> TrainResult:
     """:func:`train_model` for a static method (FitGar): the frames of every garment of the store at once."""
     from loosefit.models.fitgar_data import GarmentFrames
 
     seed_everything(cfg.train.seed)
     frames = {"frame_stride": cfg.data.frame_stride, "frame_offset": cfg.data.frame_offset}
-    train_data = GarmentFrames(data, "train", sim_params=sim_params, **frames)
+    store = DatasetStore.open(data, mode="r")
+    validation = choose_validation(store, _uses(store, None, sim_params), **carve)
+    train_data = GarmentFrames(data, "train", sim_params=sim_params, names=validation.train, **frames)
     val_data = None
-    if val_split is not None:
-        try:
-            val_data = GarmentFrames(data, val_split, sim_params=sim_params, **frames)
-        except InputError:
-            val_data = None  # no held-out sequences: train without validation
+    if validation.val:
+        val_data = GarmentFrames(data, None, sim_params=sim_params, names=validation.val, **frames)
     model = cls.from_data(train_data, cfg.model)
     meta = {"method": method, "garment": None, "data": str(Path(data).resolve()), "sizes": model.sizes(),
             "sim_params": sim_params, "train_sequences": train_data.sequence_names,
-            "val_sequences": val_data.sequence_names if val_data else [], "rig": {}}
+            "val_sequences": val_data.sequence_names if val_data else [], "validation": validation.to_json(),
+            "rig": {}}
     _write_run(run, meta, cfg, resume)
     return train(model, train_data, val_data, cfg.train, run.path, resume=resume)
 
 
 def _train_garment_windows(cls, method: str, data, garment: str | None, run: RunDir, cfg, resume: bool,
-                           val_split: str | None) -> TrainResult:
+                           carve: dict) -> TrainResult:
     """:func:`train_model` for a dynamic multi-garment method (SwinGar): every (or each named) garment of the training split;
-    validation on every garment of ``val_split`` (held-out garments, shapes and motions)."""
+    validation on every garment of the validation split (held-out garments, shapes and motions; no carving)."""
     from loosefit.models.multi_garment import MultiGarmentData, MultiWindowDataset
 
+    if carve["val_motions"] is not None or carve["val_fraction"] is not None:
+        raise InputError(f"{method} validates on a split of the store (held-out garments too): give the plan a "
+                         "'val' split instead of carving validation motions", Path(data))
     seed_everything(cfg.train.seed)
     names = None if garment is None else [g.strip() for g in garment.split(",") if g.strip()]
     settings = cfg.model.graph_settings()  # the garment graphs the model reads (its global descriptor)
     train_data = MultiGarmentData(data, "train", names, **settings)
+    validation = choose_validation(DatasetStore.open(data, mode="r"), lambda name: True, carve["val_split"])
     val_data = None
-    if val_split is not None:
-        try:
-            val_data = MultiGarmentData(data, val_split, None, body=False, **settings)
-        except InputError:
-            val_data = None  # no held-out sequences: train without validation
+    if validation.val:
+        val_data = MultiGarmentData(data, validation.source, None, body=False, **settings)
     model = cls.from_data(train_data, cfg.model)
     meta = {"method": method, "garments": [g.name for g in train_data.graphs], "data": str(Path(data).resolve()),
             "sizes": model.sizes(),
             "train_sequences": [s.name for d in train_data.sequences for s in d.sequences],
-            "val_sequences": [s.name for d in val_data.sequences for s in d.sequences] if val_data else []}
+            "val_sequences": [s.name for d in val_data.sequences for s in d.sequences] if val_data else [],
+            "validation": validation.to_json()}
     _write_run(run, meta, cfg, resume)
     history = cfg.model.motion_frames - 1 + cfg.model.corrective_frames - 1
     windows = [None if d is None else MultiWindowDataset(d, cfg.data.window, cfg.data.stride, history)
@@ -166,7 +203,7 @@ class StaleRunError(InputError):
 
 
 #: What a run's training data is: resuming on data that differs in any of these would silently mix two datasets.
-SAME_DATA_KEYS = ("garment", "garments", "sim_params", "train_sequences", "sizes", "rig")
+SAME_DATA_KEYS = ("garment", "garments", "sim_params", "train_sequences", "val_sequences", "sizes", "rig")
 
 
 def _check_same_data(path: Path, meta: dict) -> None:

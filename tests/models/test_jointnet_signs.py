@@ -1,6 +1,7 @@
 """JointNet's constants against closed forms on a model built from sizes alone (no data store): the Fourier
-frequencies' scale and the ``2 pi`` of JointNet Eq. 3, the garment prior added to the bone features (JointNet
-Eq. 4), the association's and the PSD bases' initial scales, and the per-coordinate L1 of JointNet Eq. 7."""
+frequencies' scale and the ``2 pi`` of JointNet Eq. 3, the garment prior concatenated with the bone features
+(JointNet Fig. 2; Eq. 4's sum as an option), the association's and the PSD bases' initial scales, and the
+per-coordinate L1 of JointNet Eq. 7."""
 
 from __future__ import annotations
 
@@ -52,17 +53,23 @@ def test_fourier_feature_at_the_paper_frequency():
     torch.testing.assert_close(model.fourier_features().detach(), expected, rtol=0, atol=1e-6)
 
 
-def test_garment_prior_is_added_to_the_bone_features():
-    """JointNet Eq. 4 adds ``f_V`` to ``relu(A) psi`` (loosefit follows the equation; the paper's Fig. 2 and text
-    concatenate): with no joint associated, the bone MLP reads the Fourier features alone, ``K`` wide."""
-    model = build()
-    seen = []
-    model.bone_mlp.register_forward_hook(lambda module, args, out: seen.append(args[0].detach()))
-    with torch.no_grad():
-        model.association.fill_(-1.0)  # relu(A) = 0
-        model(torch.randn(2, 3, 11), torch.randn(2, 3, len(NAMES) - 1, 6), psd=False)
-    assert seen[0].shape == (2, 3, 6, TINY.features)
-    torch.testing.assert_close(seen[0], model.fourier_features().detach().expand(2, 3, -1, -1), rtol=0, atol=0)
+def test_garment_prior_is_concatenated_with_the_bone_features():
+    """The paper's Fig. 2 and Sec. 3.2 concatenate ``f_V`` with ``relu(A) psi`` (the default): with no joint
+    associated, the bone MLP reads ``K`` zeros then the Fourier features, ``2 K`` wide; ``fourier="add"``
+    (Eq. 4's sum) reads the Fourier features alone, ``K`` wide."""
+    for mode, width in (("concat", 2 * TINY.features), ("add", TINY.features)):
+        model = build(dataclasses.replace(TINY, fourier=mode))
+        assert model.bone_mlp[0].in_features == width
+        seen = []
+        model.bone_mlp.register_forward_hook(lambda module, args, out: seen.append(args[0].detach()))
+        with torch.no_grad():
+            model.association.fill_(-1.0)  # relu(A) = 0
+            model(torch.randn(2, 3, 11), torch.randn(2, 3, len(NAMES) - 1, 6), psd=False)
+        prior = model.fourier_features().detach().expand(2, 3, -1, -1)
+        expected = torch.cat([torch.zeros_like(prior), prior], -1) if mode == "concat" else prior
+        assert seen[0].shape == (2, 3, 6, width)
+        torch.testing.assert_close(seen[0], expected, rtol=0, atol=0)
+    assert JointNetConfig().fourier == "concat"
 
 
 def test_association_starts_with_rows_summing_to_one():

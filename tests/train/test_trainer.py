@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from loosefit.errors import InputError
-from loosefit.train import StageConfig, TrainingError, load_checkpoint, train
+from loosefit.train import StageConfig, TrainConfig, TrainingError, load_checkpoint, train
 from tests.train.conftest import SineGRU, SineSequences, make_model, quick_config
 
 STEPS_PER_EPOCH = 5  # 20 samples, batches of 4
@@ -170,6 +170,8 @@ def test_threads_applied_and_restored(data, tmp_path):
         torch.set_num_threads(before)
     assert result.monitor == "loss" and result.val_metrics == {}
     assert result.best_metric == min(r["train_loss"] for r in result.history if r["stage"] == "head")
+    # the training loss selects no checkpoint: without validation there is no best.pt
+    assert result.best_checkpoint is None and not (tmp_path / "run" / "checkpoints" / "best.pt").exists()
     assert list((tmp_path / "run" / "tensorboard").glob("events.out.tfevents.*"))
 
 
@@ -243,10 +245,12 @@ def test_nan_loss_keeps_last_checkpoint(data, tmp_path):
     assert (saved["stage_index"], saved["epoch"], saved["global_step"]) == (0, 2, 10)
 
 
-@pytest.mark.parametrize("optimizer, first_step", [("adam", 1.0), ("rmsprop", 10.0)])
-def test_optimizer_first_step_matches_closed_form(data, tmp_path, optimizer, first_step):
-    # One step on the head: Adam moves every weight by lr (m/sqrt(v) = sign g); RMSProp (smoothing
-    # 0.99) by lr * g / sqrt(0.01 g^2) = 10 lr.
+@pytest.mark.parametrize("optimizer, first_step, state_key", [("adam", 1.0, "exp_avg_sq"), ("rmsprop", 1.0, "exp_avg_sq"),
+                                                              ("rmsprop-torch", 10.0, "square_avg")])
+def test_optimizer_first_step_matches_closed_form(data, tmp_path, optimizer, first_step, state_key):
+    # One step on the head: Adam moves every weight by lr (m/sqrt(v) = sign g), and so does RMSProp with its
+    # squared-gradient average corrected for its zero start (g / sqrt(0.01 g^2 / 0.01)); torch's RMSprop
+    # (smoothing 0.99, uncorrected) by lr * g / sqrt(0.01 g^2) = 10 lr.
     train_set, _ = data
     model = make_model()
     before = model.head.weight.detach().clone()
@@ -256,4 +260,58 @@ def test_optimizer_first_step_matches_closed_form(data, tmp_path, optimizer, fir
     step = (model.head.weight.detach() - before).abs()
     assert torch.allclose(step, torch.full_like(step, first_step * 1e-4), rtol=1e-3)
     state = load_checkpoint(tmp_path / optimizer / "checkpoints" / "last.pt")["optimizer"]["state"]
-    assert ("square_avg" in state[0]) == (optimizer == "rmsprop")
+    assert state_key in state[0]
+
+
+def test_corrected_rmsprop_steps_follow_the_closed_form(data, tmp_path):
+    """Three steps of ``"rmsprop"`` on the head against RMSProp written out: ``v_t = 0.99 v + 0.01 g^2``,
+    ``w -= lr g / (sqrt(v_t / (1 - 0.99^t)) + 1e-8)``, with the gradients the run itself took."""
+    train_set, _ = data
+    model = make_model()
+    grads, weights = [], [model.head.weight.detach().clone()]
+    model.head.weight.register_hook(lambda g: grads.append(g.detach().clone()))
+    config = quick_config(optimizer="rmsprop", lr=1e-3, batch_size=20, schedule="none", epochs=0,
+                          stages={"head": StageConfig(epochs=3)})
+    train(model, train_set, None, config, tmp_path / "run")
+    assert len(grads) == 3
+    w, v = weights[0].double(), torch.zeros_like(weights[0], dtype=torch.float64)
+    for t, g in enumerate(grads, 1):
+        v = 0.99 * v + 0.01 * g.double() ** 2
+        w = w - 1e-3 * g.double() / ((v / (1 - 0.99**t)).sqrt() + 1e-8)
+    torch.testing.assert_close(model.head.weight.detach().double(), w, rtol=1e-5, atol=1e-8)
+
+
+class Drift(torch.nn.Module):
+    """One weight ``w`` (from 0) trained towards 2 (loss ``(w - 2)^2``) and validated against 1 (``rmse_mm =
+    1000 |w - 1|``): the validation error falls until ``w`` passes 1, then rises while training goes on."""
+
+    def __init__(self):
+        super().__init__()
+        self.w = torch.nn.Parameter(torch.zeros(()))
+
+    def training_loss(self, batch, stage):
+        loss = ((self.w - 2) ** 2) * batch["x"].mean()
+        return loss, {}
+
+    def validation_metrics(self, batch, stage):
+        return {"rmse_mm": 1000 * abs(self.w.item() - 1.0)}
+
+
+def test_best_checkpoint_is_the_validation_minimum(tmp_path):
+    """A run whose validation error rises after an early minimum keeps that minimum's epoch in best.pt;
+    last.pt holds the end of training."""
+    samples = [{"x": torch.ones(1)} for _ in range(4)]
+    config = TrainConfig(epochs=12, batch_size=4, lr=0.15, schedule="none", progress=False, tensorboard=False)
+    model = Drift()
+    result = train(model, samples, samples[:1], config, tmp_path / "run")
+    rows = _rows(tmp_path / "run" / "metrics.csv")
+    val = [float(r["val_rmse_mm"]) for r in rows]
+    best_epoch = 1 + val.index(min(val))
+    assert 1 < best_epoch < 12 and val[-1] > min(val) + 100, val  # the premise: an early minimum, then a rise
+    best = load_checkpoint(tmp_path / "run" / "checkpoints" / "best.pt")
+    last = load_checkpoint(tmp_path / "run" / "checkpoints" / "last.pt")
+    assert best["epoch"] == best_epoch and last["epoch"] == 12
+    assert 1000 * abs(float(best["model"]["w"]) - 1.0) == pytest.approx(min(val), rel=1e-6)
+    assert float(last["model"]["w"]) == pytest.approx(model.w.item(), rel=1e-6)
+    assert result.best_metric == pytest.approx(min(val), rel=1e-6)
+    assert result.best_checkpoint == tmp_path / "run" / "checkpoints" / "best.pt"

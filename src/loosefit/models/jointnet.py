@@ -13,9 +13,10 @@ windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints 
    features to bones: ``relu(A) @ psi``. An L1 penalty keeps it sparse, so a bone listens to few joints
    (an arm does not swing the hem of a skirt).
 3. **Garment prior.** Fourier features of each bone's rest position, ``[alpha_m cos(2 pi c_m . p),
-   alpha_m sin(2 pi c_m . p)]`` with fixed random frequencies ``c_m`` and learnt ``alpha_m``, are added
-   (JointNet Eq. 4; the paper's Fig. 2 and text concatenate them, see the departures below).
-4. **Bone transforms.** A per-bone (shared) MLP ``F`` (K, 1024, 2048, 1024, 6) gives three Euler angles
+   alpha_m sin(2 pi c_m . p)]`` with fixed random frequencies ``c_m`` and learnt ``alpha_m``, are
+   concatenated with the bone features, as the paper's Fig. 2 and Sec. 3.2 text have it (``F`` reads
+   ``2 K`` values); its Eq. 4 writes a sum, ``fourier="add"`` (``F`` reads ``K``).
+4. **Bone transforms.** A per-bone (shared) MLP ``F`` (2K, 1024, 2048, 1024, 6) gives three Euler angles
    and a three-vector offset, both standardised by the training statistics of the rig's bone
    transforms. The bone rotates about its rest position ``c`` and moves by the offset, so
    rotation ``R = euler(angles)`` and translation ``c + offset - R c`` (``R p`` plus it takes ``c`` to
@@ -32,9 +33,6 @@ zero and its parameters are not optimised), ``stage2`` everything.
 
 Departures from the paper, named:
 
-- the garment prior is added to the bone features, as JointNet Eq. 4 writes, where Fig. 2 and Sec. 3.2's text
-  concatenate it: ``F`` reads ``K`` features, not ``2 K`` (at the paper's sizes 491,520 fewer weights in its
-  first layer), and the prior shifts the joints' features instead of filling channels of its own;
 - a joint's input is the root features (height, displacement and heading change since the previous frame,
   tilt), its own rotation, its parent's and those of all its selected children, as 6D rotations; the paper
   concatenates the root position, the joint's axis-angle and those of its two skeleton neighbours;
@@ -90,6 +88,10 @@ class JointNetConfig:
         psd_shapes: ``|X|``, displacement bases per joint (64 in the authors' code; not in the paper).
         fourier_scale: standard deviation of the Fourier frequencies ``c_m``, cycles per metre (not in
             the paper; 2 separates bones about 10 cm apart on a garment about 1 m across).
+        fourier: how the Fourier features join the bone features: ``"concat"`` (the paper's Fig. 2 and
+            Sec. 3.2 text: ``F`` reads ``2 K`` values) or ``"add"`` (its Eq. 4: ``F`` reads ``K``).
+        bone_init: the initial last layer of ``F``: ``"zero"`` (every bone starts at its mean training
+            transform) or ``"torch"`` (drawn as any linear layer).
         euler_order: intrinsic axis order of the predicted Euler angles.
         lambda_norm: weight of the normal loss (not in the paper: the normal term is then roughly a
             third of the L1 vertex term, in metres, at a few millimetres of error).
@@ -108,6 +110,8 @@ class JointNetConfig:
     psd_mlp: list[int] = field(default_factory=lambda: [480, 128])
     psd_shapes: int = 64
     fourier_scale: float = 2.0
+    fourier: str = "concat"
+    bone_init: str = "torch"
     euler_order: str = "xyz"
     lambda_norm: float = 0.05
     lambda_sparse: float = 1e-5
@@ -121,6 +125,10 @@ class JointNetConfig:
             raise InputError(f"features must be even (half cosines, half sines), got {self.features}")
         if sorted(self.euler_order.lower()) != ["x", "y", "z"]:
             raise InputError(f"euler_order must be a permutation of 'xyz', got {self.euler_order!r}")
+        if self.fourier not in ("concat", "add"):
+            raise InputError(f"fourier must be 'concat' or 'add', got {self.fourier!r}")
+        if self.bone_init not in ("zero", "torch"):
+            raise InputError(f"bone_init must be 'zero' or 'torch', got {self.bone_init!r}")
         if not (self.fourier_scale > 0 and self.lambda_norm >= 0 and self.lambda_sparse >= 0 and self.loss_frames >= 0):
             raise InputError("fourier_scale must be > 0, lambda_norm, lambda_sparse and loss_frames >= 0")
 
@@ -283,7 +291,10 @@ class JointNet(GarmentModel):
         self.association = nn.Parameter(torch.rand(B, G) * (2.0 / G))
         self.fourier_alpha = nn.Parameter(torch.randn(K // 2))
         self.register_buffer("fourier_freqs", torch.randn(K // 2, 3) * config.fourier_scale)
-        self.bone_mlp = MLP([K, *config.bone_mlp, 6])
+        self.bone_mlp = MLP([2 * K if config.fourier == "concat" else K, *config.bone_mlp, 6])
+        if config.bone_init == "zero":  # every bone starts at its mean training transform
+            nn.init.zeros_(self.bone_mlp[-1].weight)
+            nn.init.zeros_(self.bone_mlp[-1].bias)
         self.psd_mlp = MLP([K, *config.psd_mlp, config.psd_shapes])
         self.psd_basis = nn.Parameter(torch.randn(G, config.psd_shapes, V, 3) * PSD_INIT_STD)
 
@@ -333,6 +344,14 @@ class JointNet(GarmentModel):
         phase = 2 * math.pi * self.bone_rest @ self.fourier_freqs.T  # (B, K/2)
         return torch.cat([self.fourier_alpha * torch.cos(phase), self.fourier_alpha * torch.sin(phase)], -1)
 
+    def join_prior(self, features: torch.Tensor) -> torch.Tensor:
+        """Joint features of the bones ``relu(A) psi (..., B, K)`` joined with the garment prior: ``[relu(A) psi,
+        f_V] (..., B, 2K)`` (``fourier="concat"``, Fig. 2) or ``relu(A) psi + f_V (..., B, K)`` (``"add"``, Eq. 4)."""
+        prior = self.fourier_features()
+        if self.config.fourier == "add":
+            return features + prior
+        return torch.cat([features, prior.expand(features.shape[:-1] + prior.shape[-1:])], -1)
+
     def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
         """Raw features -> ``(N, T, J_s, 11 + 6 * (2 + C))`` per-joint GRU inputs (standardised)."""
         root, joints = self.normalise(root, joints)
@@ -342,7 +361,8 @@ class JointNet(GarmentModel):
         return torch.cat([root[:, :, None].expand(-1, -1, gathered.shape[2], -1), gathered], -1)
 
     def bone_transforms(self, bone_features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(N, T, B, K)`` bone features -> rotations ``(N, T, B, 3, 3)`` and translations ``(N, T, B, 3)``."""
+        """``(N, T, B, 2K or K)`` bone features (:meth:`join_prior`) -> rotations ``(N, T, B, 3, 3)`` and
+        translations ``(N, T, B, 3)``."""
         out = self.bone_mlp(bone_features)
         euler = self.euler_mean + self.euler_std * out[..., :3]
         offset = self.offset_mean + self.offset_std * out[..., 3:]
@@ -363,7 +383,7 @@ class JointNet(GarmentModel):
         psi = grouped_linear(self.joint_out_weight, hidden.transpose(0, 2).flatten(1, 2)) + self.joint_out_bias
         psi = psi.unflatten(1, (T, N)).permute(2, 1, 0, 3)  # (N, T, J_s, K)
         association = self.association_matrix()
-        bone_features = association @ psi + self.fourier_features()  # (N, T, B, K): Eq. 4's sum, not a concatenation
+        bone_features = self.join_prior(association @ psi)  # (N, T, B, 2K) or (N, T, B, K)
         R, trans = self.bone_transforms(bone_features)
         rest, displacement = self.rig_rest, None
         if psd:

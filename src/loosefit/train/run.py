@@ -7,7 +7,7 @@
       metrics.csv            one row per epoch per stage
       run.json               summary written when training finishes
       checkpoints/last.pt    state after the last saved epoch (resume from here)
-      checkpoints/best.pt    state at the best validation metric of the latest stage
+      checkpoints/best.pt    state at the best validation metric of the latest stage (only with validation)
       tensorboard/           TensorBoard event files
 
 A checkpoint is a ``torch.save``d dict: ``model``, ``optimizer``, ``scheduler`` (state dicts; the

@@ -33,8 +33,10 @@ class TrainConfig:
         seed: seeds every generator at the start, and each epoch's shuffling.
         epochs: epochs per stage (overridable per stage in ``stages``).
         batch_size: samples per batch (training and validation).
-        optimizer: ``"adam"``, ``"adamw"`` (decoupled weight decay) or ``"rmsprop"`` (torch's
-            defaults: smoothing 0.99, no momentum; JointNet's optimiser).
+        optimizer: ``"adam"``, ``"adamw"`` (decoupled weight decay), ``"rmsprop"`` (smoothing 0.99, no
+            momentum, its squared-gradient average corrected for its zero start; JointNet's optimiser) or
+            ``"rmsprop-torch"`` (torch's RMSprop, uncorrected: its first steps are up to 10 times ``lr``;
+            :data:`loosefit.train.trainer.OPTIMIZERS`).
         lr: initial learning rate of each stage's optimiser.
         weight_decay: L2 penalty (Adam, RMSProp) or decoupled decay (AdamW).
         schedule: learning-rate schedule over a stage's epochs, stepped once per epoch:
@@ -50,8 +52,9 @@ class TrainConfig:
         checkpoint_every: write ``checkpoints/last.pt`` every N epochs (and always at a stage's end).
         validate_every: validate every N epochs (and always at a stage's end).
         log_every: send the running training loss to TensorBoard every N optimiser steps.
-        monitor: validation metric that selects ``checkpoints/best.pt`` (the training loss
-            ``"loss"`` when there is no validation set).
+        monitor: validation metric that selects ``checkpoints/best.pt``. Without a validation set the
+            training loss ``"loss"`` is tracked as ``best_metric`` but no ``best.pt`` is written: the
+            training loss selects no checkpoint.
         monitor_mode: ``"min"`` or ``"max"``: whether lower or higher ``monitor`` is better.
         progress: show tqdm progress bars.
         tensorboard: write TensorBoard event files.
@@ -62,7 +65,7 @@ class TrainConfig:
     seed: int = 0
     epochs: int = 10
     batch_size: int = 8
-    optimizer: Literal["adam", "adamw", "rmsprop"] = "adam"
+    optimizer: Literal["adam", "adamw", "rmsprop", "rmsprop-torch"] = "adam"
     lr: float = 1e-3
     weight_decay: float = 0.0
     schedule: Literal["cosine", "step", "none"] = "cosine"
@@ -124,7 +127,7 @@ class TrainResult:
         train_metrics: training averages of the last epoch (``"loss"`` and the model's terms).
         val_metrics: validation averages of the last validated epoch (empty without validation).
         monitor: the metric that selected ``best_checkpoint``; best_metric: its best value in the last stage.
-        best_checkpoint: ``checkpoints/best.pt``, or ``None`` if never written.
+        best_checkpoint: ``checkpoints/best.pt``, or ``None`` if never written (always without validation).
         wall_s: training seconds, summed over interrupted and resumed parts.
         parameter_count: scalar parameters of the model.
         history: the ``metrics.csv`` rows, as dicts.

@@ -58,9 +58,21 @@ def _device(name: str) -> torch.device:
     return distributed.resolve_device(name)
 
 
+#: ``TrainConfig.optimizer`` -> (torch class, its settings). ``"rmsprop"`` is RMSProp (squared-gradient average
+#: with smoothing 0.99, no momentum) whose average is corrected for its zero start, as Adam corrects its own:
+#: that is torch's Adam without the first moment. torch's RMSprop (``"rmsprop-torch"``) divides the first
+#: gradient by ``sqrt(0.01 g^2)``, a step of ``10 lr`` on every weight at once, still ``1.9 lr`` after 30 steps.
+OPTIMIZERS = {
+    "adam": (torch.optim.Adam, {}),
+    "adamw": (torch.optim.AdamW, {}),
+    "rmsprop": (torch.optim.Adam, {"betas": (0.0, 0.99), "eps": 1e-8}),
+    "rmsprop-torch": (torch.optim.RMSprop, {"alpha": 0.99, "eps": 1e-8}),
+}
+
+
 def _optimizer(params: list[torch.nn.Parameter], config: TrainConfig, stage: StageConfig) -> torch.optim.Optimizer:
-    kind = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW, "rmsprop": torch.optim.RMSprop}[config.optimizer]
-    return kind(params, lr=stage.lr, weight_decay=stage.weight_decay)
+    kind, settings = OPTIMIZERS[config.optimizer]
+    return kind(params, lr=stage.lr, weight_decay=stage.weight_decay, **settings)
 
 
 def _scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig, stage: StageConfig):
@@ -380,7 +392,7 @@ class _Trainer:
         if not self.main:
             return
         state = self._state(stage_index, epoch, optimizer, scheduler, complete)
-        if improved:
+        if improved and self.val_set is not None:  # best.pt is chosen by validation, never by the training loss
             save_checkpoint(self.run.best_checkpoint, state)
             self.best_written = True
         if epoch % self.config.checkpoint_every == 0 or last_epoch:
