@@ -6,10 +6,16 @@ here with ``--bones`` virtual bones, which resumes and skips what is done):
 
 1. body-LBS, VirtualBones and JointNet are trained on its training motions into ``--runs/<garment>/<method>``
    (resumed when there), from ``configs/models/<method>.yaml`` with the ``--set`` overrides. The test
-   motions never select a checkpoint: training runs without validation and the last checkpoint is used.
+   motions never select a checkpoint: the runs validate on the store's ``val`` split, or, when it has none
+   for the garment, on ``--val-fraction`` of the training motions carved out by name (the same motions for
+   every method; never a test motion: :mod:`loosefit.train.validation`), and animation uses the best
+   checkpoint by that validation (the last one for a run without validation).
 2. Every test motion is animated and evaluated against its simulation with
    :func:`loosefit.metrics.report.evaluate` (RMSE, mean vertex error, Hausdorff, STED, collision with
    the posed body); VirtualBones' low-frequency mesh alone is a row of its own ("virtualbones-lf").
+   The training and validation motions are animated too: the RMSE per motion kind (``walk``, ``spin``...,
+   the procedural generator's name; ``file`` for motion files) and split, side by side, is
+   ``garments/<garment>/<method>/errors_by_kind/<kind>/{train,val,test}_rmse_mm`` in the JSON.
 3. Robustness to an irrelevant joint (JointNet paper, Table 3): ``--perturb-joint`` of each test motion
    gets a smooth random rotation offset of ``--perturb-degrees`` (the angle wanders over that range, about
    a slowly turning random axis); VirtualBones and JointNet animate the original and the perturbed motion,
@@ -20,7 +26,8 @@ With ``--simparams`` (a simulated ``configs/datasets/simparams.yaml``): one Virt
 training parameter set of its garment (the pivot candidates, ``--runs/ensemble/<garment>/params-<hash>``),
 the RBF ensemble fitted on them (:func:`loosefit.models.ensemble.fit_ensemble`, the ``ensemble`` section of
 the VirtualBones config) and RBF against the inverse-distance (linear) baseline on the held-out sets
-(:func:`loosefit.models.ensemble.evaluate_parameter_sets`).
+(:func:`loosefit.models.ensemble.evaluate_parameter_sets`); the pivot networks train on all their
+training sequences without validation and are used as trained last.
 
 The networks are those of :data:`CPU_TRAINING` (``--preset cpu``, the default: CPU-sized layers and
 fewer epochs, about 45 min per garment on one core) or the paper's (``--preset paper``: the YAML configs
@@ -28,6 +35,7 @@ as they are, for a GPU); ``--set`` overrides come after the preset's.
 
 Run: .venv/bin/python benchmarks/accuracy.py --data DATA.zarr --runs RUNS [--garments skirt+average,...]
          [--set virtualbones:train.stages.low.epochs=2 ...] [--simparams DATA2.zarr] [--bones 80] [--name accuracy]
+         [--val-fraction 0.2]
      (``--data`` may be left out with ``--simparams``: the ensemble alone)
 (writes benchmarks/results/<name>.json)
 """
@@ -54,6 +62,7 @@ from loosefit.config import load_config  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.errors import InputError  # noqa: E402
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle  # noqa: E402
+from loosefit.metrics.errors import rmse_mm  # noqa: E402
 from loosefit.metrics.report import SequencePair, evaluate  # noqa: E402
 from loosefit.models.dataset import GarmentSequences  # noqa: E402
 from loosefit.models.ensemble import evaluate_parameter_sets, fit_ensemble  # noqa: E402
@@ -119,18 +128,55 @@ def sequence_body(store: DatasetStore, name: str, rig: str) -> AnnyBody:
 DEVICE = "cpu"
 
 
-def train_run(method: str, data: Path, garment: str, run: Path, overrides: list[str], sim_params: dict | None = None) -> dict:
-    """Train (or resume, or find finished) one run folder on :data:`DEVICE`; a short summary of the training."""
+def train_run(method: str, data: Path, garment: str, run: Path, overrides: list[str], sim_params: dict | None = None,
+              validation: dict | None = None) -> dict:
+    """Train (or resume, or find finished) one run folder on :data:`DEVICE`; a short summary of the training.
+    ``validation``: :func:`loosefit.training.train_model`'s ``val_split`` / ``val_fraction`` (None: none)."""
     start = time.perf_counter()
     if "train" in {f.name for f in dataclasses.fields(run_config_class(method))}:
         overrides = [*overrides, f"train.device={DEVICE}"]  # the device may change on resume
+    validation = validation or {"val_split": None}
     result = train_model(method, data, garment, run, config=CONFIGS / f"{method}.yaml", overrides=overrides,
-                         resume=True, val_split=None, sim_params=sim_params)
-    summary = {"run": str(run), "overrides": overrides, "call_s": time.perf_counter() - start}
+                         resume=True, sim_params=sim_params, **validation)
+    summary = {"run": str(run), "overrides": overrides, "validation": validation, "call_s": time.perf_counter() - start,
+               "checkpoint": "best" if (run / "checkpoints" / "best.pt").is_file() else "last"}
     if result is not None:
         summary.update(train_wall_s=result.wall_s, parameters=result.parameter_count, global_step=result.global_step,
-                       train_metrics=result.train_metrics)
+                       train_metrics=result.train_metrics, val_metrics=result.val_metrics,
+                       best_metric=result.best_metric)
     return summary
+
+
+def garment_validation(store: DatasetStore, garment: str, fraction: float) -> dict:
+    """How ``garment``'s runs validate: on the store's ``val`` split when it has sequences of the garment, else
+    on ``fraction`` of the training motions carved out by name."""
+    if any(store.sequence(n).garment == garment for n in store.sequence_names(split="val")):
+        return {"val_split": "val"}
+    return {"val_split": "none", "val_fraction": fraction}
+
+
+def motion_kind(motion: Motion) -> str:
+    """The family of a motion: the procedural generator's name (its motions are named ``<kind>:seed=<seed>``),
+    ``"file"`` for any other."""
+    return motion.name.split(":")[0] if ":seed=" in motion.name else "file"
+
+
+def errors_by_kind(store: DatasetStore, animator, splits: dict[str, list[str]], output: str = "verts") -> dict:
+    """RMSE (mm, pooled over frames and vertices) per motion kind and split: ``{kind: {"<split>_rmse_mm": ...,
+    "<split>_sequences": n}}`` for ``splits`` ``{"train" | "val" | "test": sequence names}``."""
+    sums: dict = {}
+    for split, names in splits.items():
+        for name in names:
+            seq = store.sequence(name)
+            motion = store.motion(seq.motion)
+            err = rmse_mm(animator.animate(motion, output=output), np.asarray(seq.verts[:]))
+            entry = sums.setdefault(motion_kind(motion), {}).setdefault(split, [0.0, 0, 0])
+            entry[0] += err**2 * motion.num_frames
+            entry[1] += motion.num_frames
+            entry[2] += 1
+    return {kind: {key: value for split, (sq, frames, n) in sorted(by_split.items())
+                   for key, value in ((f"{split}_rmse_mm", float(np.sqrt(sq / frames))), (f"{split}_sequences", n))}
+            for kind, by_split in sorted(sums.items())}
 
 
 # ---------------------------------------------------------------- the robustness test
@@ -187,15 +233,26 @@ def robustness(store: DatasetStore, garment: str, animators: dict, names: list[s
 
 
 def garment_benchmark(data: Path, store: DatasetStore, garment: str, runs: Path, sets: dict, joint: str,
-                      degrees: tuple[float, float]) -> dict:
+                      degrees: tuple[float, float], val_fraction: float = 0.2) -> dict:
     """Train, animate the test motions, evaluate and run the robustness test for one garment."""
-    out: dict = {"training": {}, "metrics": {}}
+    out: dict = {"training": {}, "metrics": {}, "validation": garment_validation(store, garment, val_fraction)}
     animators = {}
     for method in ORDER:
         run = runs / garment / method
         print(f"== {garment}: train {method} -> {run}", flush=True)
-        out["training"][method] = train_run(method, data, garment, run, sets[method])
-        animators[method] = Animator(run, checkpoint="last", device=DEVICE)
+        out["training"][method] = train_run(method, data, garment, run, sets[method], validation=out["validation"])
+        animators[method] = Animator(run, device=DEVICE)  # best.pt (by validation), else last.pt
+    meta = animators["virtualbones"].meta  # every method's runs use the same sequences
+    splits = {"train": meta["train_sequences"], "val": meta["val_sequences"], "test": held_out_sequences(store, garment)}
+    out["sequences"] = splits
+    print(f"== {garment}: errors by motion kind ({', '.join(f'{len(v)} {k}' for k, v in splits.items())})", flush=True)
+    for method, animator in animators.items():
+        out[method] = {"errors_by_kind": errors_by_kind(store, animator, splits)}
+    out["virtualbones-lf"] = {"errors_by_kind": errors_by_kind(store, animators["virtualbones"], splits, output="lf")}
+    for method in (*ORDER, "virtualbones-lf"):
+        for kind, e in out[method]["errors_by_kind"].items():
+            shown = ", ".join(f"{s} {e[f'{s}_rmse_mm']:.1f}" for s in ("train", "val", "test") if f"{s}_rmse_mm" in e)
+            print(f"   {method:16s} {kind:8s} RMSE mm: {shown}", flush=True)
     names = held_out_sequences(store, garment)
     faces = store.garment(garment).faces
     pairs = {m: [] for m in (*ORDER, "virtualbones-lf")}
@@ -328,6 +385,8 @@ def main() -> None:
     parser.add_argument("--perturb-joint", default="LeftArm", help="the joint perturbed in the robustness test")
     parser.add_argument("--perturb-degrees", default="30,45", help="range of the perturbation angle, degrees")
     parser.add_argument("--name", default="accuracy", help="results name: benchmarks/results/<name>.json")
+    parser.add_argument("--val-fraction", type=float, default=0.2, help="share of the training motions that validate "
+                        "(carved out by name) for a garment without val sequences")
     parser.add_argument("--device", choices=("cpu", "cuda", "auto"), default="cpu", help="where models train and animate")
     args = parser.parse_args()
     global DEVICE
@@ -341,7 +400,9 @@ def main() -> None:
     runs = Path(args.runs)
     started = time.perf_counter()
     results: dict = {"load_average_at_start": os.getloadavg(), "runs": str(runs.resolve()), "preset": args.preset,
-                     "overrides": sets, "checkpoint": "last (no model selection on test motions)"}
+                     "overrides": sets,
+                     "checkpoint": "best by validation on val or carved training motions, never test motions "
+                                   "(last for a run without validation)"}
     results["garments"], targets = {}, []
     if args.data is not None:
         data = Path(args.data)
@@ -355,7 +416,7 @@ def main() -> None:
                              f"(usable: {garments_with_test(store)})", data)
         for garment in garments:
             results["garments"][garment] = garment_benchmark(data, store, garment, runs, sets, args.perturb_joint,
-                                                             degrees)
+                                                             degrees, args.val_fraction)
             targets += garment_targets(garment, results["garments"][garment])
     if args.simparams:
         results["ensemble"], ensemble_targets = ensemble_benchmark(Path(args.simparams), runs, sets["virtualbones"],
