@@ -103,8 +103,8 @@ VARIANTS = {
     "swingar-alpha-1": ("swingar", ["model.alpha=1.0"]),
     "swingar-alpha-3": ("swingar", ["model.alpha=3.0"]),
     "swingar-prior": ("swingar", ["model.skinning_prior=true"]),
-    "swingar-first-attention": ("swingar", ["model.attention_norm=graph", "model.attention_centred=false",
-                                            "model.concat_heads=false", "model.gate_attention=shared"]),
+    "swingar-first-attention": ("swingar", ["model.gate_attention=shared", "model.attention_norm=graph",
+                                            "model.attention_centred=false", "model.concat_heads=false"]),
 }
 #: ``--variants`` shorthands.
 GROUPS = {

@@ -52,12 +52,15 @@ DESIGNS = {
 }
 ALPHAS = {"alpha-0": "0.0", "alpha-1": "1.0", "alpha-2": "2.0", "alpha-3": "3.0", "plain-gat": "null"}
 #: The curve's training budget on top of the CPU preset (small store: more epochs of fewer windows).
-CURVE_SETTINGS = ["data.window=5", "data.stride=14", "train.stages.supervised.epochs=8", "train.stages.all.epochs=2",
+CURVE_SETTINGS = ["data.window=4", "data.stride=24", "train.stages.supervised.epochs=4", "train.stages.all.epochs=1",
                   "train.batch_size=4", "train.progress=false", "train.tensorboard=false", "train.device=cpu"]
 
 
 def design_overrides(design: str) -> list[str]:
-    return [f"model.{k}={str(v).lower()}" for k, v in DESIGNS[design].items()]
+    """``--set`` overrides of a design; ``gate_attention`` first (``per_gate`` is refused without ``concat_heads``,
+    and each override is checked as it is applied)."""
+    keys = sorted(DESIGNS[design], key=lambda k: k != "gate_attention")
+    return [f"model.{k}={str(DESIGNS[design][k]).lower()}" for k in keys]
 
 
 def load_cfg(overrides):

@@ -29,6 +29,8 @@ SMALL = dict(graph_hidden=[8, 16], graph_heads=[2, 2], shape_mlp=[16, 8], motion
              corrective_hidden=8, corrective_heads=2, corrective_layers=[8, 3], descriptor_samples=32)
 CONFIG = SwinGarConfig(**SMALL)
 HISTORY = CONFIG.motion_frames - 1 + CONFIG.corrective_frames - 1
+#: Adam steps and the loose bound (mm) of the one-window memorisation test (measured: see the test).
+MEMORISE_STEPS, MEMORISE_BOUND_MM = 150, 10.0
 
 
 def synthetic_frames(rest: np.ndarray, translation: np.ndarray, phase: float) -> np.ndarray:
@@ -239,6 +241,35 @@ def test_training_steps_lower_the_loss(model, batch):
         opt.step()
     assert terms["vert"] < 0.2 * first[1], (first, terms)
     assert loss.item() < 0.7 * first[0], (first, loss.item())
+
+
+def test_learns_one_window_by_heart(data):
+    """The gradient path end to end: Adam (lr 1e-2) on one window of 4 frames alone takes the output far below
+    where it starts, and the coarse stage (skinning weights and blend shapes) learns too, not only the correction.
+    Measured after 150 steps: 90.0 -> 2.7 mm, the coarse mesh 90.0 -> 34.4 mm (bounds: 10 mm and a tenth; half)."""
+    windows = MultiWindowDataset(data, window=4, stride=50, history=HISTORY)
+    group = collate_by_graph([windows[0]])[0]
+    torch.manual_seed(0)
+    model = SwinGar.from_data(data, CONFIG)
+    opt = torch.optim.Adam(model.parameters(), 1e-2)
+
+    def errors():
+        with torch.no_grad():
+            out = model(group["graph_tensors"], group["root"], group["joints"],
+                        state={"root": group["history_root"], "joints": group["history_joints"]})
+            err = out["verts"] - group["verts"]
+            rms = lambda e: float(e.square().sum(-1).mean().sqrt()) * 1e3  # noqa: E731
+            return rms(err), rms(err - out["correction"])
+
+    first = errors()
+    for _ in range(MEMORISE_STEPS):
+        loss, _ = model.training_loss([group], "supervised")
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    last = errors()
+    assert last[0] < MEMORISE_BOUND_MM and last[0] < 0.1 * first[0], (first, last)
+    assert last[1] < 0.5 * first[1], (first, last)
 
 
 def test_checkpoint_round_trip(model, batch, tmp_path):
