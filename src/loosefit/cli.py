@@ -250,6 +250,7 @@ def cmd_animate(args):
     from loosefit.animate import Animator
     from loosefit.animate_any import AnyGarmentAnimator, is_static_run
     from loosefit.io.export import export_animation
+    from loosefit.metrics.collision import inside_body_report
     from loosefit.motion.io import load_motion
 
     writable(args.out, folder=True if len(args.motion) > 1 else None)
@@ -271,7 +272,7 @@ def cmd_animate(args):
     for path, motion in zip(args.motion, motions):  # root motion the run never saw: the garment may lag behind
         for line in animator.range_warnings(motion, path):
             print(f"loosefit animate: warning: {line}", file=sys.stderr)
-    if args.collision:
+    if args.collision != "none":
         from loosefit.models.collision import SDF_FILE, collision_margin, handle_motion_collisions, load_body_sdf
 
         mode, net = args.collision, None
@@ -288,7 +289,11 @@ def cmd_animate(args):
         posed = body.pose(motion) if args.with_body or out.suffix.lower() == ".npz" else None
         export_animation(out, verts, faces, fps=motion.fps,
                          body_verts=None if posed is None else posed.verts, body_faces=None if posed is None else body.faces)
-        print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method})")
+        inside = inside_body_report(verts, body, motion)
+        print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method}, collision handling "
+              f"{args.collision}); inside the body by more than {inside['depth_m'] * 1e3:g} mm: {inside['mean_percent']:.1f} % "
+              f"of the vertices, {inside['worst_percent']:.1f} % in the worst frame (measured on {inside['frames']} of "
+              f"{inside['of_frames']} frames)")
 
 
 def cmd_report(args):
@@ -520,8 +525,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "nothing), last or a checkpoint path")
     sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the model runs")
-    sp.add_argument("--collision", default=None, help="collision post-process: a body SDF run folder (loosefit "
-                    "train --method collision), 'exact' (libigl distance) or 'pushout' (fixed-distance baseline)")
+    sp.add_argument("--collision", default="exact", help="collision handling after the network (SwinGar Eq. 10): "
+                    "'exact' (the default: libigl's distance to the posed body), a body SDF run folder (loosefit train "
+                    "--method collision: the neural field), 'pushout' (fixed-distance baseline) or 'none'")
     sp.add_argument("--collision-margin", default="0",
                     help="with a body SDF network: correct where the network puts a vertex less than this many "
                          "metres outside the body too (its surface moved out; default 0, as in SwinGar); 'auto': "

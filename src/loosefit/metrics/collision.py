@@ -12,6 +12,7 @@ vertices resting on the skin within simulation round-off.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -67,3 +68,35 @@ def collision_ratio_per_frame(garment_verts, body, body_faces=None, tolerance: f
 def collision_ratio(garment_verts, body, body_faces=None, tolerance: float = DEFAULT_TOLERANCE) -> float:
     """Mean over frames of the colliding-vertex percentage."""
     return float(collision_ratio_per_frame(garment_verts, body, body_faces, tolerance).mean())
+
+
+#: Depth (metres) beyond which an animated garment vertex counts as inside the body in what ``loosefit animate``
+#: reports: deeper than cloth resting on the skin, shallower than the collisions a user sees.
+REPORT_DEPTH = 0.005
+#: Frames (evenly spaced) ``loosefit animate`` measures: the proxy's distance costs about 50 ms a frame.
+REPORT_FRAMES = 60
+
+
+def inside_body_report(garment_verts: np.ndarray, body, motion, depth: float = REPORT_DEPTH,
+                       max_frames: int = REPORT_FRAMES) -> dict:
+    """How much of an animated garment is inside the body, as ``loosefit animate`` prints it.
+
+    Args:
+        garment_verts: ``(T, V, 3)`` world garment vertices along ``motion``, metres.
+        body: the body the garment is worn on (its low-resolution collision proxy is measured, where it has one).
+        depth: metres inside the body a vertex must exceed to count.
+        max_frames: frames measured at most, evenly spaced over the motion.
+
+    Returns:
+        ``{"mean_percent", "worst_percent", "frames", "of_frames", "depth_m"}``: the percentage of vertices
+        deeper than ``depth`` averaged over the measured frames and in the worst one.
+    """
+    T = len(garment_verts)
+    frames = np.unique(np.linspace(0, T - 1, min(T, max_frames)).round().astype(int))
+    proxy = body.collision_proxy() if hasattr(body, "collision_proxy") else body
+    posed = proxy.pose(dataclasses.replace(motion, rotations=motion.rotations[frames],
+                                          translation=motion.translation[frames])).verts
+    ratio = collision_ratio_per_frame(np.asarray(garment_verts)[frames], posed, proxy.faces, depth)
+    return {"mean_percent": float(ratio.mean()), "worst_percent": float(ratio.max()), "frames": int(len(frames)),
+            "of_frames": int(T), "depth_m": depth}
+
