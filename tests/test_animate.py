@@ -150,3 +150,20 @@ def test_inside_body_report_counts_what_is_deeper_than_the_depth(body):
     shallow = posed[:, picked] - 0.002 * normals
     assert inside_body_report(shallow, body, motion, max_frames=10)["mean_percent"] < 1.0
 
+
+
+def test_view_animates_runs_with_collision_handling_like_animate(lbs_run, tmp_path, body):
+    """`loosefit view RUN:MOTION` shows the animation `loosefit animate` writes: collision-handled by default."""
+    from loosefit.models.collision import handle_motion_collisions
+    from loosefit.motion.procedural import generate
+    from loosefit.viz.viewer_scene import build_scene
+
+    motion = generate("spin", 1.0, 0, body)
+    motion.save(tmp_path / "m.npz")
+    spec = [f"{lbs_run}:{tmp_path / 'm.npz'}"]
+    raw = build_scene(spec, body=body, collisions=False, handling="none").panels[0].garment.verts
+    fixed = build_scene(spec, body=body, collisions=False).panels[0].garment.verts
+    expected = handle_motion_collisions(raw, Animator(lbs_run).faces, body, motion, "exact")
+    assert np.abs(fixed - expected).max() < 1e-6 and np.abs(fixed - raw).max() > 1e-4
+    with pytest.raises(InputError, match="exact, pushout or none"):
+        build_scene(spec, body=body, handling="sdf")

@@ -322,17 +322,21 @@ def print_warnings(scene: ViewerScene) -> None:
 
 
 def view(inputs: list[str], port: int = 8000, export: str | Path | None = None, body=None,
-         collisions: bool = True, collision_frames: int = DEFAULT_COLLISION_FRAMES, serve: bool = True):
+         collisions: bool = True, collision_frames: int = DEFAULT_COLLISION_FRAMES, serve: bool = True,
+         handling: str = "exact"):
     """``loosefit view INPUT... [--port P] [--export DIR]``: export the page to ``DIR``, or serve it on
     ``http://127.0.0.1:P/`` until interrupted. Returns the index path (export) or the server (``serve=False``:
-    started in the background; close it when done)."""
+    started in the background; close it when done). ``handling``: the runs' collision handling (exact, pushout
+    or none)."""
     if export is not None:
-        scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames)
+        scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames,
+                            handling=handling)
         print_warnings(scene)
         return export_scene(scene, export)
     server = ViewerServer(None, port=port)  # a port in use fails before the inputs are loaded
     try:
-        scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames)
+        scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames,
+                            handling=handling)
     except BaseException:
         server.httpd.server_close()
         raise
