@@ -71,7 +71,9 @@ def run(store, tmp_path_factory):
     from loosefit.cli import main
 
     out = tmp_path_factory.mktemp("fitgar-run") / "run"
-    assert main(["train", "--method", "fitgar", "--data", str(store), "--out", str(out), "--config", str(TINY_CONFIG)]) == 0
+    # validated on the held-out dress: the store has no val split
+    assert main(["train", "--method", "fitgar", "--data", str(store), "--out", str(out), "--config", str(TINY_CONFIG),
+                 "--val-split", "test"]) == 0
     return out
 
 
@@ -200,6 +202,6 @@ def test_resume_of_a_finished_run_trains_no_further(store, run):
     from loosefit.training import train_model
 
     before = (run / "checkpoints" / "last.pt").read_bytes()
-    result = train_model("fitgar", store, None, run, config=TINY_CONFIG, resume=True)
+    result = train_model("fitgar", store, None, run, config=TINY_CONFIG, resume=True, val_split="test")
     assert result.global_step == json.loads((run / "run.json").read_text())["global_step"]
     assert (run / "checkpoints" / "last.pt").read_bytes() == before
