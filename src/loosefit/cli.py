@@ -302,7 +302,8 @@ def cmd_report(args):
 
     writable(args.out, folder=True)  # before the runs are evaluated
     index = build_report(args.data, args.run, args.out, sequences=args.sequence, split=args.split,
-                         results_dir=args.results or DEFAULT_RESULTS, device=args.device, images=not args.no_images)
+                         results_dir=args.results or DEFAULT_RESULTS, device=args.device, images=not args.no_images,
+                         handling=args.collision)
     print(f"wrote {index} (and report.md, metrics.json, figures/)")
 
 
@@ -571,6 +572,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--results", default=None, help="benchmark results folder (default: the checkout's benchmarks/results)")
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default="cpu", help="where the models run")
     sp.add_argument("--no-images", action="store_true", help="leave out the rendered error maps")
+    sp.add_argument("--collision", choices=["exact", "pushout", "none"], default="exact",
+                    help="collision handling of the animations, as loosefit animate (default exact)")
     sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser")

@@ -48,9 +48,10 @@ def _metric_cells(row: dict) -> list[str]:
 
 def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequences: list[str] | None = None,
                  split: str | None = "test", results_dir: str | Path | None = DEFAULT_RESULTS, device: str = "cpu",
-                 images: bool = True) -> Path:
+                 images: bool = True, handling: str = "exact") -> Path:
     """Animate the held-out ``sequences`` (default: the ``split``) of ``data`` with every run, evaluate
-    them, draw the figures and write the report into ``out``; returns ``out/index.html``.
+    them, draw the figures and write the report into ``out``; returns ``out/index.html``. The animations get
+    collision handling ``handling`` (``"exact"``, ``"pushout"`` or ``"none"``), as ``loosefit animate`` does.
 
     Raises:
         InputError: a missing store or run, a run for a garment none of the sequences wears, an unknown
@@ -71,7 +72,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
     if results_dir is not None and not Path(results_dir).is_dir():
         raise InputError("benchmark results folder not found", results_dir)
     seqs = load_sequences(data, sequences, split)
-    methods = load_methods(runs, seqs, device)
+    methods = load_methods(runs, seqs, device, handling)
     for m in methods:  # its predictions of these motions are extrapolations
         for line in m.warnings:
             print(f"loosefit report: warning: {m.label}: {line}", file=sys.stderr, flush=True)
@@ -108,7 +109,8 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         "data": str(data.resolve()),
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "results_dir": None if results_dir is None else str(results_dir),
-        "which": "the named sequences" if sequences is not None else f"the {split} split",
+        "which": ("the named sequences" if sequences is not None else f"the {split} split")
+                 + f"; collision handling {handling}",
         "headers": [h for _, h, _ in METRIC_COLUMNS],
         "methods": [{"label": e["method"], "run": e["run"],
                      "rows": [{"name": r["name"], "frames": r["frames"], "cells": _metric_cells(r)} for r in e["rows"]],
@@ -129,7 +131,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
     env = Environment(loader=PackageLoader("loosefit.report", "templates"), undefined=StrictUndefined,
                       autoescape=select_autoescape(enabled_extensions=("html.j2",), default_for_string=False),
                       trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
-    doc = {"data": context["data"], "methods": evaluations, "sequences": context["sequences"], "plots": plots,
+    doc = {"data": context["data"], "collision_handling": handling, "methods": evaluations, "sequences": context["sequences"], "plots": plots,
            "speed": speed, "claims": claims}
     with atomic_path(out / "metrics.json") as tmp:
         tmp.write_text(json.dumps(doc, indent=2) + "\n")
