@@ -211,8 +211,8 @@ def batches_of(data: GarmentFrames, indices, size: int) -> list[dict]:
             for i in range(0, len(indices), size)]
 
 
-def fitgar_scale(args) -> dict:
-    """Section 3 (see the module docstring)."""
+def fitgar_scale(args, save=None) -> dict:
+    """Section 3 (see the module docstring); ``save(result)`` after each training size, when given."""
     rows = []
     store = DatasetStore.open(args.data, mode="r")
     garments = None if not args.sequences else {store.sequence(n).garment for n in args.sequences.split(",")}
@@ -237,6 +237,12 @@ def fitgar_scale(args) -> dict:
         rows.append({"frame_stride": stride, "samples": len(data), "sequences": data.sequence_names,
                      "batch": args.batch,
                      "steps": log})
+        if save is not None:
+            save(scale_result(args, test, test_batches, rows))
+    return scale_result(args, test, test_batches, rows)
+
+
+def scale_result(args, test: GarmentFrames, test_batches: list[dict], rows: list[dict]) -> dict:
     return {"method": "fitgar", "anchor": args.anchor, "config": str(args.config), "overrides": args.set or [],
             "test_sequences": test.sequence_names,
             "test_frames": int(sum(len(b["counts"]) for b in test_batches)), "test_stride": args.test_stride,
@@ -319,7 +325,8 @@ def main(argv=None) -> None:
     elif args.section == "twins":
         value, label = pose_twins(args), None
     else:
-        value, label = fitgar_scale(args), args.label or args.anchor
+        label = args.label or args.anchor
+        value = fitgar_scale(args, lambda partial: save_results(args.name, merge(args.name, "scale", partial, label)))
     value = {**value, "wall_seconds": time.perf_counter() - start} if isinstance(value, dict) else value
     save_results(args.name, merge(args.name, args.section, value, label))
 
