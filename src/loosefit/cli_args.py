@@ -1,5 +1,6 @@
 """Argument checks of the command line: argparse ``type=`` functions (a bad value is a usage error, exit 2,
-without a traceback) and the check that an output can be written before any work starts."""
+without a traceback), the check that an output can be written before any work starts, and the options and
+help texts several verbs share."""
 
 from __future__ import annotations
 
@@ -51,3 +52,34 @@ def writable(path, folder: bool | None = None) -> None:
     if folder is None:
         folder = str(path).endswith(("/", "\\")) or Path(path).suffix == ""
     check_writable(path, folder=folder)
+
+
+JOINT_MAP_FORMAT = """\
+A joint map is a YAML file saying which joint of a BVH skeleton drives which joint of the body's rig
+(cmu_mb for the Anny body: Hips, LHipJoint, LeftUpLeg, LeftLeg, LeftFoot, LeftToeBase, LowerBack,
+Spine, Spine1, Neck, Neck1, Head, LeftShoulder, LeftArm, LeftForeArm, LeftHand, LThumb,
+LeftFingerBase, LeftHandFinger1 and their Right* / R* twins). Built-in maps: cmu, mixamo, cc
+(Character Creator), chosen automatically when the names fit; pass any other with --joint-map.
+
+  name: my-skeleton            # optional, default: the file name
+  target_rig: cmu_mb           # optional: the rig whose joints are the keys of joints
+  joints:                      # required: rig joint: source joint, or a list of alternatives
+    Hips: pelvis
+    LeftUpLeg: [l_hip, LeftHip]
+  ignore: [prop_*, "*_twist"]  # source joints with no rig joint (fnmatch patterns)
+  optional: [LeftToeBase]      # rig joints whose source joint may be missing from a file
+  calibration: rest            # rest | motion (default: rest when the file's rest pose stands)
+  up: y                        # the file's up axis (x, -y, z ...), default: detected
+  front: z                     # the file's front axis, default: detected
+
+Source names match with or without a namespace prefix (mixamorig:Hips matches Hips). Every source
+joint must be mapped or ignored; the hips, both legs (hip, knee, ankle) and one spine joint must be
+mapped. `loosefit motion map FILE.bvh --out MAP.yaml` writes a starting map to check."""
+
+
+def joint_map_option(sp) -> None:
+    """The ``--joint-map`` option of every verb that reads a BVH file."""
+    sp.add_argument("--joint-map", default=None, metavar="MAP.yaml",
+                    help="joint map for a BVH skeleton without a built-in map (cmu, mixamo, cc): a YAML file or a "
+                         "built-in name; `loosefit motion map --help` shows the format, `loosefit motion map "
+                         "FILE.bvh --out MAP.yaml` writes a starting one")
