@@ -272,6 +272,7 @@ def cmd_curve(args) -> None:
             scores["ratio_to_body_lbs"] = scores["mean_rmse_mm"] / results["body_lbs_mean_mm"]
             results["variants"].setdefault(variant, {})[f"seed-{seed}"] = scores
             print(variant, seed, scores["mean_rmse_mm"], flush=True)
+            save_results(args.name, results)  # after every run: a stopped benchmark keeps what it measured
     for variant, seeds in results["variants"].items():
         values = [s["mean_rmse_mm"] for s in seeds.values()]
         results["variants"][variant]["summary"] = {"mean_rmse_mm": float(np.mean(values)),
