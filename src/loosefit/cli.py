@@ -122,8 +122,8 @@ def cmd_garment_import(args):
     p = garment.params
     repaired = {k: v for k, v in p["repairs"].items() if v}
     print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces; {p['unit']}, {p['up']} up, "
-          f"attachment {p['attachment']}, top at {p['top_z']:.3f} m (moved by {p['offset']} m)"
-          + (f"; repaired {repaired}" if repaired else ""))
+          f"attachment {p['attachment']}, top at {p['top_z']:.3f} m (moved by {p['offset']} m); pushed out of the body "
+          f"by {p['pushed_out']['max_mm']:g} mm at most" + (f"; repaired {repaired}" if repaired else ""))
 
 
 def cmd_info(args):

@@ -121,14 +121,39 @@ def test_pieces(tmp_path, body, skirt):
 
 
 def test_penetration_is_removed_and_ply_reads(tmp_path, body, skirt, sdf):
+    """A penetration is pushed out and the push reported, measured against the rigid placement."""
+    from loosefit.garment.fitting import outward
+
     v = skirt.verts.astype(np.float64)
-    v[:, :2] *= 0.8  # pulled into the hips
+    d, direction = outward(sdf, v)
+    dent = d < d.min() + 0.004  # the vertices nearest the hips, moved 6 mm into the body
+    v[dent] -= (d[dent] + 0.006)[:, None] * direction[dent]
     path = tmp_path / "tight.ply"
     trimesh.Trimesh(v, skirt.faces, process=False).export(path)
     assert sdf.query(v).min() < -0.005
     g = import_garment(path, body)
     assert g.params["up"] == "z" and mesh_report(g.verts, g.faces).ok
     assert clearance(g, sdf) > 0.003
+    rigid = v + np.asarray(g.params["offset"])  # the placement: the same axes and unit, moved
+    moved = np.linalg.norm(g.verts - rigid, axis=1)
+    assert g.params["pushed_out"]["max_mm"] == pytest.approx(1e3 * moved.max(), abs=0.01)
+    assert g.params["pushed_out"]["max_mm"] > 6.0 and g.params["pushed_out"]["over_5mm_percent"] > 0
+    moved_before = np.linalg.norm(g.verts[~dent] - rigid[~dent], axis=1)
+    assert np.median(moved_before) < 1e-6  # away from the dent the garment keeps its shape
+
+
+@pytest.mark.parametrize("size, unit, message", [
+    (0.7, "cm", r"its largest side is 7 mm in cm, .* \(in the other units: 70 cm in m, 0\.7 mm in mm\)"),  # metres read as cm
+    (6.0, None, r"its largest side is 6 m in m, 6 cm in cm, 6 mm in mm"),  # no unit makes a garment of it
+    (0.01, None, r"its largest side is 1 cm in m, 0\.1 mm in cm, 0\.01 mm in mm"),
+    (6000.0, None, r"its largest side is 6e\+03 m in m, 60 m in cm, 6 m in mm"),
+])
+def test_a_size_no_unit_makes_a_garment_is_refused(tmp_path, body, skirt, size, unit, message):
+    path = tmp_path / "odd.obj"
+    v = skirt.verts.astype(np.float64)
+    trimesh.Trimesh(v * size / np.ptp(v, axis=0).max(), skirt.faces, process=False).export(path)
+    with pytest.raises(InputError, match="no unit gives a garment's size: " + message):
+        import_garment(path, body, unit=unit)
 
 
 # Garments as other tools write them: centred at their own pelvis origin, Y-up (+Z front), in
