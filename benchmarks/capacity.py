@@ -1,12 +1,13 @@
 """Can a method fit what it has seen? Anchor sharing, memorisation and a small scale curve.
 
-Three measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
+Four measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
 replaces only itself, so the sections can be run one at a time):
 
 1. ``anchors`` (FitGar, no store needed): ``shared_anchor_fraction`` of the seed-0 template of every kind
    (skirt, dress, long_shirt, jumpsuit) at ``--edge-length`` (3 cm) on the average Anny body, for each
    anchor (:data:`loosefit.models.fitgar_inputs.ANCHOR_MODES`): the share of garment vertices whose rest
-   anchor another vertex's is within 1 mm of, and the largest group of such vertices;
+   anchor another vertex's is within 1 mm of, and the largest group of such vertices; beside them the closest
+   vertex of the body subdivided once (the paper's way, FitGar Sec. 5.1);
 2. ``memorise`` (``--method``, :data:`MEMORISE`): the method trained on a handful of training frames
    (``--samples`` spread over ``--sequences``) with the whole handful as one batch, and its error on exactly
    those frames after each of ``--steps`` steps. FitGar: its coarse stage then its detail stage (coarse
@@ -16,12 +17,14 @@ replaces only itself, so the sections can be run one at a time):
    value per group of vertices sharing an anchor (a network that reads a node's own features alone can do
    no better);
 3. ``scale`` (FitGar): trained on every ``k``-th training frame (``--strides``, e.g. 8, 4, 2: x1, x2, x4
-   samples) in minibatches of ``--batch`` for ``--scale-steps`` steps a stage, the coarse and detail errors on
-   the training frames used and on every ``--test-stride``-th frame of the test split, after each of
-   ``--scale-checkpoints`` steps of the coarse stage and at the end of the detail stage.
+   samples) of ``--sequences`` in minibatches of ``--batch``, the coarse and detail errors on the training frames
+   used and on every ``--test-stride``-th frame of the test sequences of the same garments, after each of
+   ``--scale-checkpoints`` steps of the coarse stage and at the end of as many detail steps as the last one;
+4. ``twins`` (FitGar's data): is the garment a function of the pose? (:func:`pose_twins`).
 
-Every run uses one torch thread, the config file's widths (``configs/models/fitgar-cpu.yaml`` by default),
-its learning rate and gradient clip (``--set train.lr=...`` and model keys override), Adam, seed 0.
+Every run uses one torch thread (``--device cuda`` trains on a GPU, same widths and steps), the config file's
+widths (``configs/models/fitgar-cpu.yaml`` by default), its learning rate and gradient clip (``--set train.lr=...``
+and model keys override), Adam, seed 0.
 
 Run:
     .venv/bin/python benchmarks/capacity.py anchors --name capacity-fitgar
@@ -29,6 +32,8 @@ Run:
         --sequences skirt-0+average+walk+default \
         --samples 4 --steps 50,100,200,400 --anchor surface --label surface --name capacity-fitgar
     .venv/bin/python benchmarks/capacity.py scale --data S.zarr --strides 8,4,2 --name capacity-fitgar
+    .venv/bin/python benchmarks/capacity.py twins --data S.zarr --name capacity-fitgar
+(the commands of the published numbers are in benchmarks/README.md, "FitGar's capacity")
 """
 
 from __future__ import annotations
