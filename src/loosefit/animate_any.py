@@ -18,7 +18,7 @@ from loosefit.animate import load_run
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import collate_frames, frame_items
-from loosefit.models.fitgar_inputs import GarmentBodyPair
+from loosefit.models.fitgar_inputs import DEFAULT_ANCHOR, GarmentBodyPair
 from loosefit.models.motion_features import to_world
 from loosefit.models.registry import model_class
 from loosefit.train.protocol import to_device
@@ -94,7 +94,9 @@ class AnyGarmentAnimator:
             raise InputError(f"the model was trained on bodies of {sizes['num_shape']} shape values and "
                              f"{sizes['num_joints']} joints; this body has {len(shape)} and {body.num_joints}")
         alpha = self.fit_model.attribute(garment_verts, faces, body.rest_verts())
-        return GarmentBodyPair.build(garment_verts, faces, body, shape, alpha)
+        # the anchors the run was trained on (runs recorded before surface anchors used body vertices)
+        anchor = getattr(self.model, "anchor", None) or DEFAULT_ANCHOR
+        return GarmentBodyPair.build(garment_verts, faces, body, shape, alpha, anchor=anchor)
 
     def animate(self, pair: GarmentBodyPair, motion: Motion, output: str = "verts") -> np.ndarray:
         """World vertices ``(T, V, 3)`` float32 of ``pair`` along ``motion``: ``output`` ``"verts"`` (the

@@ -158,9 +158,9 @@ def test_animate_any_garment_frame_by_frame(run, heavy_case):
         animator.animate(pair, motion, output="lf")
 
 
-def test_a_run_recorded_before_surface_anchors_is_refused(run, heavy_case, tmp_path):
-    """Its sizes name no anchor: it was trained on closest-vertex anchors, and frames built on the surface are
-    refused with a clear error; built on vertices, they animate."""
+def test_a_run_recorded_before_surface_anchors_animates_on_its_own_anchors(run, heavy_case, tmp_path):
+    """Its sizes name no anchor: it was trained on closest-vertex anchors. The animator builds pairs on those
+    (so `loosefit animate` still animates it); frames built on the surface are refused with a clear error."""
     import shutil
 
     from loosefit.animate_any import AnyGarmentAnimator
@@ -175,11 +175,13 @@ def test_a_run_recorded_before_surface_anchors_is_refused(run, heavy_case, tmp_p
     shape, heavy, garment, motion = heavy_case
     animator = AnyGarmentAnimator(old)
     pair = animator.pair(garment.verts, garment.faces, heavy)
+    vertex = GarmentBodyPair.build(garment.verts, garment.faces, heavy, heavy.shape.to_array(), pair.alpha,
+                                   anchor="vertex")
+    assert np.array_equal(pair.rest_anchors(), vertex.rest_anchors())
+    assert np.isfinite(animator.animate(pair, motion)).all()
+    surface = GarmentBodyPair.build(garment.verts, garment.faces, heavy, heavy.shape.to_array(), pair.alpha)
     with pytest.raises(InputError, match="trained on 'vertex' anchors .*recorded before"):
-        animator.animate(pair, motion)
-    alpha = pair.alpha
-    vertex = GarmentBodyPair.build(garment.verts, garment.faces, heavy, heavy.shape.to_array(), alpha, anchor="vertex")
-    assert np.isfinite(animator.animate(vertex, motion)).all()
+        animator.animate(surface, motion)
 
 
 def test_loosefit_animate_cli(run, heavy_case, tmp_path):

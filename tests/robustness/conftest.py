@@ -33,12 +33,13 @@ def robustness_shared(tiny_store, tmp_path_factory) -> Shared:
                   plan=tiny_store.parent / "tiny.yaml", python=sys.executable)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def robustness_results(request, robustness_shared, tmp_path_factory) -> dict:
-    """Result name -> :class:`~tests.robustness.harness.Result` of every case a collected test names
-    (its ``case`` parameter), run once for the session, two at a time."""
+    """Result name -> :class:`~tests.robustness.harness.Result` of every case a collected test of this module
+    names (its ``case`` parameter), run once for the module, two at a time. Per module, so that parallel test
+    workers (pytest-xdist, one module each) never run the same cases twice."""
     wanted = {item.callspec.params["case"] for item in request.session.items
-              if hasattr(item, "callspec") and "case" in item.callspec.params}
+              if item.module is request.module and hasattr(item, "callspec") and "case" in item.callspec.params}
     cases = [c for c in CASES if wanted & set(c.results or (c.name,))]
     results = run_cases(cases, tmp_path_factory.mktemp("robustness-cases"), robustness_shared, workers=2)
     return {r.name: r for r in results}
