@@ -45,7 +45,7 @@ STORE=$G/data/train.zarr
 if [ "$DEVICE" = cuda ]; then
   SIZE=paper; STEPS=${STEPS:-300}
   step cuda-tests 120 $PY -m pytest -q -p no:cacheprovider -o addopts= tests/models/test_swingar.py \
-    tests/models/test_jointnet.py tests/models/layers -k "cuda or gat or gru"
+    tests/models/test_jointnet.py tests/models/layers -k "cuda or gat_ln or lstm or gru"
 else
   SIZE=tiny; STEPS=${STEPS:-24}
 fi
