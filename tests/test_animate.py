@@ -167,3 +167,25 @@ def test_view_animates_runs_with_collision_handling_like_animate(lbs_run, tmp_pa
     assert np.abs(fixed - expected).max() < 1e-6 and np.abs(fixed - raw).max() > 1e-4
     with pytest.raises(InputError, match="exact, pushout or none"):
         build_scene(spec, body=body, handling="sdf")
+
+
+def test_view_takes_the_joint_map_of_a_bvh_motion(lbs_run, tmp_path, body):
+    """A BVH of a skeleton without a built-in map: `view RUN:clip.bvh` refuses it naming `loosefit motion map`;
+    with `--joint-map` it shows what `animate --joint-map` writes."""
+    from loosefit.cli import main
+    from loosefit.motion.bvh import write_bvh
+    from loosefit.viz.viewer_scene import build_scene
+    from tests.motion.test_retarget import smooth_motion, to_bvh
+
+    bvh, joint_map = tmp_path / "odd.bvh", tmp_path / "map.yaml"
+    names = [f"bone{j:02d}" for j in range(body.num_joints)]
+    write_bvh(bvh, to_bvh(body, smooth_motion(body, 30.0, seconds=0.5), names=names, up="y", scale=100.0))
+    assert main(["motion", "map", str(bvh), "--out", str(joint_map)]) == 0
+    with pytest.raises(InputError, match="loosefit motion map"):
+        build_scene([f"{lbs_run}:{bvh}"], body=body, collisions=False, handling="none")
+    shown = build_scene([f"{lbs_run}:{bvh}"], body=body, collisions=False, handling="none",
+                        joint_map=str(joint_map)).panels[0].garment.verts
+    assert main(["animate", str(lbs_run), "--motion", str(bvh), "--joint-map", str(joint_map), "--collision", "none",
+                 "--out", str(tmp_path / "a.npz")]) == 0
+    with np.load(tmp_path / "a.npz") as z:
+        assert np.abs(shown - z["verts"]).max() < 1e-6

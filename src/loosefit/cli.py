@@ -332,7 +332,7 @@ def cmd_view(args):
     if args.export is not None:
         writable(args.export, folder=True)  # before the scene is built
     result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
-                  collision_frames=args.collision_frames, handling=args.collision)
+                  collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map)
     if args.export is not None:
         print(f"wrote {result}: open it in a browser (from disk or any web server)")
 
@@ -555,6 +555,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "of serving it (opens from disk)")
     sp.add_argument("--collision", choices=["exact", "pushout", "none"], default="exact",
                     help="collision handling of the runs' animations, as loosefit animate (default exact)")
+    joint_map_option(sp)
     sp.add_argument("--no-collisions", action="store_true", help="skip the per-frame collision ratio")
     sp.add_argument("--collision-frames", type=int_at_least(0), default=100, help="compute the collision ratio at this many "
                     "evenly spaced frames (0: every frame; ~0.5 s a frame for a 13.7k-vertex body)")

@@ -118,7 +118,8 @@ def _dataset_panel(store: Path, name: str, body) -> tuple[ViewerPanel, float]:
     return _panel_from_tracks(tracks, name, f"{store}:{name}"), fps
 
 
-def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact") -> tuple[ViewerPanel, float]:
+def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact",
+               joint_map=None) -> tuple[ViewerPanel, float]:
     from loosefit.animate import Animator
     from loosefit.animate_any import is_static_run
     from loosefit.motion.io import load_motion
@@ -132,7 +133,7 @@ def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact") -> t
         from loosefit.body import AnnyBody
 
         body = AnnyBody()
-    motion = load_motion(motion_path, body)
+    motion = load_motion(motion_path, body, joint_map=joint_map)
     animator = Animator(run)
     verts = animator.animate_batch([motion])[0]
     if handling != "none":  # as `loosefit animate` does by default
@@ -147,9 +148,10 @@ def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact") -> t
                        warnings=animator.range_warnings(motion, motion_path)), motion.fps
 
 
-def load_input(spec: str, body=None, handling: str = "exact") -> tuple[ViewerPanel, float]:
+def load_input(spec: str, body=None, handling: str = "exact", joint_map=None) -> tuple[ViewerPanel, float]:
     """One viewer input (see the module docstring) as ``(panel, fps)``; a run's animation gets collision
-    handling ``handling`` (``"exact"``, ``"pushout"`` or ``"none"``, as ``loosefit animate --collision``).
+    handling ``handling`` (``"exact"``, ``"pushout"`` or ``"none"``, as ``loosefit animate --collision``), its
+    BVH motion the joint map ``joint_map`` (as ``loosefit animate --joint-map``).
 
     Raises:
         InputError: a missing file, an unreadable or malformed one, an unknown kind of input.
@@ -167,7 +169,7 @@ def load_input(spec: str, body=None, handling: str = "exact") -> tuple[ViewerPan
 
             if is_dataset_store(lpath):
                 return _dataset_panel(lpath, right, body)
-            return _run_panel(lpath, Path(right), body, handling)
+            return _run_panel(lpath, Path(right), body, handling, joint_map)
         if not lpath.exists():
             raise InputError("no such file or directory", lpath)
     if path.is_dir():
@@ -220,7 +222,8 @@ def _collisions(panels: list[ViewerPanel], max_frames: int) -> None:
 
 
 def build_scene(inputs: list[str], body=None, collisions: bool = True,
-                collision_frames: int = DEFAULT_COLLISION_FRAMES, handling: str = "exact") -> ViewerScene:
+                collision_frames: int = DEFAULT_COLLISION_FRAMES, handling: str = "exact",
+                joint_map=None) -> ViewerScene:
     """The scene of ``loosefit view INPUT...``: the first input is the reference (simulation), the others
     predictions compared with it.
 
@@ -229,6 +232,7 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
         body: the body posed for dataset sequences and runs (default: Anny, average shape).
         collisions: compute the per-frame collision ratio of panels that have a body.
         handling: collision handling of the runs' animations (:func:`load_input`).
+        joint_map: the joint map of the runs' BVH motions (:func:`load_input`).
         collision_frames: compute it at this many evenly spaced frames (0: every frame); the others are
             NaN (one signed-distance tree of a 13.7k-vertex body and a 12k-vertex query take ~0.5 s a frame
             on the 2-core machines).
@@ -241,7 +245,7 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
         raise InputError("give at least one input: SEQ.npz, DATA.zarr:SEQUENCE or RUN:MOTION")
     if handling not in ("exact", "pushout", "none"):
         raise InputError(f"collision handling must be exact, pushout or none, got {handling!r}")
-    loaded = [load_input(spec, body, handling) for spec in inputs]
+    loaded = [load_input(spec, body, handling, joint_map) for spec in inputs]
     panels = [p for p, _ in loaded]
     fps = loaded[0][1]
     ref = panels[0]
