@@ -36,6 +36,7 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_results  # noqa: E402
+from swingar_gpu import window_errors  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CPU_CONFIG = ROOT / "configs" / "models" / "swingar-cpu.yaml"
@@ -165,19 +166,7 @@ def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: 
         curve, grads, t0 = [], {}, time.time()
 
         def score(step, loss):
-            with torch.no_grad():
-                sq = csq = n = 0.0
-                for group in batch:
-                    out = model(group["graph_tensors"], group["root"], group["joints"],
-                                state={"root": group["history_root"], "joints": group["history_joints"]})
-                    err = out["verts"] - group["verts"]
-                    # the coarse mesh in the same frame as the output: it lacks only the correction
-                    cerr = err - out["correction"]
-                    sq += float(err.square().sum(-1).mean(-1).sum())
-                    csq += float(cerr.square().sum(-1).mean(-1).sum())
-                    n += err.shape[0] * err.shape[1]
-            curve.append({"step": step, "rmse_mm": (sq / n) ** 0.5 * 1e3, "coarse_rmse_mm": (csq / n) ** 0.5 * 1e3,
-                          "loss": loss, "seconds": time.time() - t0})
+            curve.append({"step": step, **window_errors(model, batch), "loss": loss, "seconds": time.time() - t0})
 
         for step in range(steps + 1):
             loss, _ = model.training_loss(batch, stage)

@@ -167,6 +167,21 @@ MEMORISE = {
 }
 
 
+def window_errors(model, batch: list[dict]) -> dict[str, float]:
+    """RMSE (mm) of ``model`` on the collated windows ``batch`` (groups by garment graph), and of its coarse
+    mesh, in the same frame as the output: the output less its correction."""
+    with torch.no_grad():
+        sq = csq = n = 0.0
+        for g in batch:
+            out = model(g["graph_tensors"], g["root"], g["joints"],
+                        state={"root": g["history_root"], "joints": g["history_joints"]})
+            err = out["verts"] - g["verts"]
+            sq += float(err.square().sum(-1).mean(-1).sum())
+            csq += float((err - out["correction"]).square().sum(-1).mean(-1).sum())
+            n += err.shape[0] * err.shape[1]
+    return {"rmse_mm": (sq / n) ** 0.5 * 1e3, "coarse_rmse_mm": (csq / n) ** 0.5 * 1e3}
+
+
 def memorise(windows: Path, out: Path, names: list[str], steps: int, count: int, overrides: list[str]) -> None:
     """Each hypothesis of :data:`MEMORISE` on the first ``count`` training windows of the first garment: Adam at a
     constant rate for ``steps`` steps on them alone (vertex term), the RMSE on them (and of the coarse mesh)."""
@@ -203,17 +218,7 @@ def memorise(windows: Path, out: Path, names: list[str], steps: int, count: int,
             for step in range(steps + 1):
                 loss, _ = model.training_loss(batch, "supervised")
                 if step % max(steps // 20, 1) == 0 or step == steps:
-                    with torch.no_grad():
-                        sq = csq = n = 0.0
-                        for g in batch:
-                            o = model(g["graph_tensors"], g["root"], g["joints"],
-                                      state={"root": g["history_root"], "joints": g["history_joints"]})
-                            err = o["verts"] - g["verts"]
-                            sq += float(err.square().sum(-1).mean(-1).sum())
-                            csq += float((err - o["correction"]).square().sum(-1).mean(-1).sum())
-                            n += err.shape[0] * err.shape[1]
-                    curve.append({"step": step, "rmse_mm": (sq / n) ** 0.5 * 1e3, "coarse_rmse_mm": (csq / n) ** 0.5 * 1e3,
-                                  "seconds": time.time() - t0})
+                    curve.append({"step": step, **window_errors(model, batch), "seconds": time.time() - t0})
                 if step == steps:
                     break
                 opt.zero_grad()

@@ -12,18 +12,9 @@ import torch
 
 from loosefit.errors import InputError
 from loosefit.models.layers.gat_ln import GATLN, attention_entropy, attention_table, head_columns, recording_attention
+from tests.models.layers.test_gat_ln_signs import FACES, IN, OUT, V, neighbourhoods
 from tests.rig.conftest import tube
 
-FACES = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2]])
-V, IN, OUT = 5, 3, 4
-
-
-def neighbourhoods() -> list[list[int]]:
-    near = {i: {i} for i in range(V)}
-    for f in FACES:
-        for a in f:
-            near[int(a)].update(int(b) for b in f)
-    return [sorted(near[i]) for i in range(V)]
 
 
 def by_hand(layer: GATLN, x: torch.Tensor) -> torch.Tensor:
