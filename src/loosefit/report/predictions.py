@@ -105,24 +105,23 @@ def animate_run(run: str | Path, sequences: list[Sequence], device: str = "cpu")
 
 def load_methods(runs: list[str | Path], sequences: list[Sequence], device: str = "cpu",
                  handling: str = "exact") -> list[Method]:
-    """Every run animated on ``sequences``, with collision handling ``handling`` (exact, pushout or none; see
-    :func:`loosefit.models.collision.handle_motion_collisions`); labels are method names, with the run folder's
-    name when two runs share a method."""
+    """Every run animated on ``sequences``, with collision handling ``handling``
+    (:func:`loosefit.models.collision.post_process`); labels are method names, with the run folder's name when
+    two runs share a method."""
     if not runs:
         raise InputError("give at least one run folder to report on")
-    if handling not in ("exact", "pushout", "none"):
-        raise InputError(f"collision handling must be exact, pushout or none, got {handling!r}")
-    from loosefit.models.collision import handle_motion_collisions
+    from loosefit.models.collision import check_post_process, post_process
+
+    check_post_process(handling)  # before any run is animated
     from loosefit.animate import read_run_meta
     from loosefit.motion_range import range_warnings
 
     loaded = []
     for run in runs:
         method, predictions = animate_run(run, sequences, device)
-        if handling != "none":
-            by_name = {s.name: s for s in sequences}
-            predictions = {name: handle_motion_collisions(p, by_name[name].faces, by_name[name].body, by_name[name].motion,
-                                                          handling) for name, p in predictions.items()}
+        by_name = {s.name: s for s in sequences}
+        predictions = {name: post_process(p, by_name[name].faces, by_name[name].body, by_name[name].motion, handling)
+                       for name, p in predictions.items()}
         meta = read_run_meta(run)
         warnings = [line for s in sequences if s.name in predictions
                     for line in range_warnings(meta, s.motion, f"of sequence {s.name}")]

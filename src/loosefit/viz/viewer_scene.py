@@ -136,10 +136,9 @@ def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact",
     motion = load_motion(motion_path, body, joint_map=joint_map)
     animator = Animator(run)
     verts = animator.animate_batch([motion])[0]
-    if handling != "none":  # as `loosefit animate` does by default
-        from loosefit.models.collision import handle_motion_collisions
+    from loosefit.models.collision import post_process
 
-        verts = handle_motion_collisions(verts, animator.faces, body, motion, handling)
+    verts = post_process(verts, animator.faces, body, motion, handling)  # as `loosefit animate` does by default
     posed = body.pose(motion)
     tracks = [ViewerTrack("body", posed.verts[: len(verts)], body.faces, BODY_COLOR),
               ViewerTrack("garment", verts, animator.faces, GARMENT_COLOR)]
@@ -243,8 +242,9 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
     """
     if not inputs:
         raise InputError("give at least one input: SEQ.npz, DATA.zarr:SEQUENCE or RUN:MOTION")
-    if handling not in ("exact", "pushout", "none"):
-        raise InputError(f"collision handling must be exact, pushout or none, got {handling!r}")
+    from loosefit.models.collision import check_post_process
+
+    check_post_process(handling)  # before any input is loaded
     loaded = [load_input(spec, body, handling, joint_map) for spec in inputs]
     panels = [p for p, _ in loaded]
     fps = loaded[0][1]

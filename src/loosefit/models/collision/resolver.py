@@ -346,6 +346,26 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
     return world, inside
 
 
+#: What ``loosefit view`` and ``report --collision`` take: a mode of :func:`handle_motion_collisions` that needs
+#: no network, or no handling (``animate`` also takes a body SDF run folder).
+POST_PROCESSES = ("exact", "pushout", "none")
+
+
+def check_post_process(handling: str) -> str:
+    """``handling`` if it is one of :data:`POST_PROCESSES`, else an :class:`InputError`."""
+    if handling not in POST_PROCESSES:
+        raise InputError(f"collision handling must be exact, pushout or none, got {handling!r}")
+    return handling
+
+
+def post_process(verts: np.ndarray, faces: np.ndarray, body, motion, handling: str) -> np.ndarray:
+    """An animation ``verts (T, V, 3)`` after ``handling`` (:data:`POST_PROCESSES`): as it is for ``"none"``,
+    else corrected by :func:`handle_motion_collisions`."""
+    if check_post_process(handling) == "none":
+        return verts
+    return handle_motion_collisions(verts, faces, body, motion, handling)
+
+
 def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
                              net: BodySDFNet | None = None, push_distance: float = 0.004,
                              cull: bool = True, margin: float = 0.0, cull_cell=CULL_CELL) -> np.ndarray:
