@@ -1,0 +1,65 @@
+"""Mean run, floor and the two RMSEs of a prediction against closed forms on synthetic runs."""
+
+import numpy as np
+import pytest
+
+from loosefit.errors import InputError
+from loosefit.metrics.reference import References, floor_m, mean_run, rmse_m
+
+T, V = 5, 7
+
+
+def synthetic_runs():
+    """Runs m + e_k with e = (+a, -a, +b, -b): they sum to zero, so the mean is m exactly;
+    |a| = 3 mm, |b| = 4 mm at every vertex and frame."""
+    rng = np.random.default_rng(0)
+    m = rng.normal(0.0, 0.3, (T, V, 3))
+    a, b = np.array([0.003, 0.0, 0.0]), np.array([0.0, 0.004, 0.0])
+    runs = np.stack([m + a, m - a, m + b, m - b])
+    return m, runs
+
+
+def test_mean_and_floor_of_runs_summing_to_their_mean():
+    m, runs = synthetic_runs()
+    np.testing.assert_allclose(mean_run(runs), m, atol=1e-12)
+    # mean of |e_k|^2 = (9 + 9 + 16 + 16) / 4 mm^2 = 12.5 mm^2
+    assert floor_m(runs) == pytest.approx(np.sqrt(12.5) * 1e-3, rel=1e-9)
+    assert floor_m(runs[:1]) == 0.0  # a single run has no spread
+
+
+def test_scores_against_base_and_mean():
+    m, runs = synthetic_runs()
+    refs = References(runs[0], runs[1:])
+    c = np.array([0.0, 0.0, 0.002])
+    score = refs.score(m + c)
+    assert score.references == 3
+    assert score.rmse_vs_mean_mm == pytest.approx(2.0, rel=1e-9)
+    assert score.rmse_mm == pytest.approx(np.sqrt(4.0 + 9.0), rel=1e-9)  # |c - a| against the base m + a
+    assert score.floor_mm == pytest.approx(np.sqrt(12.5), rel=1e-9)
+    # The mean run itself: zero against the mean, |a| against the base.
+    best = refs.score(refs.mean)
+    assert best.rmse_vs_mean_mm == pytest.approx(0.0, abs=1e-9) and best.rmse_mm == pytest.approx(3.0, rel=1e-9)
+
+
+def test_no_prediction_beats_the_floor_over_the_runs():
+    """mean_k RMSE(p, run_k)^2 = RMSE(p, mean)^2 + floor^2 for any p, checked by brute force."""
+    rng = np.random.default_rng(1)
+    runs = rng.normal(0.0, 0.01, (5, T, V, 3)) + rng.normal(0.0, 0.3, (1, T, V, 3))
+    refs = References(runs[0], runs[1:])
+    for _ in range(3):
+        p = runs.mean(0) + rng.normal(0.0, 0.005, (T, V, 3))
+        over_runs = np.mean([rmse_m(p, r) ** 2 for r in runs])
+        assert over_runs == pytest.approx(rmse_m(p, refs.mean) ** 2 + refs.floor_m ** 2, rel=1e-9)
+        assert np.sqrt(over_runs) >= refs.floor_m
+
+
+def test_bad_runs_are_refused():
+    m, runs = synthetic_runs()
+    with pytest.raises(InputError, match="match the base"):
+        References(runs[0], runs[1:, :, :3])
+    with pytest.raises(InputError, match="K >= 1"):
+        References(runs[0], runs[:0])
+    bad = runs.copy()
+    bad[2, 1, 1, 0] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        References(bad[0], bad[1:])
