@@ -13,8 +13,8 @@ from scipy.spatial.transform import Rotation
 from loosefit.cli import main
 from loosefit.data import DatasetStore
 from loosefit.motion import Motion
-from loosefit.motion_range import (HEIGHT_TOLERANCE_M, META_KEY, SPEED_TOLERANCE, TURN_TOLERANCE, MotionRange,
-                                   range_warnings, root_speeds, root_turn_rates)
+from loosefit.motion_range import (HEIGHT_TOLERANCE_M, META_KEY, SPEED_TOLERANCE, TURN_TOLERANCE, MotionExtent, MotionRange,
+                                   range_warnings, root_speeds, root_turn_rates, turn_bouts)
 from loosefit.training import MODEL_META, train_model
 
 FPS = 30.0
@@ -180,3 +180,39 @@ def test_report_warns_for_a_sequence_outside_the_range(run, tiny_store, tmp_path
     for page in ("report.md", "index.html"):
         text = (tmp_path / "r" / page).read_text()
         assert "motion of sequence walk-lifted: root height" in text and "sequence walk-start" not in text
+
+
+def yawing(yaw: np.ndarray, heights: np.ndarray | None = None, fps=FPS) -> Motion:
+    """A motion whose root heading follows ``yaw (T,)`` radians about Z, standing at ``heights (T,)`` (0.9 m)."""
+    T = len(yaw)
+    trans = np.zeros((T, 3))
+    trans[:, 2] = 0.9 if heights is None else heights
+    rotations = np.zeros((T, 3, 3))
+    rotations[:, 0] = Rotation.from_euler("z", yaw[:, None]).as_rotvec()
+    return Motion(rotations, trans, fps=fps, joint_names=["root", "a", "b"], name="yawing")
+
+
+def test_turn_bouts_and_extent_of_a_closed_form_spin():
+    # still 10 frames, a full turn ccw at 2 pi rad/s (30 frames), still 15, half a turn cw at 4 rad/s, still 10,
+    # and a slow drift (1 rad/s, under the bout rate) that never counts
+    rate = np.concatenate([np.zeros(10), np.full(30, 2 * np.pi), np.zeros(15), np.full(int(round(np.pi / 4 * FPS)), -4.0),
+                           np.zeros(10), np.full(20, 1.0)]) / FPS
+    yaw = np.concatenate([[0.0], np.cumsum(rate)])
+    bouts = turn_bouts(yawing(yaw))
+    assert len(bouts) == 2
+    assert bouts[0].turn == pytest.approx(2 * np.pi, rel=1e-5) and bouts[0].peak_rate == pytest.approx(2 * np.pi, rel=1e-5)
+    assert (bouts[0].start, bouts[0].stop) == (10, 41)
+    assert bouts[1].turn == pytest.approx(-4.0 * round(np.pi / 4 * FPS) / FPS, rel=1e-5)
+    assert bouts[1].peak_rate == pytest.approx(4.0, rel=1e-5)
+    heights = 0.9 + 0.3 * np.sin(np.linspace(0, np.pi, len(yaw)))  # a 30 cm rise
+    e = MotionExtent.of(yawing(yaw, heights))
+    assert (e.max_turn_ccw, e.max_turn_cw) == (pytest.approx(2 * np.pi, rel=1e-5), pytest.approx(-bouts[1].turn, rel=1e-5))
+    assert e.reversals == 1 and e.rise == pytest.approx(0.3, abs=1e-4)
+    # a motion covers its own extent; one turning only ccw covers neither the reversal nor the cw half turn; a third
+    # of the turn does not cover a full one
+    assert e.covers(e)
+    ccw_only = MotionExtent.of(yawing(np.concatenate([[0.0], np.cumsum(rate * (rate > 0))]), heights))
+    assert ccw_only.reversals == 0 and ccw_only.max_turn_cw == 0.0
+    assert not ccw_only.covers(e) and e.covers(ccw_only)
+    third = MotionExtent.of(yawing(yaw / 3, heights))
+    assert not third.covers(e)

@@ -144,3 +144,86 @@ def range_warnings(meta: dict, motion: Motion, label: str | Path | None = None) 
         return []
     name = str(label) if label is not None else (repr(motion.name) if motion.name else "(unnamed)")
     return [f"motion {name}: {p}: the garment may not follow the body" for p in training.problems(motion)]
+
+
+# --- Coverage: does the training data hold motions like a held-out one? ---------------------------------------
+#: rad/s above which the root counts as turning (a walk's heading wobble stays below it; spins reach 6-13 rad/s).
+BOUT_RATE = 1.5
+#: radians a turn must add up to before it counts as a bout (filters a quick glance).
+BOUT_MIN_TURN = 0.5
+
+
+@dataclass(frozen=True)
+class TurnBout:
+    """One stretch of turning in one direction: signed total ``turn`` (rad, + counter-clockwise seen from above),
+    its largest rate ``peak_rate`` (rad/s, absolute) and its first and last frame (``start``, ``stop`` exclusive)."""
+
+    turn: float
+    peak_rate: float
+    start: int
+    stop: int
+
+
+def turn_bouts(motion: Motion) -> list[TurnBout]:
+    """The root's turn bouts: maximal runs of frames that turn faster than :data:`BOUT_RATE` in one direction and add
+    up to at least :data:`BOUT_MIN_TURN`, in order. A spin's bouts give its directions and reversals, a jump's the
+    turn it makes in flight."""
+    import torch
+
+    from loosefit.geometry.rotations import axis_angle_to_matrix
+    from loosefit.models.motion_features import heading_angles
+
+    root = axis_angle_to_matrix(torch.from_numpy(motion.rotations[:, 0]).double()).numpy()
+    dpsi = np.diff(heading_angles(root))
+    rate = ((dpsi + np.pi) % (2 * np.pi) - np.pi) * motion.fps  # (T - 1,) signed, between frames t and t + 1
+    sign = np.where(np.abs(rate) > BOUT_RATE, np.sign(rate), 0.0)
+    bouts, t = [], 0
+    while t < len(rate):
+        if sign[t] == 0:
+            t += 1
+            continue
+        stop = t
+        while stop < len(rate) and sign[stop] == sign[t]:
+            stop += 1
+        turn = float(rate[t:stop].sum() / motion.fps)
+        if abs(turn) >= BOUT_MIN_TURN:
+            bouts.append(TurnBout(turn, float(np.abs(rate[t:stop]).max()), t, stop + 1))
+        t = stop
+    return bouts
+
+
+@dataclass(frozen=True)
+class MotionExtent:
+    """What a motion asks of a garment model beyond the root range: its largest single turn ``max_turn`` (rad) and
+    turn rate ``max_rate`` (rad/s) per direction (``ccw``/``cw``), its direction reversals between consecutive
+    bouts, and the root's rise above its lowest height ``rise`` (m: jumps)."""
+
+    max_turn_ccw: float
+    max_turn_cw: float
+    max_rate: float
+    reversals: int
+    rise: float
+
+    @classmethod
+    def of(cls, motion: Motion) -> "MotionExtent":
+        bouts = turn_bouts(motion)
+        ccw = [b.turn for b in bouts if b.turn > 0]
+        cw = [-b.turn for b in bouts if b.turn < 0]
+        reversals = sum(1 for a, b in zip(bouts, bouts[1:]) if a.turn * b.turn < 0)
+        heights = root_heights(motion)
+        return cls(max(ccw, default=0.0), max(cw, default=0.0), max((b.peak_rate for b in bouts), default=0.0),
+                   reversals, float(heights.max() - heights.min()))
+
+    def covers(self, other: "MotionExtent", slack: float = 0.85) -> bool:
+        """Whether a motion of this extent reaches ``other``'s: its largest turn in each direction, its turn rate
+        and its rise each at least ``slack`` of ``other``'s less a small absolute part (:data:`BOUT_MIN_TURN`,
+        :data:`BOUT_RATE`, :data:`HEIGHT_TOLERANCE_M`: a walk's 1 cm of bob is no range to cover), and a
+        reversal where ``other`` has one."""
+        return (self.max_turn_ccw >= slack * other.max_turn_ccw - BOUT_MIN_TURN
+                and self.max_turn_cw >= slack * other.max_turn_cw - BOUT_MIN_TURN
+                and self.max_rate >= slack * other.max_rate - BOUT_RATE
+                and self.rise >= slack * other.rise - HEIGHT_TOLERANCE_M
+                and (self.reversals > 0 or other.reversals == 0))
+
+    def to_json(self) -> dict[str, float]:
+        return {k: round(v, 4) if isinstance(v, float) else v for k, v in asdict(self).items()}
