@@ -23,6 +23,8 @@ COLLECTIONS = ("garments", "bodies", "motions", "sequences")
 SPLITS = ("train", "val", "test")
 STATUSES = ("ok", "failed")
 FRAMES_PER_CHUNK = 32
+#: Group of a sequence's reference runs: ``sequences/<name>/references/<k>`` (T, V, 3) float32, k = 1, 2, ...
+REFERENCES = "references"
 # Lossless: cloth positions keep their full float32 mantissa, so expect ratios near 1.2, not 10.
 COMPRESSOR = Blosc(cname="zstd", clevel=3, shuffle=Blosc.BITSHUFFLE)
 

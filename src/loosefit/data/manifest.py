@@ -35,6 +35,16 @@ def format_info(info: dict) -> str:
     lines.append(f"sequences ({seqs['count']}, {seqs['frames']} frames ok):")
     for split, counts in sorted(seqs["by_split"].items()):
         lines.append(f"  {split}: {counts['ok']} ok ({counts['frames']} frames), {counts['failed']} failed")
+    refs = info.get("references") or {}
+    if refs:
+        lines.append(f"reference runs ({len(refs)} sequences; floor: the runs' RMS spread around their mean):")
+    for name, r in refs.items():
+        if r.get("damaged"):
+            lines.append(f"  {name}: damaged (see problems)")
+            continue
+        floor = "no floor (no run ok)" if r["floor_mm"] is None else f"floor {r['floor_mm']:.2f} mm"
+        failed = f", {r['failed']} failed" if r["failed"] else ""
+        lines.append(f"  {name}: {r['ok']} ok{failed}, {floor}")
     if info.get("writer"):
         lines.append(f"being written by {info['writer']}")
     if info["problems"]:

@@ -20,7 +20,7 @@ import zarr
 from loosefit.data import staging
 from loosefit.data.chunks import array_problem, open_checked
 from loosefit.data.layout import (
-    COLLECTIONS, NAME_RE, SINGULAR, SPLITS, STATUSES, attrs_problem, entry_arrays, read_json,
+    COLLECTIONS, NAME_RE, REFERENCES, SINGULAR, SPLITS, STATUSES, attrs_problem, entry_arrays, read_json,
 )
 from loosefit.data.lock import current_holder
 from loosefit.errors import InputError
@@ -266,6 +266,49 @@ class StoreReader:
             if (split is None or attrs["split"] == split) and (status is None or attrs["status"] == status)
         ]
 
+    # ---------------------------------------------------------------- reference runs
+
+    def reference_runs(self, name: str) -> dict[int, dict]:
+        """The reference runs stored with sequence ``name``, by index (sorted): each run's attributes (``status``,
+        ``reason``, ``created``, ``frames`` and what the writer kept: noise, seed, hash, stats). {} for none
+        (also for every store written before reference runs existed).
+
+        Raises:
+            InputError: no such sequence, or a run's attributes are corrupt (naming the file).
+        """
+        self._require_entry("sequences", name)
+        folder = self._entry_dir("sequences", name) / REFERENCES
+        if not folder.is_dir():
+            return {}
+        runs = {}
+        for entry in os.scandir(folder):
+            if not (entry.is_dir() and entry.name.isdigit() and (Path(entry.path) / ".zarray").is_file()):
+                continue
+            attrs = read_json(Path(entry.path) / ".zattrs")
+            meta = read_json(Path(entry.path) / ".zarray")
+            if attrs is None or attrs.get("status") not in STATUSES or not isinstance(attrs.get("checksums"), dict) \
+                    or meta is None or not isinstance(meta.get("shape"), list):
+                raise InputError(f"corrupt reference run {entry.name} of sequence {name!r}: attributes or metadata "
+                                 f"unreadable; {self.repair_hint()}", Path(entry.path) / ".zattrs")
+            runs[int(entry.name)] = {**{k: v for k, v in attrs.items() if k != "checksums"},
+                                     "frames": int(meta["shape"][0])}
+        return dict(sorted(runs.items()))
+
+    def reference(self, name: str, index: int) -> np.ndarray:
+        """Reference run ``index`` of sequence ``name``: ``(T, V, 3)`` float32 metres (fewer frames for a failed
+        run), its chunks checked against their checksums."""
+        if index not in self.reference_runs(name):
+            raise InputError(f"sequence {name!r} has no reference run {index!r}", self._entry_dir("sequences", name))
+        return self._open_array(self._entry_dir("sequences", name) / REFERENCES / str(int(index)))[...]
+
+    def references(self, name: str) -> np.ndarray:
+        """The ``"ok"`` reference runs of sequence ``name`` in index order: ``(K, T, V, 3)`` float32 metres,
+        ``K = 0`` when it has none. With the base run (the sequence) they give the mean run and the floor of
+        :mod:`loosefit.metrics.reference`."""
+        T, V = self.sequence(name).verts.shape[:2]
+        runs = [self.reference(name, k) for k, r in self.reference_runs(name).items() if r["status"] == "ok"]
+        return np.stack(runs) if runs else np.zeros((0, T, V, 3), np.float32)
+
     # ---------------------------------------------------------------- later stages
 
     def read_array(self, group_path: str, name: str) -> np.ndarray:
@@ -296,6 +339,8 @@ class StoreReader:
         """A summary of the store (the manifest), JSON-compatible: ``garments`` {name: kind, verts, faces,
         pinned}, ``bodies`` {name: model, shape}, ``motions`` {name: frames, joints, fps, rig},
         ``sequences`` {count, frames, by_split: {split: {status: count, "frames": frames of ok ones}}},
+        ``references`` {sequence: ok, failed, floor_mm} for the sound sequences with reference runs (the floor of
+        the base and its ok runs, :mod:`loosefit.metrics.reference`; None when no run is ok or one is damaged),
         ``problems`` (see :meth:`problems`; ``verify``: every chunk read), ``writer`` (the process
         holding the write lock, or None), ``size_bytes`` on disk, and the root attributes.
         Corrupt entries are left out of the counts and listed in ``problems``."""
@@ -335,6 +380,10 @@ class StoreReader:
             if attrs["status"] == "ok":
                 split["frames"] += n
                 frames += n
+        references = {}
+        for name, attrs in sound["sequences"].items():
+            if attrs["status"] == "ok" and (self._entry_dir("sequences", name) / REFERENCES).is_dir():
+                references[name] = self._reference_summary(name)
         size = sum(os.path.getsize(os.path.join(d, f)) for d, _, files in os.walk(self._root) for f in files)
         writer = current_holder(self._root)
         return {
@@ -347,10 +396,23 @@ class StoreReader:
             "bodies": bodies,
             "motions": motions,
             "sequences": {"count": count, "frames": frames, "by_split": by_split},
+            "references": {name: r for name, r in references.items() if r["ok"] or r["failed"] or r.get("damaged")},
             "problems": problems,
             "writer": None if writer is None else writer.describe(),
             "size_bytes": size,
         }
+
+    def _reference_summary(self, name: str) -> dict:
+        """``ok`` and ``failed`` reference runs of sequence ``name`` and the floor in mm (None when unreadable)."""
+        from loosefit.metrics.reference import References
+
+        try:
+            runs = self.reference_runs(name)
+            ok = sum(r["status"] == "ok" for r in runs.values())
+            floor = References(self.sequence(name).verts[:], self.references(name)).floor_mm if ok else None
+        except InputError:  # damage is listed among the problems
+            return {"ok": 0, "failed": 0, "floor_mm": None, "damaged": True}
+        return {"ok": ok, "failed": len(runs) - ok, "floor_mm": floor}
 
     def _leftover_problems(self) -> dict[str, str]:
         return {str(lo.path.relative_to(self._root)): lo.describe() for lo in staging.leftovers(self._root)}

@@ -10,6 +10,9 @@ Layout (every group is a Zarr group; arrays are Blosc-zstd compressed)::
                                    attrs fps, rig, joint_names, motion_name
       sequences/<name>/            verts (T,V,3) float32 in chunks of 32 frames, optional extra arrays;
                                    attrs garment, body, motion, sim_params, stats, split, status, reason
+        references/<k>             optional reference runs k = 1, 2... of the sequence (the same motion and
+                                   settings, start noise with seed k): (T,V,3) float32; attrs status, reason,
+                                   created, checksums and the run's info (:meth:`DatasetStore.write_reference`)
       .staging/                    writes in progress (see :mod:`loosefit.data.staging`)
       .lock                        pid, host and start of the process writing the store (:mod:`loosefit.data.lock`)
 

@@ -23,8 +23,8 @@ from loosefit.data import staging
 from loosefit.data.chunks import array_problem, file_checksums
 from loosefit.data.reading import array_checksums
 from loosefit.data.layout import (
-    COLLECTIONS, COMPRESSOR, CORE_ARRAYS, FRAMES_PER_CHUNK, RESERVED_ATTRS, SPLITS, STATUSES, jsonable, now,
-    read_json,
+    COLLECTIONS, COMPRESSOR, CORE_ARRAYS, FRAMES_PER_CHUNK, REFERENCES, RESERVED_ATTRS, SPLITS, STATUSES, jsonable,
+    now, read_json,
 )
 from loosefit.errors import InputError
 from loosefit.motion.motion import Motion
@@ -282,6 +282,57 @@ class StoreWriter:
                 per_frame = value.ndim >= 1 and value.shape[0] == T and T > 0
                 chunks = (FRAMES_PER_CHUNK, *value.shape[1:]) if per_frame else True
                 group.create_dataset(key, data=value, chunks=chunks, compressor=COMPRESSOR, write_empty_chunks=True)
+
+    def write_reference(self, name: str, index: int, verts, status: str = "ok", reason: str = "",
+                        info: dict | None = None) -> None:
+        """Store reference run ``index`` (>= 1) of sequence ``name`` atomically, replacing one of that index:
+        the array ``sequences/<name>/references/<index>`` with the run's metadata in its attributes.
+
+        Args:
+            verts: ``(T, V, 3)`` metres, stored as float32 in chunks of 32 frames; an ``"ok"`` run has the
+                sequence's ``T`` frames and finite values, a ``"failed"`` one (with a ``reason``) at most ``T``.
+            info: JSON values kept with the run (its noise, seed, hash, simulation stats...).
+
+        Replacing the sequence (:meth:`write_sequence`) drops its reference runs: they belong to that base run.
+        """
+        self._check_writable()
+        seq = self._require_entry("sequences", name)
+        where = self._entry_dir("sequences", name)
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 1:
+            raise InputError(f"sequence {name!r}: a reference run's index must be an integer >= 1, got {index!r}", where)
+        if status not in STATUSES or (status == "failed" and not reason):
+            raise InputError(f"sequence {name!r}: reference run {index}: status must be one of {STATUSES} "
+                             f"(a failed one with a reason), got {status!r}", where)
+        T, V = self._stored_length("sequences", name, "verts"), self.garment_num_verts(seq["garment"])
+        value = np.asarray(verts, dtype=np.float32)
+        if value.ndim != 3 or value.shape[1:] != (V, 3) or value.shape[0] > T or (status == "ok" and value.shape[0] != T):
+            raise InputError(f"sequence {name!r}: reference run {index} must have shape ({T}, {V}, 3) like the "
+                             f"sequence, got {value.shape}", where)
+        if status == "ok" and not np.isfinite(value).all():
+            raise InputError(f"sequence {name!r}: reference run {index} has NaN or infinite vertices; store it "
+                             "with status='failed' and a reason", where)
+        attrs = {**jsonable(dict(info or {}), f"sequence {name!r} reference run {index}", where),
+                 "status": status, "reason": str(reason), "created": now()}
+        group = where / REFERENCES
+        self._ensure_groups(group)
+        target = f"sequences/{name}/{REFERENCES}/{int(index)}"
+        staged = staging.new_staging_dir(self._root, target)
+        try:
+            out = zarr.open_array(str(staged), mode="w-", shape=value.shape, chunks=(FRAMES_PER_CHUNK, V, 3),
+                                  dtype=np.float32, fill_value=np.nan, compressor=COMPRESSOR, write_empty_chunks=True)
+            out[...] = value
+            out.attrs.put({**attrs, "checksums": file_checksums(staged)})
+        except BaseException:
+            staging.discard(staged)
+            raise
+        staging.commit(self._root, staged, target)
+
+    def delete_reference(self, name: str, index: int) -> None:
+        """Remove reference run ``index`` of sequence ``name`` (nothing when there is none)."""
+        self._check_writable()
+        self._require_entry("sequences", name)
+        if (self._entry_dir("sequences", name) / REFERENCES / str(int(index))).exists():
+            staging.remove(self._root, f"sequences/{name}/{REFERENCES}/{int(index)}")
 
     def delete_sequence(self, name: str) -> None:
         """Remove a sequence (complete, corrupt or without marker) at once."""

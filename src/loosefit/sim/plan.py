@@ -25,10 +25,17 @@ Plan format (paths are relative to the plan file)::
     split:                         # a sequence using any listed item goes there; the rest is train
       test: {motions: [clip]}
       val: {}
+    references: {count: 4, noise: 1.0e-5}   # optional: perturbed reference runs of every test sequence
 
 A job's id is ``<garment>+<shape>+<motion>+<sim_params>``; the garment entry in the dataset is
 ``<garment>+<shape>`` (templates are fitted to each shape). Motions are generated on, or
 retargeted to, the average body and shared by all shapes.
+
+``references`` asks for ``count`` extra runs of every *test* sequence (:class:`ReferencePlan`): run ``k``
+(1..count) starts from the garment with every rest vertex moved by Gaussian noise of ``noise`` metres (noise
+seed ``k``, :func:`loosefit.sim.runner.perturb_start`) and is otherwise the base run (its solver steps
+included), over the whole motion. They are stored with the base sequence and give the floor of every
+accuracy figure (:mod:`loosefit.metrics.reference`); they never change a sequence's job hash.
 
 The file is read by :mod:`loosefit.config` (so ``1e-5`` is a number); each garment and motion entry is
 checked as a typed spec (:class:`TemplateGarment`, :class:`FileGarment`, :class:`ProceduralMotion`,
@@ -54,7 +61,7 @@ from loosefit.sim.quality import QualityGate
 
 SEPARATOR = "+"
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.=-]{0,60}$")
-_TOP_KEYS = {"name", "shapes", "garments", "motions", "sim_params", "gate", "sequences", "split"}
+_TOP_KEYS = {"name", "shapes", "garments", "motions", "sim_params", "gate", "sequences", "split", "references"}
 _GROUP_KEYS = ("garments", "shapes", "motions", "sim_params")
 _SPLITS = ("test", "val")
 
@@ -173,6 +180,26 @@ def _check_slowdown(value) -> None:
         raise InputError(f"'slowdown' must be a number >= 1 (1: as made), got {value!r}")
 
 
+@dataclass(frozen=True)
+class ReferencePlan:
+    """Reference runs of every test sequence: ``count`` runs (0: none), start noise ``noise`` metres
+    (standard deviation per axis of every rest vertex); see the module docstring."""
+
+    count: int = 0
+    noise: float = 1.0e-5
+
+    def __post_init__(self):
+        if isinstance(self.count, bool) or not isinstance(self.count, int) or self.count < 0:
+            raise InputError(f"'count' must be an integer >= 0, got {self.count!r}")
+        if isinstance(self.noise, bool) or not isinstance(self.noise, (int, float)) or not 0 < self.noise < 0.01:
+            raise InputError(f"'noise' must be a number of metres in (0, 0.01), got {self.noise!r}")
+
+    def run_hash(self, job: "SequenceJob", index: int) -> str:
+        """Digest of what determines reference run ``index`` of ``job``: the base's hash, the noise and the seed."""
+        content = {"job_hash": job.hash, "noise": float(self.noise), "seed": int(index)}
+        return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()[:16]
+
+
 GarmentSpec = Union[TemplateGarment, FileGarment]
 MotionSpec = Union[ProceduralMotion, FileMotion]
 
@@ -189,6 +216,11 @@ class Plan:
     sim_params: dict[str, SimParams]
     gate: QualityGate
     jobs: list[SequenceJob] = field(default_factory=list)
+    references: ReferencePlan = field(default_factory=ReferencePlan)
+
+    def reference_jobs(self) -> list[SequenceJob]:
+        """The jobs that get reference runs (the test sequences; none when ``references.count`` is 0)."""
+        return [job for job in self.jobs if job.split == "test"] if self.references.count else []
 
     def garment_spec(self, name: str) -> GarmentSpec:
         """Garment ``name``'s entry as a typed spec (its defaults filled in)."""
@@ -265,6 +297,15 @@ def _shape_spec(name: str, spec, path: Path) -> dict:
     return spec
 
 
+def _references(value, path: Path) -> ReferencePlan:
+    spec = _mapping(value, "references", path)
+    _check_keys(spec, {f.name for f in dataclasses.fields(ReferencePlan)}, "references", path)
+    try:
+        return config_from_dict(ReferencePlan, spec, path)
+    except InputError as e:
+        raise InputError(f"references: {e.problem.removeprefix('config: ')}", path) from None
+
+
 def load_plan(path: str | Path) -> Plan:
     """Read and check a plan file; expand its sequence groups into :class:`SequenceJob` s.
 
@@ -300,6 +341,7 @@ def load_plan(path: str | Path) -> Plan:
         motions=motions,
         sim_params=sim_params,
         gate=QualityGate.from_dict(_mapping(raw.get("gate"), "gate", path), path),
+        references=_references(raw.get("references"), path),
     )
     plan.jobs = _expand(plan, raw.get("sequences"), _mapping(raw.get("split"), "split", path))
     return plan
