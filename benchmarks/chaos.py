@@ -9,6 +9,12 @@ per probe, each compared with the base (RMSE over the garment, per half second, 
   nudge-D   the left arm turned by D degrees about a slowly turning axis (``--nudge-degrees``; the
             accuracy benchmark's robustness perturbation at a fixed angle)
   repeat    the base again, in another process: ``bit_identical`` and the largest difference
+  mean-steps  step-count convergence of the mean run: ``--references`` K runs with start noise (seeds 1..K,
+            as a store's reference runs, :func:`loosefit.sim.runner.perturb_start`) at the base's N solver
+            steps a frame and K at 2N; the mean of each set with its base (the base, and the ``steps`` run at 2N)
+            and the RMS distance between the two means, ``<garment>/<motion>/mean_steps_mm``, beside the floor
+            of each set (``floor_mm`` at N, ``floor_2n_mm``: :mod:`loosefit.metrics.reference`). When the two
+            means differ by much less than the floor, N steps resolve what a model can learn (the mean)
 
 Every simulation runs in a fresh process (``--workers`` at a time), so no run reads another's cache and
 ``repeat`` checks reproducibility across processes. With ``--data`` (a store simulated from the plan), the
@@ -25,6 +31,7 @@ Run: .venv/bin/python benchmarks/chaos.py --plan configs/datasets/bench.yaml [--
          [--motions walk-1,spin-1,jump-1,kick-1] [--seconds 4] [--probes noise,steps,nudge,repeat]
          [--sim-params NAME] [--set KEY=VALUE ...] [--workers 2] [--name chaos-bench]
          [--sample-stride 40 --sample-offset 39]   (a held plan: the settled poses alone)
+         [--references 4]   (the mean-steps probe's runs per step count)
 (writes benchmarks/results/<name>.json)
 """
 
@@ -48,7 +55,7 @@ from loosefit.errors import InputError  # noqa: E402
 
 #: The joint the nudge probe turns.
 NUDGE_JOINT = "LeftArm"
-PROBES = ("noise", "steps", "nudge", "repeat")
+PROBES = ("noise", "steps", "nudge", "repeat", "mean-steps")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,7 +80,7 @@ def simulate(task: Task) -> dict:
     from loosefit.body import AnnyShape
     from loosefit.sim import SimParams, simulate_sequence
     from loosefit.sim.plan import load_plan
-    from loosefit.sim.runner import load_plan_garment, load_plan_motion, plan_body
+    from loosefit.sim.runner import load_plan_garment, load_plan_motion, perturb_start, plan_body
 
     plan = load_plan(task.plan)
     shape = tuple(AnnyShape().to_array().tolist())
@@ -82,8 +89,7 @@ def simulate(task: Task) -> dict:
     motion = load_plan_motion(plan, task.motion).slice(0, task.frames)
     params = SimParams.from_dict(task.params)
     if task.noise_seed is not None:
-        noise = np.random.default_rng(task.noise_seed).normal(0.0, task.sigma, garment.verts.shape)
-        garment = dataclasses.replace(garment, verts=(garment.verts + noise).astype(np.float32))
+        garment = perturb_start(garment, task.noise_seed, task.sigma)
     if task.nudge_degrees:
         d = task.nudge_degrees
         motion = perturb_joint(motion, body.joint_names.index(NUDGE_JOINT), (d, d), seed=0)
@@ -123,6 +129,35 @@ def probe_tasks(base: Task, probes: list[str], seeds: list[int], sigma: float, d
     return tasks
 
 
+def mean_steps_futures(pool, base: Task, n: int, count: int, sigma: float) -> dict:
+    """The mean-steps probe's runs: ``ref-k`` at ``n`` steps a frame and ``ref2n-k`` at ``2n``, noise seeds 1..count."""
+    out = {}
+    for k in range(1, count + 1):
+        for name, quality in ((f"ref-{k}", n), (f"ref2n-{k}", 2 * n)):
+            out[name] = pool.submit(simulate, dataclasses.replace(base, noise_seed=k, sigma=sigma, quality=quality))
+    return out
+
+
+def mean_steps(base: dict, runs: dict, count: int) -> dict:
+    """The mean-steps figures (mm) from the base, its ``steps`` run and the ``ref-k`` / ``ref2n-k`` runs: the RMS
+    distance between the mean at N and the mean at 2N steps (overall and below the knees) and each set's floor;
+    empty when a run of either set crashed or failed."""
+    from loosefit.metrics.reference import floor_m, mean_run, rmse_m
+
+    sets = {"n": [base] + [runs.get(f"ref-{k}", {"error": "missing"}) for k in range(1, count + 1)],
+            "2n": [runs.get("steps", {"error": "missing"})]
+                  + [runs.get(f"ref2n-{k}", {"error": "missing"}) for k in range(1, count + 1)]}
+    if any("error" in r or r["status"] != "ok" for rs in sets.values() for r in rs):
+        return {}
+    stacks = {k: np.stack([r["verts"] for r in rs]) for k, rs in sets.items()}
+    means = {k: mean_run(v) for k, v in stacks.items()}
+    below = base["below_knees"]
+    return {"mean_steps_mm": 1e3 * rmse_m(means["n"], means["2n"]),
+            "mean_steps_below_knees_mm": 1e3 * rmse_m(means["n"][:, below], means["2n"][:, below]) if below.any() else None,
+            "floor_mm": 1e3 * floor_m(stacks["n"], means["n"]), "floor_2n_mm": 1e3 * floor_m(stacks["2n"], means["2n"]),
+            "steps_n": int(base["stats"]["quality"]), "runs_per_mean": count + 1}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plan", default="configs/datasets/bench.yaml", help="a dataset plan")
@@ -142,6 +177,8 @@ def main() -> None:
     parser.add_argument("--sample-stride", type=int, default=0,
                         help="also compare at frames offset::stride alone (a held plan's settled poses: 40)")
     parser.add_argument("--sample-offset", type=int, default=0, help="see --sample-stride (a held plan: 39)")
+    parser.add_argument("--references", type=int, default=4,
+                        help="the mean-steps probe: noisy runs (seeds 1..K) at N and at 2N steps a frame")
     parser.add_argument("--save", default=None, help="a folder for the base runs as mesh sequences (<garment>-<motion>.npz)")
     args = parser.parse_args()
 
@@ -154,6 +191,8 @@ def main() -> None:
             if name not in known:
                 raise InputError(f"{kind} {name!r} is not in the plan (it has {sorted(known)})", args.plan)
     probes = [p for p in args.probes.split(",") if p]
+    if "mean-steps" in probes and args.references < 1:
+        raise InputError(f"--references must be at least 1, got {args.references}")
     if unknown := sorted(set(probes) - set(PROBES)):
         raise InputError(f"unknown probes {unknown}; known: {list(PROBES)}")
     params_name = args.sim_params or next(iter(plan.sim_params))
@@ -178,11 +217,13 @@ def main() -> None:
         probe_futures = {k: {name: pool.submit(simulate, t) for name, t in
                              probe_tasks(bases[k], probes, seeds, args.sigma, degrees).items()} for k in bases}
         base_runs = {k: _outcome(f) for k, f in base_futures.items()}
-        if "steps" in probes:  # N is the base's own (adaptive) step count
+        if "steps" in probes or "mean-steps" in probes:  # N is the base's own (adaptive) step count
             for k, run in base_runs.items():
                 if "error" not in run:
-                    doubled = dataclasses.replace(bases[k], quality=2 * run["stats"]["quality"])
-                    probe_futures[k]["steps"] = pool.submit(simulate, doubled)
+                    n = run["stats"]["quality"]
+                    probe_futures[k]["steps"] = pool.submit(simulate, dataclasses.replace(bases[k], quality=2 * n))
+                    if "mean-steps" in probes:
+                        probe_futures[k].update(mean_steps_futures(pool, bases[k], n, args.references, args.sigma))
         probe_runs = {k: {name: _outcome(f) for name, f in fs.items()} for k, fs in probe_futures.items()}
 
     figures, runs = {}, {}
@@ -203,6 +244,8 @@ def main() -> None:
             if name == "repeat":
                 figures[f"{key}/repeat/bit_identical"] = bool(np.array_equal(run["verts"], base["verts"]))
                 figures[f"{key}/repeat/other_process"] = run["pid"] != base["pid"]
+        if "mean-steps" in probes:
+            figures.update({f"{key}/{k}": v for k, v in mean_steps(base, probe_runs[(g, m)], args.references).items()})
         if args.data is not None:
             figures.update({f"{key}/stored/{k}": v for k, v in _against_store(args.data, g, m, base).items()})
     results = {"plan": args.plan, "garments": garments, "motions": motions, "frames": frames,
@@ -211,6 +254,12 @@ def main() -> None:
                "figures": figures, "runs": runs}
     save_results(args.name, results)
     print_table(figures, garments, motions)
+    for g in garments:
+        for m in motions:
+            if f"{g}/{m}/mean_steps_mm" in figures:
+                f = {k: figures[f"{g}/{m}/{k}"] for k in ("mean_steps_mm", "floor_mm", "floor_2n_mm", "steps_n")}
+                print(f"{g}/{m}: means at {f['steps_n']} and {2 * f['steps_n']} steps a frame differ by "
+                      f"{f['mean_steps_mm']:.1f} mm; floor {f['floor_mm']:.1f} mm (N), {f['floor_2n_mm']:.1f} mm (2N)")
 
 
 def _outcome(future) -> dict:

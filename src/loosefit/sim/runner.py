@@ -6,6 +6,13 @@ written atomically, so an interrupted run loses at most the sequences in flight;
 plan again redoes only those. A job that raises (a crash, not a quality failure) is stored as
 failed with a reason starting with ``"crashed:"`` and retried by the next run; the other jobs go on.
 
+With the plan's ``references`` (:class:`loosefit.sim.plan.ReferencePlan`), the reference runs of every test
+sequence stored ok are simulated after the base runs: run ``k`` is the base's job with the garment's start
+moved by :func:`perturb_start` (seed ``k``) and the base's solver steps a frame, stored with the sequence
+(:meth:`loosefit.data.store.DatasetStore.write_reference`) as it finishes, ok or failed by the gate like
+sequences; a crashed one is retried by the next run, and so is one whose plan entry changed (its hash).
+Runs beyond ``count`` are dropped. A sequence that failed the gate gets none (it is never evaluated).
+
 Workers: ``workers=1`` without ``address`` simulates in this process; otherwise every job is a Ray
 task (one CPU each), on a local Ray started with ``workers`` CPUs or on the cluster at ``address``.
 Each Ray worker is its own process with its own Blender.
@@ -80,6 +87,16 @@ def simulate_file(
     result = simulate_sequence(garment, body, motion, params)
     save_result(out_path, result, garment.faces, body.faces, motion.fps)
     return result
+
+
+def perturb_start(garment, seed: int, sigma: float):
+    """``garment`` with every rest vertex (the start state the simulation skins from) moved by Gaussian noise of
+    ``sigma`` metres per axis, from ``numpy.random.default_rng(seed)``: a reference run's start
+    (:mod:`loosefit.metrics.reference`), the same for the same seed on every machine."""
+    import dataclasses
+
+    noise = np.random.default_rng(seed).normal(0.0, sigma, np.shape(garment.verts))
+    return dataclasses.replace(garment, verts=(np.asarray(garment.verts, np.float64) + noise).astype(np.float32))
 
 
 def load_plan_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
@@ -181,7 +198,8 @@ def run_plan(
 
     Returns:
         Summary: ``jobs``, ``skipped`` (already done), ``ok``, ``failed``, ``crashed``, ``wall_s``
-        and per sequence ``{id: {status, reason, ms_per_frame, wall_s}}``.
+        and per sequence ``{id: {status, reason, ms_per_frame, wall_s}}``; ``references``: the same counts
+        for the reference runs (``jobs`` 0 without the plan key) and per run ``{"<id>#<k>": {...}}``.
     """
     from loosefit.data.store import DatasetStore
 
@@ -212,6 +230,14 @@ def summary_line(summary: dict[str, Any], store) -> str:
     line = f"{summary['plan']}: {summary['ok']} of {done} sequences simulated ok"
     if summary["skipped"]:
         line += f" ({summary['skipped']} of {summary['jobs']} were done before)"
+    refs = summary.get("references") or {}
+    if refs.get("jobs"):
+        made = refs["ok"] + refs["failed"] + refs["crashed"]
+        line += f"; {refs['ok']} of {made} reference runs ok"
+        if refs["failed"] or refs["crashed"]:
+            line += f" ({refs['failed']} failed the gate, {refs['crashed']} crashed)"
+        if refs["skipped"]:
+            line += f" ({refs['skipped']} of {refs['jobs']} were done before)"
     bad = [(name, s["reason"]) for name, s in summary["sequences"].items() if s["status"] != "ok"]
     if bad:
         shown = "; ".join(f"{name}: {reason}" for name, reason in bad[:3])
@@ -249,14 +275,90 @@ def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bo
         bar.update(1)
 
     try:
-        if workers == 1 and address is None:
-            for job, payload in zip(todo, payloads):
-                record(job, simulate_job(payload))
-        else:
-            _run_ray(todo, payloads, workers, address, record)
+        _dispatch(todo, payloads, workers, address, record)
     finally:
         bar.close()
+    summary["references"] = _run_references(plan, store, workers, address, progress)
     summary["wall_s"] = time.perf_counter() - start
+    return summary
+
+
+def _dispatch(keys: list, payloads: list[dict[str, Any]], workers: int, address: str | None, record) -> None:
+    """Simulate every payload in this process or on Ray, calling ``record(key, result)`` as each finishes."""
+    if workers == 1 and address is None:
+        for key, payload in zip(keys, payloads):
+            record(key, simulate_job(payload))
+    elif keys:
+        _run_ray(keys, payloads, workers, address, record)
+
+
+def _reference_done(store, job: SequenceJob, index: int, run_hash: str) -> bool:
+    """Whether reference run ``index`` of ``job`` is stored with hash ``run_hash``, did not crash and reads back
+    as written (every chunk is checked)."""
+    run = store.reference_runs(job.id).get(index)
+    if run is None or run.get("run_hash") != run_hash or run["reason"].startswith(CRASHED):
+        return False
+    try:
+        store.reference(job.id, index)
+    except InputError as e:
+        log.warning("%s: reference run %d of %s is damaged (%s); simulating it again", store.path, index, job.id, e)
+        return False
+    return True
+
+
+def _run_references(plan: Plan, store, workers: int, address: str | None, progress: bool) -> dict[str, Any]:
+    """Simulate the reference runs the plan asks for and the store lacks (see the module docstring); their summary."""
+    refs = plan.references
+    todo, total = [], 0
+    for job in plan.reference_jobs():
+        if not store.has_sequence(job.id):
+            continue
+        base = store.sequence(job.id)
+        if base.status != "ok" or base.stats.get("job_hash") != job.hash:
+            continue
+        total += refs.count
+        for index in [k for k in store.reference_runs(job.id) if k > refs.count]:
+            store.delete_reference(job.id, index)
+        for index in range(1, refs.count + 1):
+            run_hash = refs.run_hash(job, index)
+            if not _reference_done(store, job, index, run_hash):
+                todo.append((job, index, run_hash, base.stats.get("quality")))
+    summary: dict[str, Any] = {"jobs": total, "skipped": total - len(todo), "ok": 0, "failed": 0, "crashed": 0,
+                               "runs": {}}
+    if not todo:
+        return summary
+    jobs = list(dict.fromkeys(job for job, *_ in todo))
+    bases = dict(zip((job.id for job in jobs), _inputs(plan, store, jobs)))
+    payloads = []
+    for job, index, _, steps in todo:
+        payload = bases[job.id]
+        params = payload["params"]
+        if steps is not None:  # the base's steps exactly (the noise could move the adaptive choice)
+            params = {**params, "quality": int(steps), "adaptive_quality": False}
+        payloads.append({**payload, "garment": perturb_start(payload["garment"], index, refs.noise), "params": params})
+    bar = tqdm(total=total, initial=summary["skipped"], desc=f"{plan.name} references", unit="run",
+               disable=not progress)
+
+    def record(key: tuple, result: dict[str, Any]) -> None:
+        job, index, run_hash, steps = key
+        verts = result["verts"]
+        if verts is None:
+            verts = np.zeros((0, store.garment_num_verts(job.garment_entry), 3), np.float32)
+        info = {"noise_seed": index, "noise_m": refs.noise, "run_hash": run_hash, "quality": steps,
+                "stats": result["stats"]}
+        store.write_reference(job.id, index, verts, status=result["status"], reason=result["reason"], info=info)
+        kind = "crashed" if result["reason"].startswith(CRASHED) else result["status"]
+        summary[kind] += 1
+        summary["runs"][f"{job.id}#{index}"] = {"status": result["status"], "reason": result["reason"],
+                                                "wall_s": result["stats"].get("wall_s")}
+        if progress:
+            bar.write(f"{job.id} reference {index}: {result['status']} {result['reason']}".rstrip())
+        bar.update(1)
+
+    try:
+        _dispatch(todo, payloads, workers, address, record)
+    finally:
+        bar.close()
     return summary
 
 

@@ -1,0 +1,127 @@
+"""Reference runs of a plan's test sequences: simulated after the base runs, stored with them, resumable."""
+
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+
+from loosefit.data.store import DatasetStore
+from loosefit.sim import runner
+from loosefit.sim.params import SimParams
+from loosefit.sim.plan import load_plan
+from loosefit.sim.runner import CRASHED, perturb_start, run_plan
+from loosefit.sim.sequence import simulate_sequence
+from tests.sim.conftest import jump, ring_skirt, walk
+
+FRAMES = 12
+TEST = "skirt+average+jump+quick"
+
+
+def write_plan(root, references):
+    plan = {
+        "name": "refs",
+        "garments": {"skirt": {"file": "skirt.obj"}},
+        "motions": {m: {"file": f"{m}.npz"} for m in ("walk", "jump")},
+        "sim_params": {"quick": {"preroll": 0.2}},
+        "split": {"test": {"motions": ["jump"]}},
+    }
+    if references is not None:
+        plan["references"] = references
+    path = root / f"refs-{len(list(root.glob('refs-*.yaml')))}.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    return path
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory, body):
+    root = tmp_path_factory.mktemp("refs")
+    ring_skirt(body, n_around=24, n_down=8, length=0.3).save(root / "skirt.obj")
+    for make in (walk, jump):
+        make(body, FRAMES).save(root / f"{make.__name__}.npz")
+    return root
+
+
+@pytest.fixture(scope="module")
+def done(root):
+    """The plan with two reference runs, run in one go."""
+    out = root / "done.zarr"
+    summary = run_plan(write_plan(root, {"count": 2, "noise": 1.0e-5}), out, progress=False)
+    return summary, out
+
+
+def is_reference(payload):
+    return payload["params"]["adaptive_quality"] is False
+
+
+def test_test_sequences_get_their_runs_after_the_base(done, root, body):
+    summary, out = done
+    assert (summary["ok"], summary["references"]["jobs"], summary["references"]["ok"]) == (2, 2, 2)
+    assert "2 of 2 reference runs ok" in runner.summary_line(summary, out)
+    store = DatasetStore.open(out)
+    assert store.reference_runs("skirt+average+walk+quick") == {}  # a training sequence gets none
+    runs = store.reference_runs(TEST)
+    base = store.sequence(TEST)
+    assert [(k, r["status"], r["noise_seed"], r["noise_m"], r["quality"]) for k, r in runs.items()] == [
+        (1, "ok", 1, 1e-5, base.stats["quality"]), (2, "ok", 2, 1e-5, base.stats["quality"])]
+    refs = store.references(TEST)
+    assert refs.shape == (2, FRAMES, 24 * 8, 3)
+    assert not np.array_equal(refs[0], refs[1]) and not np.array_equal(refs[0], base.verts[:])
+    # run 1 is the base's job started from the garment moved by seed-1 noise, at the base's steps
+    garment = store.garment("skirt+average")
+    params = SimParams(preroll=0.2, quality=base.stats["quality"], adaptive_quality=False)
+    again = simulate_sequence(perturb_start(garment, 1, 1e-5), body, store.motion("jump"), params)
+    np.testing.assert_array_equal(again.verts, refs[0])
+    moved = np.linalg.norm(perturb_start(garment, 1, 1e-5).verts - garment.verts, axis=1)
+    assert 5e-6 < np.sqrt(np.mean(moved**2) / 3) < 2e-5  # 10 micrometres per axis
+
+
+def test_resume_simulates_only_missing_runs_and_follows_the_plan(done, root, tmp_path, monkeypatch):
+    _, out = done
+    copy = tmp_path / "copy.zarr"
+    shutil.copytree(out, copy)
+    with DatasetStore.open(copy, mode="a") as store:
+        store.delete_reference(TEST, 2)
+        created = store.reference_runs(TEST)[1]["created"]
+    calls = []
+    real = runner.simulate_job
+    monkeypatch.setattr(runner, "simulate_job", lambda payload: calls.append(is_reference(payload)) or real(payload))
+    summary = run_plan(write_plan(root, {"count": 2, "noise": 1.0e-5}), copy, progress=False)
+    assert calls == [True] and (summary["skipped"], summary["references"]["skipped"]) == (2, 1)
+    store = DatasetStore.open(copy)
+    assert store.reference_runs(TEST)[1]["created"] == created
+    np.testing.assert_array_equal(store.references(TEST), DatasetStore.open(out).references(TEST))
+    # fewer runs asked for: the extra one goes, nothing is simulated
+    calls.clear()
+    run_plan(write_plan(root, {"count": 1}), copy, progress=False)
+    assert calls == [] and list(DatasetStore.open(copy).reference_runs(TEST)) == [1]
+    # other noise: the run is simulated again; no references key: the runs stay, nothing is simulated
+    summary = run_plan(write_plan(root, {"count": 1, "noise": 2.0e-5}), copy, progress=False)
+    assert calls == [True] and DatasetStore.open(copy).reference_runs(TEST)[1]["noise_m"] == 2e-5
+    summary = run_plan(write_plan(root, None), copy, progress=False)
+    assert calls == [True] and summary["references"]["jobs"] == 0 and "reference" not in runner.summary_line(summary, copy)
+
+
+def test_a_crashed_run_is_stored_failed_and_retried(done, root, tmp_path, monkeypatch):
+    _, out = done
+    copy = tmp_path / "copy.zarr"
+    shutil.copytree(out, copy)
+    with DatasetStore.open(copy, mode="a") as store:
+        store.delete_reference(TEST, 1)
+    real = runner.simulate_sequence
+
+    def crash(garment, body, motion, params, **kw):
+        raise RuntimeError("Blender fell over")
+
+    monkeypatch.setattr(runner, "simulate_sequence", crash)
+    plan = write_plan(root, {"count": 2, "noise": 1.0e-5})
+    summary = run_plan(plan, copy, progress=False)
+    assert (summary["references"]["crashed"], summary["references"]["skipped"]) == (1, 1)
+    run = DatasetStore.open(copy).reference_runs(TEST)[1]
+    assert run["status"] == "failed" and run["reason"].startswith(CRASHED) and run["frames"] == 0
+    assert DatasetStore.open(copy).references(TEST).shape[0] == 1  # the failed run is not a reference
+    monkeypatch.setattr(runner, "simulate_sequence", real)
+    summary = run_plan(plan, copy, progress=False)
+    assert summary["references"]["ok"] == 1
+    np.testing.assert_array_equal(DatasetStore.open(copy).references(TEST), DatasetStore.open(out).references(TEST))
+    assert load_plan(plan).references.count == 2
