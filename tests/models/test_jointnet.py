@@ -14,9 +14,9 @@ from torch.utils.data import Subset, default_collate
 from loosefit.config import load_config
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
-from loosefit.models.config import WindowConfig
 from loosefit.models.dataset import GarmentSequences, WindowDataset
 from loosefit.models.jointnet import Config, JointGRU, JointNet, JointNetConfig, neighbour_table, select_joints
+from loosefit.models.streams import MemoryWindowConfig
 from loosefit.train import StageConfig, TrainConfig, seed_everything, train
 from loosefit.train.losses import normal_loss
 from loosefit.train.trainer import OPTIMIZERS
@@ -277,7 +277,7 @@ def test_config_file_holds_the_defaults():
     assert config == Config()
     assert (config.model.gru_hidden, config.model.features, config.model.bone_mlp) == (600, 480, [1024, 2048, 1024])
     assert (config.train.optimizer, config.train.step_gamma, config.train.step_epochs) == ("rmsprop", 0.7, 30)
-    assert config.data == WindowConfig(window=60, stride=50, burn_in=10)
+    assert config.data == MemoryWindowConfig(window=60, stride=50, burn_in=10)
     with pytest.raises(InputError, match="even"):
         JointNetConfig(features=31)
 

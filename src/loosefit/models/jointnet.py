@@ -55,7 +55,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
 from loosefit.models.base import GarmentModel
 from loosefit.models.body_lbs import training_body
-from loosefit.models.config import WindowConfig
+from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.layers.mlp import MLP
 from loosefit.rig.prepare import load_rig
@@ -150,7 +150,7 @@ class Config:
 
     model: JointNetConfig = field(default_factory=JointNetConfig)
     train: TrainConfig = field(default_factory=_paper_training)
-    data: WindowConfig = field(default_factory=lambda: WindowConfig(window=60, stride=50, burn_in=10))
+    data: MemoryWindowConfig = field(default_factory=lambda: MemoryWindowConfig(window=60, stride=50, burn_in=10))
 
 
 def select_joints(names: list[str], config: JointNetConfig) -> list[int]:
@@ -304,6 +304,7 @@ class JointNet(GarmentModel):
         for name in ("euler", "offset"):
             self.register_buffer(f"{name}_mean", torch.zeros(B, 3))
             self.register_buffer(f"{name}_std", torch.ones(B, 3))
+        self.carry = StateCarry(state_dim=0)  # stateful training: the GRU state at each window's end
 
     # ------------------------------------------------------------------ construction
 
@@ -408,10 +409,17 @@ class JointNet(GarmentModel):
         """``||relu(A)||_1`` (JointNet Eq. 8)."""
         return self.association_matrix().sum()
 
+    @staticmethod
+    def mask(batch: dict) -> torch.Tensor:
+        """``(B, T)`` counted frames: after the burn-in, before a stateful window's padding."""
+        return window_mask(batch)
+
     def training_loss(self, batch: dict, stage: str):
         mask = self.mask(batch)
         frames = self.loss_frames(mask, self.config.loss_frames)
-        pred = self(batch["root"], batch["joints"], psd=stage == "stage2", frames=frames)["verts"]
+        out = self(batch["root"], batch["joints"], self.carry.initial(batch), psd=stage == "stage2", frames=frames)
+        self.carry.keep(batch, out["state"])
+        pred = out["verts"]
         target, mask = batch["verts"][:, frames], mask[:, frames]
         l1 = vertex_l1(pred, target, mask)
         normal = normal_loss(pred, target, self.faces, mask)
@@ -422,5 +430,6 @@ class JointNet(GarmentModel):
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
         """The base metrics (``rmse_mm``, ``mean_vertex_error_mm``), with the PSD only once it trains (``stage2``)."""
         with torch.no_grad():
-            pred = self(batch["root"], batch["joints"], psd=stage == "stage2")["verts"]
-            return masked_errors_mm(pred, batch["verts"], self.mask(batch))
+            out = self(batch["root"], batch["joints"], self.carry.initial(batch), psd=stage == "stage2")
+            self.carry.keep(batch, out["state"])
+            return masked_errors_mm(out["verts"], batch["verts"], self.mask(batch))

@@ -44,7 +44,7 @@ from torch import nn
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_sixd, sixd_to_matrix
 from loosefit.models.base import GarmentModel
-from loosefit.models.config import WindowConfig
+from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.ensemble import EnsembleConfig
 from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
@@ -152,7 +152,7 @@ class Config:
 
     model: VirtualBonesConfig = field(default_factory=VirtualBonesConfig)
     train: TrainConfig = field(default_factory=_default_train)
-    data: WindowConfig = field(default_factory=WindowConfig)
+    data: MemoryWindowConfig = field(default_factory=MemoryWindowConfig)
     ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
 
 
@@ -192,6 +192,7 @@ class VirtualBones(GarmentModel):
             self.head[-1].weight.mul_(OUT_SCALE)
             self.head[-1].bias.mul_(OUT_SCALE)
         self._laplacian: torch.Tensor | None = None  # built from the faces when a loss first needs it
+        self.carry = StateCarry(state_dim=1)  # stateful training: (h_low, h_high) at each window's end
 
     # ------------------------------------------------------------------ construction
 
@@ -306,12 +307,19 @@ class VirtualBones(GarmentModel):
             self._laplacian = laplacian_operator(self.faces.cpu().numpy(), self._sizes["num_verts"]).to(self.faces.device)
         return self._laplacian
 
+    @staticmethod
+    def mask(batch: dict) -> torch.Tensor:
+        """``(B, T)`` counted frames: after the burn-in, before a stateful window's padding."""
+        return window_mask(batch)
+
     def training_loss(self, batch: dict, stage: str):
         mask = self.mask(batch)
         x = self._inputs(batch["root"], batch["joints"])
         c = self.config
+        h_low, h_high = self.carry.initial(batch) or (None, None)
         if stage == "low":
-            raw, _, _, lf, _ = self.low_frequency(x)
+            raw, _, _, lf, h_low = self.low_frequency(x, h_low)
+            self.carry.keep(batch, (h_low, None))
             vertex = vertex_distance(lf, batch["lf"], mask)
             lap = laplacian_difference(lf, batch["lf"], self.laplacian(), mask)
             loss = vertex + c.laplacian_weight * lap
@@ -325,8 +333,9 @@ class VirtualBones(GarmentModel):
         if stage == "high":
             frames = self.loss_frames(mask, self.config.hf_loss_frames)
             with torch.no_grad():  # the low-frequency module is frozen in this stage
-                raw, _, _, lf, _ = self.low_frequency(x, frames=frames)
-            offsets, _ = self.high_frequency(raw, lf, frames=frames)
+                raw, _, _, lf, h_low = self.low_frequency(x, h_low, frames=frames)
+            offsets, h_high = self.high_frequency(raw, lf, h_high, frames=frames)
+            self.carry.keep(batch, (h_low, h_high))
             verts = lf + offsets
             mask = mask[:, frames]
             keys = ("verts", "body", "body_normals", "body_nearest") + (("lf",) if c.hf_target == "residual" else ())
@@ -352,7 +361,8 @@ class VirtualBones(GarmentModel):
         "low" the output is the low-frequency mesh alone: the high-frequency module is not trained
         yet), and ``lf_rmse_mm`` of the low-frequency mesh against the low-frequency target."""
         with torch.no_grad():
-            out = self(batch["root"], batch["joints"])
+            out = self(batch["root"], batch["joints"], self.carry.initial(batch))
+            self.carry.keep(batch, out["state"])
             pred = out["lf"] if stage == "low" else out["verts"]
             mask = self.mask(batch)
             return {**masked_errors_mm(pred, batch["verts"], mask),

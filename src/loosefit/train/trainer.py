@@ -249,6 +249,12 @@ class _Trainer:
 
     # -- epochs ------------------------------------------------------------------------------
     def _loader(self, dataset: Dataset, size: int, shuffle: bool, generator: torch.Generator) -> DataLoader:
+        if hasattr(dataset, "batch_sampler"):  # a dataset that orders its own batches (stateful windows)
+            if distributed.is_distributed():
+                raise InputError(f"{type(dataset).__name__} orders its batches itself: train it in one process")
+            return DataLoader(dataset, batch_sampler=dataset.batch_sampler(size, generator, shuffle),
+                              collate_fn=self.collate, num_workers=self.config.num_workers,
+                              pin_memory=self.device.type == "cuda")
         sampler = None
         if shuffle and distributed.is_distributed():
             # this rank's share of the single-process shuffle, drawn from the same generator
