@@ -63,3 +63,38 @@ def test_bad_runs_are_refused():
     bad[2, 1, 1, 0] = np.nan
     with pytest.raises(InputError, match="NaN"):
         References(bad[0], bad[1:])
+
+
+def sphere_runs(frames, seed):
+    """A moving icosphere: base run, 3 reference runs around it and a prediction, on its faces."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(1, radius=0.3)
+    rng = np.random.default_rng(seed)
+    base = np.asarray(sphere.vertices)[None] + np.linspace(0, 0.1, frames)[:, None, None] * [0, 1.0, 0]
+    refs = base[None] + rng.normal(0, 0.004, (3, *base.shape))
+    pred = base + rng.normal(0, 0.006, base.shape)
+    return pred, base, refs, np.asarray(sphere.faces)
+
+
+def test_evaluate_reports_rmse_vs_mean_and_floor_where_runs_exist():
+    from loosefit.metrics.report import SequencePair, evaluate
+
+    (p1, g1, r1, faces), (p2, g2, r2, _), (p3, g3, _, _) = sphere_runs(6, 0), sphere_runs(4, 1), sphere_runs(3, 2)
+    pairs = [SequencePair("a", p1, g1, faces, references=r1), SequencePair("b", p2, g2, faces, references=r2),
+             SequencePair("c", p3, g3, faces)]
+    ev = evaluate(pairs, progress=False)
+    a, b, c = ev.rows
+    refs_a = References(g1, r1)
+    assert a["rmse_vs_mean_mm"] == pytest.approx(1000 * rmse_m(p1, refs_a.mean), rel=1e-6)
+    assert a["floor_mm"] == pytest.approx(refs_a.floor_mm, rel=1e-6) and a["references"] == 3
+    assert a["rmse_mm"] == pytest.approx(1000 * rmse_m(p1, g1), rel=1e-6)
+    assert c["rmse_vs_mean_mm"] is None and c["floor_mm"] is None
+    # pooled over the two sequences with runs: the RMSE of them concatenated
+    means = np.concatenate([refs_a.mean, References(g2, r2).mean])
+    assert ev.overall["rmse_vs_mean_mm"] == pytest.approx(1000 * rmse_m(np.concatenate([p1, p2]), means), rel=1e-6)
+    runs = np.concatenate([np.concatenate([g1[None], r1]), np.concatenate([g2[None], r2])], axis=1)
+    assert ev.overall["floor_mm"] == pytest.approx(1000 * floor_m(runs), rel=1e-6)
+    assert ev.overall["references"] == 2
+    assert "RMSE vs mean mm" in ev.table() and "floor mm" in ev.table()
+    assert "floor mm" not in evaluate(pairs[2:], progress=False).table()  # no runs: the table as before

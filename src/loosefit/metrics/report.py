@@ -8,12 +8,17 @@ Metrics per sequence (see each module for the formula): ``rmse_mm``, ``mean_vert
 ``laplacian_consistency``: SwinGar's Laplacian consistency deviation ``|diag(L_pred) - diag(L_gt)|``
 (:func:`~loosefit.metrics.surface.laplacian_consistency`, half-cotangent weights, dimensionless) of the
 prediction against the simulation, over every vertex and frame: how far the prediction's local surface
-structure is from the simulated one.
+structure is from the simulated one. With reference runs of a sequence (perturbed simulations, stored
+with it: :meth:`loosefit.data.store.DatasetStore.references`), ``rmse_vs_mean_mm`` (against the mean of the
+base and its reference runs) and ``floor_mm`` (their spread around that mean, below which no deterministic
+model scores against one run): :mod:`~loosefit.metrics.reference`; ``None`` for a sequence without runs.
 
 Overall values pool every frame of every sequence, so long sequences weigh more: RMSE is the root
 of the pooled mean square; mean errors, STED_s, Laplacian consistency and collision are weighted by frames x vertices,
 STED_t by frame pairs x vertices, Hausdorff by frames, E_norm by frames x faces; the overall STED
 combines the overall STED_s and STED_t. A sequence of one frame has no temporal STED (``None``).
+RMSE against the mean and the floor pool their mean squares by frames x vertices over the sequences that
+have reference runs only (``references``: how many sequences that is).
 
 Inputs: mesh-sequence ``.npz`` files (:class:`~loosefit.io.mesh_sequence.MeshSequence`; a GT file may
 carry the posed body as ``body_verts`` / ``body_faces``), directories of them matched by file name,
@@ -35,6 +40,7 @@ from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.metrics import sted as sted_mod
 from loosefit.metrics.collision import DEFAULT_TOLERANCE, collision_ratio
 from loosefit.metrics.errors import check_pair, hausdorff_per_frame, vertex_errors
+from loosefit.metrics.reference import References
 from loosefit.metrics.surface import face_normal_deviation_deg, mean_laplacian_consistency
 from loosefit.paths import atomic_path
 
@@ -43,6 +49,8 @@ COLUMNS = (
     ("frames", "frames", "{:d}"),
     ("vertices", "verts", "{:d}"),
     ("rmse_mm", "RMSE mm", "{:.2f}"),
+    ("rmse_vs_mean_mm", "RMSE vs mean mm", "{:.2f}"),
+    ("floor_mm", "floor mm", "{:.2f}"),
     ("mean_vertex_error_mm", "mean err mm", "{:.2f}"),
     ("hausdorff_mm", "Hausdorff mm", "{:.2f}"),
     ("sted_spatial", "STED_s", "{:.4f}"),
@@ -58,7 +66,8 @@ COLUMNS = (
 @dataclass
 class SequencePair:
     """One predicted sequence and its ground truth: ``pred``/``gt (T, V, 3)`` metres on ``faces (F, 3)``,
-    optionally the posed body ``body_verts (T, Vb, 3)`` with ``body_faces (Fb, 3)`` for the collision ratio."""
+    optionally the posed body ``body_verts (T, Vb, 3)`` with ``body_faces (Fb, 3)`` for the collision ratio, and
+    the reference runs ``references (K, T, V, 3)`` of ``gt`` (its perturbed simulations; None or K = 0: none)."""
 
     name: str
     pred: np.ndarray
@@ -66,6 +75,7 @@ class SequencePair:
     faces: np.ndarray
     body_verts: np.ndarray | None = None
     body_faces: np.ndarray | None = None
+    references: np.ndarray | None = None
 
 
 @dataclass
@@ -143,6 +153,9 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         collision = None
         if pair.body_verts is not None:
             collision = collision_ratio(pred, pair.body_verts, pair.body_faces, s.collision_tolerance)
+        against = None
+        if pair.references is not None and len(pair.references):
+            against = References(gt, pair.references).score(pred)
     except InputError as e:
         raise InputError(f"sequence {pair.name!r}: {e}") from None
     return {
@@ -150,6 +163,9 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         "frames": int(T),
         "vertices": int(V),
         "rmse_mm": float(1000 * np.sqrt(np.mean(err * err))),
+        "rmse_vs_mean_mm": None if against is None else against.rmse_vs_mean_mm,
+        "floor_mm": None if against is None else against.floor_mm,
+        "references": None if against is None else against.references,
         "mean_vertex_error_mm": float(1000 * err.mean()),
         "hausdorff_mm": float(1000 * hausdorff_per_frame(pred, gt).mean()),
         "sted_spatial": spatial,
@@ -179,6 +195,9 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
         return row["frames"] * row["vertices"]
 
     ms = _weighted([{**r, "ms": r["rmse_mm"] ** 2} for r in rows], "ms", tv)
+    with_refs = [r for r in rows if r.get("floor_mm") is not None]
+    ms_mean = _weighted([{**r, "ms": r["rmse_vs_mean_mm"] ** 2} for r in with_refs], "ms", tv)
+    ms_floor = _weighted([{**r, "ms": r["floor_mm"] ** 2} for r in with_refs], "ms", tv)
     spatial = _weighted(rows, "sted_spatial", tv)
     temporal = _weighted(rows, "sted_temporal", lambda r: (r["frames"] - 1) * r["vertices"])
     return {
@@ -187,6 +206,9 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
         "vertices": None,
         "faces": None,
         "rmse_mm": None if ms is None else float(np.sqrt(ms)),
+        "rmse_vs_mean_mm": None if ms_mean is None else float(np.sqrt(ms_mean)),
+        "floor_mm": None if ms_floor is None else float(np.sqrt(ms_floor)),
+        "references": len(with_refs) or None,
         "mean_vertex_error_mm": _weighted(rows, "mean_vertex_error_mm", tv),
         "hausdorff_mm": _weighted(rows, "hausdorff_mm", lambda r: r["frames"]),
         "sted_spatial": spatial,
@@ -281,7 +303,8 @@ def pairs_from_store(
 
     ``names`` picks sequences (default: every ``"ok"`` sequence of ``split``; ``split=None`` for all).
     ``body`` (a posed-body mesh sequence) is attached to every pair, so it suits one sequence or
-    sequences of one motion; without it there is no collision ratio.
+    sequences of one motion; without it there is no collision ratio. A sequence's reference runs, when the store
+    has them, come with its pair (RMSE against their mean and the floor).
     """
     from loosefit.data.store import DatasetStore
 
@@ -298,8 +321,9 @@ def pairs_from_store(
         if not path.is_file():
             raise InputError(f"no prediction for dataset sequence {name!r}", path)
         gt = MeshSequence(seq.verts[:], ds.read_array(f"garments/{seq.garment}", "faces"), ds.motion(seq.motion).fps)
-        pairs.append(_pair(name, MeshSequence.load(path), gt, path, Path(store), body_seq,
-                           None if body is None else Path(body)))
+        pair = _pair(name, MeshSequence.load(path), gt, path, Path(store), body_seq, None if body is None else Path(body))
+        pair.references = ds.references(name)  # (0, T, V, 3) for a sequence without reference runs
+        pairs.append(pair)
     return pairs
 
 
