@@ -117,9 +117,14 @@ def cmd_garment_import(args):
     from loosefit.garment import import_garment
 
     writable(args.out, folder=False)
-    garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up)
+    garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up, fit=True if args.fit else None)
     garment.save(args.out)
     p = garment.params
+    if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
+        f = p["fit"]
+        print(f"fitted as a garment made for another body ({f['why']}): made for "
+              + ",".join(f"{k}={v:g}" for k, v in f["shape"].items()) + f", draped onto this body; "
+              f"{f['inside_percent']:g}% of vertices more than 2 mm inside it")
     repaired = {k: v for k, v in p["repairs"].items() if v}
     print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces; {p['unit']}, {p['up']} up, "
           f"attachment {p['attachment']}, top at {p['top_z']:.3f} m (moved by {p['offset']} m); pushed out of the body "
@@ -414,6 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("file")
     sp.add_argument("--unit", choices=["m", "cm", "mm"], default=None, help="file unit (default: detected from size)")
     sp.add_argument("--up", choices=["y", "z"], default=None, help="file up axis (default: detected by fitting)")
+    sp.add_argument("--fit", action="store_true",
+                    help="a garment made for another body: find the Anny shape it fits, drape it from there onto "
+                         "this body with Blender cloth (done anyway when it has no plausible placement here)")
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_garment_import)

@@ -201,7 +201,8 @@ def _length(metres: float) -> str:
 
 
 def import_garment(
-    path: str | Path, body: BodyModel, unit: str | None = None, up: str | None = None, clearance: float = CLEARANCE
+    path: str | Path, body: BodyModel, unit: str | None = None, up: str | None = None, clearance: float = CLEARANCE,
+    fit: bool | None = False, fit_params=None,
 ) -> Garment:
     """Import a garment mesh (.obj or .ply) and fit it to ``body``'s rest pose.
 
@@ -211,11 +212,17 @@ def import_garment(
         unit: ``"m"``, ``"cm"`` or ``"mm"``; detected from the size when ``None``.
         up: ``"z"`` or ``"y"``; detected by fit to the body when ``None``.
         clearance: vertices and edge midpoints closer to the body than this (metres) are pushed out.
+        fit: ``True``: fit it as a garment made for another body (:mod:`loosefit.garment.body_fit`: find
+            the Anny shape it was made for, place it there, drape it onto ``body`` with Blender cloth);
+            ``None``: only when the direct placement is refused; ``False``: never.
+        fit_params: simulation parameters of the fit's drape (defaults when ``None``).
 
     Returns:
         A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, the
         placement (:meth:`loosefit.garment.placement.Placement.as_dict`: up axis, attachment,
-        offset, top height, top gap, inside fraction) and the repairs. The vertices within 3 cm of the garment's top are pinned.
+        offset, top height, top gap, inside fraction; on the body found when fitted), the repairs, the push
+        out of the body and, when fitted, ``params["fit"]``: why, the shape found, the drape and the share
+        of vertices more than 2 mm inside the body. The vertices within 3 cm of the garment's top are pinned.
 
     Raises:
         InputError: the file is unreadable or broken beyond safe repair, or no placement on the
@@ -237,16 +244,30 @@ def import_garment(
     lm = measure_body(body)
     if up is not None and up not in ("y", "z"):
         raise InputError(f"up axis must be 'y' or 'z', got {up!r}", path)
-    fits, refusals = [], []
-    for unit in units:
+    refused, fitted = None, None
+    if fit is not True:
         try:
-            fits.append((place(verts * UNITS[unit], faces, lm, path, up), unit))
+            placement, unit = _place(verts, faces, units, lm, path, up)
         except InputError as err:
-            refusals.append(f"as {unit}: {err.problem}" if len(units) > 1 else err.problem)
-    if not fits:
-        raise InputError("; ".join(refusals), path)
-    placement, unit = min(fits, key=lambda fit: fit[0].score)
-    verts = to_z_up(verts * UNITS[unit], placement.up) + placement.offset
+            if fit is False or not _has_shapes(body):
+                raise
+            refused = err
+    if fit is True or refused is not None:
+        from loosefit.garment.body_fit import fit_to_body
+
+        try:
+            fitted, shape_fit, _, info = fit_to_body({u: verts * UNITS[u] for u in units}, faces, body, path, up,
+                                                     params=fit_params)
+        except InputError as err:
+            if refused is None:
+                raise
+            raise InputError(f"{refused.problem}; fitted as a garment made for another body: {err.problem}",
+                             path) from None
+        placement, unit = shape_fit.placement, shape_fit.unit
+        info["why"] = "asked" if refused is None else "no plausible placement on this body"
+        verts = fitted
+    else:
+        verts = to_z_up(verts * UNITS[unit], placement.up) + placement.offset
     faces = orient_outward(verts, faces, lm.sdf)
     placed = verts
     verts = push_out(verts, faces, lm.sdf, clearance)
@@ -257,5 +278,29 @@ def import_garment(
         raise InputError(f"mesh is still broken after repair: {report}", path)
     pinned = verts[:, 2] > verts[:, 2].max() - 0.03
     params = {"source": str(path), "unit": unit, **placement.as_dict(), "repairs": repairs, "pushed_out": pushed}
+    if fitted is not None:
+        from loosefit.garment.body_fit import inside_percent
+
+        info["inside_percent"] = round(inside_percent(verts, lm.sdf), 2)
+        params["fit"] = info
     return Garment(verts=verts, faces=faces, pinned=pinned, kind="imported", params=params, name=path.stem)
 
+
+def _has_shapes(body) -> bool:
+    """Whether ``body`` has the shape keys a fit searches (Anny)."""
+    from loosefit.body.anny_body import AnnyBody
+
+    return isinstance(body, AnnyBody)
+
+
+def _place(verts: np.ndarray, faces: np.ndarray, units: list[str], lm, path, up: str | None):
+    """The best placement over the plausible ``units``: ``(Placement, unit)``; refused as :func:`place` is."""
+    fits, refusals = [], []
+    for unit in units:
+        try:
+            fits.append((place(verts * UNITS[unit], faces, lm, path, up), unit))
+        except InputError as err:
+            refusals.append(f"as {unit}: {err.problem}" if len(units) > 1 else err.problem)
+    if not fits:
+        raise InputError("; ".join(refusals), path)
+    return min(fits, key=lambda fit: fit[0].score)

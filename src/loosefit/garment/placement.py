@@ -64,6 +64,8 @@ RING_BAND = 0.04
 HANGING_BAND = 0.10
 #: Points scored per placement (a subset of the vertices, spread over the vertex order).
 SAMPLES = 1500
+#: With a hint of the top's height, the search covers this much above and below it, m.
+HINT_RANGE = 0.05
 
 
 @dataclass
@@ -170,7 +172,8 @@ def fit_score(dist: np.ndarray, z: np.ndarray, band: float) -> tuple[float, floa
     return float(score), float(np.abs(dist[top]).mean()), float((dist < -0.01).mean())
 
 
-def _search(sample: np.ndarray, lm: BodyLandmarks, window: tuple[float, float], start: np.ndarray, band: float):
+def _search(sample: np.ndarray, lm: BodyLandmarks, window: tuple[float, float], start: np.ndarray, band: float,
+            coarse_points: int = 400):
     """Best offset of ``sample (N, 3)`` (already moved by ``start (3,)``) with its top in ``window``.
     Returns ``(score, offset (3,), top_gap, inside)``."""
     top = sample[:, 2].max()
@@ -182,7 +185,7 @@ def _search(sample: np.ndarray, lm: BodyLandmarks, window: tuple[float, float], 
         moved = points + [0.0, dy, dz]
         return fit_score(lm.sdf.query(moved), moved[:, 2], band)
 
-    coarse = sample[:: max(1, len(sample) // 400)]
+    coarse = sample[:: max(1, len(sample) // coarse_points)]
     grid = [(score(dy, dz, coarse)[0], dy, dz) for dz in zs for dy in (-0.02, 0.0, 0.02)]
     _, by, bz = min(grid)
     best = (np.inf, by, bz)
@@ -197,7 +200,8 @@ def _search(sample: np.ndarray, lm: BodyLandmarks, window: tuple[float, float], 
     return s, start + [0.0, by, bz], gap, inside
 
 
-def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str | None = None) -> Placement:
+def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str | None = None,
+          samples: int = SAMPLES, top_hint: float | None = None) -> Placement:
     """Place a garment (``verts (V, 3)`` metres, as stored in the file) on the body.
 
     Args:
@@ -206,6 +210,10 @@ def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str
         lm: landmarks of the body's rest pose.
         path: the file, named in errors.
         up: ``"y"`` or ``"z"`` to force the file's up axis; detected when ``None``.
+        samples: points scored per placement (fewer: faster and coarser, as in the body-shape search of
+            :mod:`loosefit.garment.body_fit`).
+        top_hint: where the top is expected, m: only heights within :data:`HINT_RANGE` of it are searched
+            (the body-shape search knows it from the last shape's placement).
 
     Returns:
         The best :class:`Placement` (its offset applies to ``to_z_up(verts, placement.up)``).
@@ -214,7 +222,7 @@ def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str
         InputError: no plausible placement (see the module docstring), naming what was tried.
     """
     axes = (up,) if up else ((detect_up(verts, faces),) if detect_up(verts, faces) else ("z", "y"))
-    pick = np.linspace(0, len(verts) - 1, min(len(verts), SAMPLES)).astype(int)
+    pick = np.linspace(0, len(verts) - 1, min(len(verts), samples)).astype(int)
     body_x = float(0.5 * (lm.joints["hip"][0][0] + lm.joints["hip"][1][0]))
     found, tried = [], []
     attempts, fallback = [], False
@@ -224,6 +232,11 @@ def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str
     for axis, kind in attempts:
         v = to_z_up(verts, axis)
         window = top_windows(kind, lm)
+        if top_hint is not None:
+            window = (max(window[0], top_hint - HINT_RANGE), min(window[1], top_hint + HINT_RANGE))
+            if window[0] > window[1]:
+                tried.append(f"{axis}-up as {kind}: {top_hint:.2f} m is outside its window")
+                continue
         lo, hi = v.min(0), v.max(0)
         top_band = v[v[:, 2] > hi[2] - 0.04]
         start = np.array([
@@ -232,7 +245,7 @@ def place(verts: np.ndarray, faces: np.ndarray, lm: BodyLandmarks, path, up: str
             -lo[2],
         ])
         band = RING_BAND if kind == "ring" else HANGING_BAND
-        score, offset, gap, inside = _search(v[pick] + start, lm, window, start, band)
+        score, offset, gap, inside = _search(v[pick] + start, lm, window, start, band, min(400, samples))
         top_z = float(hi[2] + offset[2])
         here_top = float(hi[2])
         if window[0] <= here_top <= window[1]:  # the file's own position, if plausible

@@ -64,3 +64,18 @@ def with_preroll(body: BodyModel, motion: Motion, frames: int, shape=None) -> Mo
         joint_names=motion.joint_names,
         name=motion.name,
     )
+
+
+def morph_frames(source: np.ndarray, target: np.ndarray, morph: int, settle: int) -> tuple[np.ndarray, np.ndarray]:
+    """A body changing shape in place: its vertices ``source (V, 3)`` move linearly to ``target (V, 3)``
+    over ``morph`` frames, then hold for ``settle`` frames (the cloth comes to rest on the new shape).
+
+    Returns:
+        ``(frames (1 + morph + settle, V, 3) float32, weight (1 + morph + settle,) float64)``: frame 0 is
+        ``source``; ``weight`` is the share of the change done at each frame (0 at frame 0, 1 from frame
+        ``morph`` on), so that anything carried by the body change follows it in step.
+    """
+    weight = np.clip(np.arange(1 + morph + settle, dtype=np.float64) / max(morph, 1), 0.0, 1.0)
+    source, target = np.asarray(source, np.float64), np.asarray(target, np.float64)
+    frames = source[None] + weight[:, None, None] * (target - source)[None]
+    return frames.astype(np.float32), weight

@@ -1,0 +1,276 @@
+"""Fitting a garment made for another body, as a garment tool does it.
+
+A garment cut for a slimmer body sits inside this one (the direct placement of
+:mod:`loosefit.garment.placement` refuses it); one cut for a larger body hangs away from it. Three steps
+bring it onto the body without changing its cut:
+
+1. **The body it was made for** (:func:`find_shape`): the Anny shape (keys :data:`SEARCH_KEYS`; age and
+   proportions stay the target's) on which the garment's placement scores best. The objective of a shape is
+   the placement's :func:`~loosefit.garment.placement.fit_score` (gap unevenness over the attachment band
+   plus the penalties for cloth inside the body) plus the mean gap at the garment's top 4 cm (a garment
+   sits close to the body it was made for; on a slimmer body it is inside, on a larger one the gap grows),
+   plus :data:`PRIOR` metres per unit of shape distance from the target (where several shapes fit equally
+   well, as the height of a body under a skirt's waistband, the nearest one wins and the drape is
+   shortest). Search: a coarse grid (:data:`COARSE`, 9 shapes) then a coordinate search on every key
+   with steps 0.15, 0.08 and 0.04, each shape scored by the placement on :data:`SEARCH_SAMPLES` points.
+2. **Placed rigidly** on that body (the placement's axis swap and offset; the unit's scale).
+3. **Draped** (:func:`drape`): Blender cloth on the body's collider while the body's vertices move linearly
+   from the found shape to the target over :data:`MORPH_SECONDS`, then hold for :data:`SETTLE_SECONDS`.
+   The cloth's rest shape is the garment as placed (its cut is kept); its pinned vertices (the top 3 cm)
+   follow the body change at their nearest body points (:func:`carry`).
+
+The result is reported with the shape found and the final penetration: the share of vertices more than
+2 mm inside the target body (:data:`INSIDE_DEPTH`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from loosefit.errors import InputError
+from loosefit.garment.landmarks import measure_body
+from loosefit.garment.placement import Placement, fit_score, place, to_z_up
+
+#: Anny shape keys searched.
+SEARCH_KEYS = ("height", "weight", "gender", "muscle")
+#: The coarse grid: every combination of these values (other keys: the target's).
+COARSE = {"height": (0.2, 0.5, 0.8), "weight": (0.15, 0.5, 0.85)}
+#: Steps of the coordinate search, in shape units.
+STEPS = (0.15, 0.08, 0.04)
+#: Objective per unit of Euclidean shape distance from the target, m: breaks ties towards the target.
+PRIOR = 0.001
+#: Depth of the garment's upper band whose gap evenness scores a shape, m.
+SEARCH_BAND = 0.10
+#: Weight of the mean gap at the top 4 cm in the objective.
+GAP_WEIGHT = 0.05
+#: Points the placement scores per shape during the search (the final placement uses all its samples).
+SEARCH_SAMPLES = 300
+#: Most shapes scored in one search.
+MAX_EVALUATIONS = 48
+#: Seconds the body takes to change shape in the drape, and seconds it then holds.
+MORPH_SECONDS = 1.0
+SETTLE_SECONDS = 0.5
+#: Frames per second of the drape.
+FPS = 30.0
+#: A vertex deeper than this inside the body counts as penetrating in the reports, m.
+INSIDE_DEPTH = 0.002
+
+
+@dataclass
+class ShapeFit:
+    """The body a garment was made for.
+
+    Attributes:
+        shape: the Anny shape found (an :class:`~loosefit.body.anny_body.AnnyShape`).
+        placement: the garment's placement on that body.
+        unit: the file unit used.
+        objective: the shape's objective, m (see the module docstring).
+        evaluations: shapes scored.
+    """
+
+    shape: object
+    placement: Placement
+    unit: str
+    objective: float
+    evaluations: int
+
+    def shape_text(self, target) -> str:
+        """The searched keys as ``height=0.62,weight=0.31,...`` (others are the target's)."""
+        return ",".join(f"{k}={getattr(self.shape, k):.2f}" for k in SEARCH_KEYS)
+
+
+def _anny(body, path):
+    from loosefit.body.anny_body import AnnyBody
+
+    if not isinstance(body, AnnyBody):
+        raise InputError(f"fitting a garment made for another body needs the Anny body (its shape keys), not "
+                         f"{body.name!r}", path)
+    return body
+
+
+def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = None) -> ShapeFit:
+    """The Anny shape the garment was made for (step 1 of the module docstring).
+
+    Args:
+        scaled: unit -> ``(V, 3)`` file vertices scaled to metres (one entry per plausible unit).
+        faces: ``(F, 3)`` int64.
+        body: the target :class:`~loosefit.body.anny_body.AnnyBody`; the search keeps its age and proportions.
+        path: the file, named in errors.
+        up: the file's up axis, or ``None`` to detect it.
+
+    Raises:
+        InputError: no shape of the coarse grid or the search gives a plausible placement.
+    """
+    from loosefit.body.anny_body import AnnyShape
+
+    body = _anny(body, path)
+    target = body.shape
+    memo: dict = {}
+    refusals: list[str] = []
+
+    def evaluate(values: tuple) -> float:
+        values = tuple(round(float(np.clip(v, 0.0, 1.0)), 3) for v in values)
+        if values in memo:
+            return memo[values][0]
+        shape = dataclasses.replace(target, **dict(zip(SEARCH_KEYS, values)))
+        lm = measure_body(body, shape)
+        best = (np.inf, None, None, shape, lm)
+        distance = float(np.linalg.norm(np.subtract(values, [getattr(target, k) for k in SEARCH_KEYS])))
+        for unit, verts in scaled.items():
+            hint = None
+            if hints.get(unit) is not None:  # the top moves with its landmark from the best shape so far
+                top_z, attachment, anchor = hints[unit]
+                hint = top_z + _anchor(lm, attachment) - anchor
+            try:
+                p = place(verts, faces, lm, path, up, samples=SEARCH_SAMPLES, top_hint=hint)
+            except InputError as err:
+                refusals.append(f"{_short(values)}: {err.problem.split('; tried ')[-1][:200]}")
+                continue
+            pts = to_z_up(verts[pick[unit]], p.up) + p.offset
+            score = fit_score(lm.sdf.query(pts), pts[:, 2], SEARCH_BAND)[0] + GAP_WEIGHT * p.top_gap + PRIOR * distance
+            if score < best[0]:
+                best = (score, p, unit, shape, lm)
+        memo[values] = best
+        if best[1] is not None and (best_seen[0] is None or best[0] < best_seen[0]):
+            best_seen[0] = best[0]
+            hints[best[2]] = (best[1].top_z, best[1].attachment, _anchor(lm, best[1].attachment))
+        return best[0]
+
+    pick = {u: np.linspace(0, len(v) - 1, min(len(v), SEARCH_SAMPLES)).astype(int) for u, v in scaled.items()}
+    hints: dict = {}
+    best_seen = [None]
+    start = tuple(getattr(target, k) for k in SEARCH_KEYS)
+    grid = [dict(zip(COARSE, combo)) for combo in itertools.product(*COARSE.values())]
+    for point in grid:
+        evaluate(tuple(point.get(k, getattr(target, k)) for k in SEARCH_KEYS))
+    evaluate(start)
+    best = min(memo, key=lambda k: memo[k][0])
+    if not np.isfinite(memo[best][0]):
+        raise InputError(
+            f"no plausible placement on any Anny body tried ({len(memo)} shapes of height, weight in "
+            f"{COARSE['height']} x {COARSE['weight']}); the closest: " + "; ".join(refusals[:3]), path)
+    for step in STEPS:
+        improved = True
+        while improved and len(memo) < MAX_EVALUATIONS:
+            improved = False
+            for i, sign in itertools.product(range(len(SEARCH_KEYS)), (-1.0, 1.0)):
+                candidate = list(best)
+                candidate[i] = round(float(np.clip(candidate[i] + sign * step, 0.0, 1.0)), 3)
+                candidate = tuple(candidate)
+                if evaluate(candidate) < memo[best][0] - 1e-6:
+                    best, improved = candidate, True
+    score, found, unit, shape, lm = memo[best]
+    # The final placement on the found body with every sample point, near the search's.
+    placement = place(scaled[unit], faces, lm, path, found.up, top_hint=found.top_z)
+    return ShapeFit(shape=AnnyShape(**dataclasses.asdict(shape)), placement=placement, unit=unit,
+                    objective=float(score), evaluations=len(memo))
+
+
+def _anchor(lm, attachment: str) -> float:
+    """The body height a top of this attachment follows: the waist, the armpits or the neck joint."""
+    if attachment == "waistband":
+        return lm.waist_z
+    return lm.armpit_z if attachment == "strapless" else float(lm.joints["neck"][0][2])
+
+
+def _short(values) -> str:
+    return ",".join(f"{k[0]}={v:.2f}" for k, v in zip(SEARCH_KEYS, values))
+
+
+def carry(points: np.ndarray, source: np.ndarray, target: np.ndarray, k: int = 8) -> np.ndarray:
+    """How the body change from ``source (Vb, 3)`` to ``target (Vb, 3)`` (the same body's vertices in two
+    shapes) moves ``points (N, 3)``: the inverse-distance weighted mean displacement of each point's ``k``
+    nearest source vertices. Returns ``(N, 3)`` float64, m."""
+    source = np.asarray(source, np.float64)
+    dist, nearest = cKDTree(source).query(np.asarray(points, np.float64), k=k)
+    w = 1.0 / np.maximum(dist, 1e-4)
+    w /= w.sum(1, keepdims=True)
+    change = np.asarray(target, np.float64) - source
+    return np.einsum("nk,nkd->nd", w, change[nearest])
+
+
+def drape(verts: np.ndarray, faces: np.ndarray, pinned: np.ndarray, body, source, target=None, params=None,
+          morph_seconds: float = MORPH_SECONDS, settle_seconds: float = SETTLE_SECONDS) -> tuple[np.ndarray, dict]:
+    """Drape a garment from the body of shape ``source`` onto the shape ``target`` (step 3 of the module
+    docstring) with Blender cloth.
+
+    Args:
+        verts: ``(V, 3)`` garment on the rest body of shape ``source``, m; also the cloth's rest shape.
+        faces: ``(F, 3)`` int64.
+        pinned: ``(V,)`` bool: vertices that follow the body change exactly.
+        body: an Anny body; ``target`` ``None`` is its own shape.
+        source, target: :class:`~loosefit.body.anny_body.AnnyShape`.
+        params: :class:`~loosefit.sim.params.SimParams` (defaults when ``None``).
+
+    Returns:
+        ``(verts (V, 3) float64 on the target's rest body, stats)``: ``stats`` has the frames, the solver
+        steps per frame, the wall time and ms per frame.
+    """
+    import time
+
+    from loosefit.sim.collider import inflated_rest, steps_per_frame
+    from loosefit.sim.params import SimParams
+    from loosefit.sim.preroll import morph_frames
+    from loosefit.sim.sequence import backend_run_cloth
+
+    params = params or SimParams()
+    run_cloth = backend_run_cloth("blender")
+    target = target or body.shape
+    proxy = body.collision_proxy()
+    morph, settle = int(round(morph_seconds * FPS)), int(round(settle_seconds * FPS))
+    collider, weight = morph_frames(inflated_rest(body, proxy, source), inflated_rest(body, proxy, target),
+                                    morph, settle)
+    verts = np.asarray(verts, np.float64)
+    change = carry(verts, body.rest_verts(source), body.rest_verts(target))
+    garment_frames = (verts[None] + weight[:, None, None] * change[None]).astype(np.float32)
+    if params.adaptive_quality:
+        steps = steps_per_frame(collider, garment_frames[0], params.collision_distance, params.quality)
+        params = dataclasses.replace(params, quality=steps)
+    floor = float(min(body.rest_verts(source)[:, 2].min(), body.rest_verts(target)[:, 2].min()))
+    start = time.perf_counter()
+    out, seconds = run_cloth(np.asarray(faces, np.int64), np.asarray(pinned, bool), garment_frames, collider,
+                             proxy.faces, params, FPS, floor=floor)
+    stats = {"frames": int(len(out)), "steps_per_frame": int(params.quality),
+             "ms_per_frame": round(1e3 * float(seconds.mean()), 1), "wall_s": round(time.perf_counter() - start, 2)}
+    return out[-1].astype(np.float64), stats
+
+
+def inside_percent(verts: np.ndarray, sdf, depth: float = INSIDE_DEPTH) -> float:
+    """Share of ``verts (V, 3)`` more than ``depth`` m inside the body, percent."""
+    return float(100.0 * (sdf.query(np.asarray(verts, np.float64)) < -depth).mean())
+
+
+def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = None, params=None):
+    """Steps 1-3 of the module docstring for a repaired garment.
+
+    Args:
+        scaled: unit -> ``(V, 3)`` file vertices in metres, in the file's axes.
+        faces: ``(F, 3)`` int64.
+        body: the target Anny body.
+        path: the file, named in errors.
+        up: the file's up axis or ``None``.
+        params: simulation parameters of the drape.
+
+    Returns:
+        ``(verts (V, 3) on the target body, fit (ShapeFit), placed (V, 3) on the found body, info dict)``;
+        ``info`` holds the shape found, the drape's statistics and the penetration before and after.
+    """
+    fit = find_shape(scaled, faces, body, path, up)
+    placed = to_z_up(scaled[fit.unit], fit.placement.up) + fit.placement.offset
+    pinned = placed[:, 2] > placed[:, 2].max() - 0.03
+    target_sdf = measure_body(body).sdf
+    verts, stats = drape(placed, faces, pinned, body, fit.shape, params=params)
+    info = {
+        "shape": {k: round(getattr(fit.shape, k), 3) for k in SEARCH_KEYS},
+        "objective": round(fit.objective, 5),
+        "evaluations": fit.evaluations,
+        "inside_before_percent": round(inside_percent(placed, target_sdf), 2),
+        "inside_after_drape_percent": round(inside_percent(verts, target_sdf), 2),
+        "drape": stats,
+    }
+    return verts, fit, placed, info
