@@ -16,6 +16,11 @@ here with ``--bones`` virtual bones, which resumes and skips what is done):
    The training and validation motions are animated too: the RMSE per motion kind (``walk``, ``spin``...,
    the procedural generator's name; ``file`` for motion files) and split, side by side, is
    ``garments/<garment>/<method>/errors_by_kind/<kind>/{train,val,test}_rmse_mm`` in the JSON.
+   A test sequence with reference runs in the store (the plan's ``references``: the same simulation started
+   10 micrometres apart, :mod:`loosefit.metrics.reference`) is also scored against the mean of its runs, beside
+   their floor; flat figures ``figures/<garment>/<motion>/<method>/rmse_mm`` (against the simulation),
+   ``.../<method>/rmse_vs_mean_mm`` and ``figures/<garment>/<motion>/floor_mm``, ``<garment>`` the store's
+   garment entry (``skirt+average``), for every method row (body-LBS included).
 3. Robustness to an irrelevant joint (JointNet paper, Table 3): ``--perturb-joint`` of each test motion
    gets a smooth random rotation offset of ``--perturb-degrees`` (the angle wanders over that range, about
    a slowly turning random axis); VirtualBones and JointNet animate the original and the perturbed motion,
@@ -263,20 +268,40 @@ def garment_benchmark(data: Path, store: DatasetStore, garment: str, runs: Path,
         gt = np.asarray(seq.verts[:])
         body = sequence_body(store, name, motion.rig)
         posed = body.pose(motion).verts
+        refs = store.references(name)  # (0, T, V, 3) without reference runs
         for method, animator in animators.items():
-            pairs[method].append(SequencePair(name, animator.animate(motion), gt, faces, posed, body.faces))
+            pairs[method].append(SequencePair(name, animator.animate(motion), gt, faces, posed, body.faces, refs))
         lf = animators["virtualbones"].animate(motion, output="lf")
-        pairs["virtualbones-lf"].append(SequencePair(name, lf, gt, faces, posed, body.faces))
+        pairs["virtualbones-lf"].append(SequencePair(name, lf, gt, faces, posed, body.faces, refs))
     out["animate_s"] = time.perf_counter() - start
     print(f"== {garment}: evaluate {len(names)} test sequences", flush=True)
     for method, method_pairs in pairs.items():
         result = evaluate(method_pairs, progress=False)
         out["metrics"][method] = {"overall": result.overall, "sequences": result.rows}
         print(f"-- {method}\n{result.table()}", flush=True)
+    out["figures"] = reference_figures(store, garment, out["metrics"])
+    for key, value in out["figures"].items():
+        print(f"   {key} = {value:.2f}", flush=True)
     print(f"== {garment}: robustness to {joint}", flush=True)
     out["robustness"] = robustness(store, garment, {m: animators[m] for m in ("virtualbones", "jointnet")}, names,
                                    joint, degrees)
     return out
+
+
+def reference_figures(store: DatasetStore, garment: str, metrics: dict) -> dict:
+    """Per held-out sequence with reference runs: ``<garment>/<motion>/<method>/rmse_mm`` (against the simulation)
+    and ``rmse_vs_mean_mm`` (against the runs' mean), and ``<garment>/<motion>/floor_mm``, from the metric rows
+    of :func:`loosefit.metrics.report.evaluate` (``metrics``: ``{method: {"sequences": rows}}``)."""
+    figures = {}
+    for method, result in metrics.items():
+        for row in result["sequences"]:
+            if row.get("floor_mm") is None:
+                continue
+            key = f"{garment}/{store.sequence(row['name']).motion}"
+            figures[f"{key}/{method}/rmse_mm"] = row["rmse_mm"]
+            figures[f"{key}/{method}/rmse_vs_mean_mm"] = row["rmse_vs_mean_mm"]
+            figures[f"{key}/floor_mm"] = row["floor_mm"]
+    return dict(sorted(figures.items()))
 
 
 def garment_targets(garment: str, result: dict) -> list[dict]:
@@ -418,6 +443,7 @@ def main() -> None:
             results["garments"][garment] = garment_benchmark(data, store, garment, runs, sets, args.perturb_joint,
                                                              degrees, args.val_fraction)
             targets += garment_targets(garment, results["garments"][garment])
+            results.setdefault("figures", {}).update(results["garments"][garment]["figures"])
     if args.simparams:
         results["ensemble"], ensemble_targets = ensemble_benchmark(Path(args.simparams), runs, sets["virtualbones"],
                                                                    args.bones)
