@@ -76,14 +76,19 @@ def test_bad_runs_are_refused(store, args, message):
     assert store.reference_runs("s") == {}
 
 
-def test_info_gives_the_floor_of_base_and_runs(store):
+def test_info_gives_the_floor_of_base_and_runs(store, capsys):
+    from loosefit.cli import main
+
     base, runs = base_and_runs(store)
     store.write_reference("s", 4, runs[0][:5], status="failed", reason="crashed: x")
+    store.close()
     info = DatasetStore.open(store.path).info()
     r = info["references"]["s"]
     assert (r["ok"], r["failed"]) == (3, 1)
     assert r["floor_mm"] == pytest.approx(1000 * floor_m(np.concatenate([base[None], runs])), rel=1e-6)
-    assert f"s: 3 ok, 1 failed, floor {r['floor_mm']:.2f} mm" in format_info(info)
+    line = f"s: 3 ok, 1 failed, floor {r['floor_mm']:.2f} mm"
+    assert line in format_info(info)
+    assert main(["info", str(store.path)]) == 0 and line in capsys.readouterr().out
 
 
 def test_damaged_run_is_named_listed_and_repaired(store):
