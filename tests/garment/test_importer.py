@@ -329,6 +329,9 @@ def test_meshes_too_small_to_wear_are_refused(tmp_path, body, mesh, message):
 
 
 def test_the_smallest_wearable_tube_is_imported(tmp_path, body):
-    # 8 vertices around and two openings: wearable by the counts; placement puts it around the chest.
-    g = import_garment(write_obj(tmp_path / "tube.obj", *_tube(8, rings=6, radius=0.17)), body)
-    assert g.num_verts == 48 and g.params["attachment"] in ("strapless", "waistband")
+    # 8 vertices around and two openings: wearable by the counts, so it reaches placement (around the chest),
+    # but its 13 cm chords cut up to 3 cm into the body, which the push refuses; 16 vertices around do not.
+    with pytest.raises(InputError, match="too deep inside the body: pushing them out would move them up to"):
+        import_garment(write_obj(tmp_path / "tube8.obj", *_tube(8, rings=6, radius=0.17)), body)
+    g = import_garment(write_obj(tmp_path / "tube.obj", *_tube(16, rings=6, radius=0.17)), body)
+    assert g.num_verts == 96 and g.params["attachment"] in ("strapless", "waistband")

@@ -93,7 +93,19 @@ def _anny(body, path):
     return body
 
 
-def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = None) -> ShapeFit:
+@dataclass(frozen=True)
+class Search:
+    """How hard :func:`find_shape` looks: the coarse grid (key -> values), the coordinate steps and the
+    most shapes scored. The defaults are the module's constants; a smaller search is for quick checks."""
+
+    coarse: tuple = tuple(COARSE.items())
+    steps: tuple = STEPS
+    max_evaluations: int = MAX_EVALUATIONS
+    morph_seconds: float = MORPH_SECONDS
+    settle_seconds: float = SETTLE_SECONDS
+
+
+def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = None, search: Search = Search()) -> ShapeFit:
     """The Anny shape the garment was made for (step 1 of the module docstring).
 
     Args:
@@ -102,6 +114,7 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
         body: the target :class:`~loosefit.body.anny_body.AnnyBody`; the search keeps its age and proportions.
         path: the file, named in errors.
         up: the file's up axis, or ``None`` to detect it.
+        search: the grid, steps and number of shapes scored.
 
     Raises:
         InputError: no shape of the coarse grid or the search gives a plausible placement.
@@ -145,18 +158,19 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
     hints: dict = {}
     best_seen = [None]
     start = tuple(getattr(target, k) for k in SEARCH_KEYS)
-    grid = [dict(zip(COARSE, combo)) for combo in itertools.product(*COARSE.values())]
+    coarse = dict(search.coarse)
+    grid = [dict(zip(coarse, combo)) for combo in itertools.product(*coarse.values())]
     for point in grid:
         evaluate(tuple(point.get(k, getattr(target, k)) for k in SEARCH_KEYS))
     evaluate(start)
     best = min(memo, key=lambda k: memo[k][0])
     if not np.isfinite(memo[best][0]):
         raise InputError(
-            f"no plausible placement on any Anny body tried ({len(memo)} shapes of height, weight in "
-            f"{COARSE['height']} x {COARSE['weight']}); the closest: " + "; ".join(refusals[:3]), path)
-    for step in STEPS:
+            f"no plausible placement on any Anny body tried ({len(memo)} shapes: "
+            + ", ".join(f"{k} in {v}" for k, v in coarse.items()) + "); " + "; ".join(refusals[:3]), path)
+    for step in search.steps:
         improved = True
-        while improved and len(memo) < MAX_EVALUATIONS:
+        while improved and len(memo) < search.max_evaluations:
             improved = False
             for i, sign in itertools.product(range(len(SEARCH_KEYS)), (-1.0, 1.0)):
                 candidate = list(best)
@@ -245,7 +259,8 @@ def inside_percent(verts: np.ndarray, sdf, depth: float = INSIDE_DEPTH) -> float
     return float(100.0 * (sdf.query(np.asarray(verts, np.float64)) < -depth).mean())
 
 
-def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = None, params=None):
+def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = None, params=None,
+                search: Search = Search()):
     """Steps 1-3 of the module docstring for a repaired garment.
 
     Args:
@@ -255,16 +270,18 @@ def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = No
         path: the file, named in errors.
         up: the file's up axis or ``None``.
         params: simulation parameters of the drape.
+        search: how hard to look for the shape, and how long the drape is.
 
     Returns:
         ``(verts (V, 3) on the target body, fit (ShapeFit), placed (V, 3) on the found body, info dict)``;
         ``info`` holds the shape found, the drape's statistics and the penetration before and after.
     """
-    fit = find_shape(scaled, faces, body, path, up)
+    fit = find_shape(scaled, faces, body, path, up, search)
     placed = to_z_up(scaled[fit.unit], fit.placement.up) + fit.placement.offset
     pinned = placed[:, 2] > placed[:, 2].max() - 0.03
     target_sdf = measure_body(body).sdf
-    verts, stats = drape(placed, faces, pinned, body, fit.shape, params=params)
+    verts, stats = drape(placed, faces, pinned, body, fit.shape, params=params, morph_seconds=search.morph_seconds,
+                         settle_seconds=search.settle_seconds)
     info = {
         "shape": {k: round(getattr(fit.shape, k), 3) for k in SEARCH_KEYS},
         "objective": round(fit.objective, 5),

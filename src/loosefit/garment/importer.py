@@ -11,21 +11,31 @@ split seam).
 What is an error (:class:`~loosefit.errors.InputError` naming the file): unreadable lines, face
 indices out of range, NaN or infinite coordinates, an empty mesh, a non-orientable surface,
 several large pieces, a mesh too small to be worn (:func:`check_wearable`: fewer than two openings,
-or a largest opening of fewer than 8 vertices), no plausible placement on the body.
+or a largest opening of fewer than 8 vertices), normals pointing inwards, no plausible placement on the body,
+a push out of the body over :func:`max_push`.
 
 Units: each of metres, centimetres and millimetres that makes the garment's largest side
 between 0.15 and 2.5 m is tried (at most two of them can), and the better placement wins; a unit that
 makes it smaller or larger (given with ``unit``, or when none fits) is refused with the sizes tried.
 
 The shape is kept: placement is rigid (an axis swap and a translation) plus the unit's uniform scale. The
-only other change is the push out of the body to the clearance (:func:`~loosefit.garment.fitting.push_out`),
-reported in ``params["pushed_out"]`` (largest move in mm, share of vertices moved more than 5 mm). Measured
-on the template garments (four kinds, seeds 0-2, 3 cm edges): a garment made for the body needs no push at
-all (0 mm on all twelve); made for another Anny shape and imported onto the default body, a skirt for a
-taller body moves 9.8 mm, a long shirt for a thin one 15 mm, a long shirt for a taller body 44 mm, a dress
-41 mm and a skirt 57 mm for a thin one. The push is not refused at a size: a 6 mm dent at the hips already
-moves 3.1 cm (the push relaxes what it moved, which pulls it back in, and pushes again), as much as a
-garment of another size does, so a limit would refuse the one with the other.
+only other change is the push out of the body to the clearance
+(:func:`~loosefit.garment.fitting.push_out_bounded`: each vertex moves by at most its own depth short of the
+clearance plus 1 mm, nothing is smoothed), reported in ``params["pushed_out"]`` (largest and mean move in mm,
+share of vertices moved, and moved more than 5 mm). A 6 mm dent at the hips moves 12-14 mm (6 mm in, 5 mm
+clearance, its edges' midpoints a little deeper), where the earlier push-and-relax moved it 64 mm. A push over
+:func:`max_push` (20 mm at the 5 mm clearance) is refused: the placement tolerates points up to 1 cm inside,
+so deeper cloth is a garment cut for another body, not a dent. Measured on templates made for other Anny
+shapes (seed 0, 3 cm edges) imported onto the default body: a skirt or dress for a taller body, a long shirt
+or dress for a thin one need no push, a skirt for a thin one 5.4 mm, a long shirt for a taller body would
+move 23 mm and is refused.
+
+A garment made for another body (``fit=True``, or ``fit=None`` when the direct placement or the push is
+refused) is fitted as a garment tool does it: :mod:`loosefit.garment.body_fit` finds the Anny shape it fits,
+places it there and drapes it onto the body with Blender cloth while the body changes shape.
+
+Inside out: a garment whose normals point inwards (:func:`outward_flux` negative, its faces consistently
+oriented as most of the file's faces are) is refused.
 Up axis, attachment (waistband, strapless top, shoulders, straps) and placement:
 :mod:`loosefit.garment.placement`.
 """
@@ -38,7 +48,7 @@ import numpy as np
 
 from loosefit.body.base import BodyModel
 from loosefit.errors import InputError
-from loosefit.garment.fitting import orient_outward, push_out
+from loosefit.garment.fitting import PUSH_MARGIN, push_out_bounded
 from loosefit.garment.garment import Garment
 from loosefit.garment.landmarks import measure_body
 from loosefit.garment.mesh_checks import boundary_loops, face_areas, face_components, mesh_report, unique_edges
@@ -120,6 +130,8 @@ def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.n
     remap = np.cumsum(used) - 1
     verts, faces = verts[used], remap[faces]
     faces, flipped = _orient(faces, path)
+    if flipped > len(faces) / 2:  # keep the orientation most of the file's faces have
+        faces, flipped = faces[:, ::-1].copy(), len(faces) - flipped
     repairs["reoriented_faces"] = flipped
     return verts, faces, repairs
 
@@ -141,6 +153,29 @@ def check_wearable(verts: np.ndarray, faces: np.ndarray, path) -> None:
         raise InputError(
             f"too coarse to be a garment: {size}, its largest opening has {hem} vertices; an opening that goes "
             f"around the body needs at least {MIN_HEM_VERTICES} (one in each 45-degree sector)", path)
+
+
+def outward_flux(verts: np.ndarray, faces: np.ndarray) -> float:
+    """``sum_f A_f n_f . (c_f - c)`` over the faces (area ``A_f``, unit normal ``n_f``, centroid ``c_f``) about
+    the surface's centroid ``c``, m^3. On a closed surface it is three times the enclosed volume, whatever
+    ``c``; on a tube open at both ends (a garment) the missing end caps take part of that, and what is left
+    is still positive when the normals point outward (a cylinder: 2/3 of the volume; a cone's frustum
+    too), negative when they point in."""
+    tri = verts[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # 2 A n
+    centroid = tri.mean(1)
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    c = (centroid * area[:, None]).sum(0) / max(area.sum(), 1e-12)
+    return float(0.5 * np.einsum("ij,ij->", cross, centroid - c))
+
+
+def check_outward(verts: np.ndarray, faces: np.ndarray, path) -> None:
+    """Refuse a garment whose normals point inwards (:func:`outward_flux` negative): inside out, or its
+    faces wound the other way. Its faces are consistently oriented already (:func:`repair`)."""
+    if outward_flux(verts, faces) < 0:
+        raise InputError("the garment is inside out: its faces' normals point inwards, towards the body; wind "
+                         "the faces the other way (counter-clockwise seen from outside) or turn it right side out",
+                         path)
 
 
 def _orient(faces: np.ndarray, path) -> tuple[np.ndarray, int]:
@@ -202,7 +237,7 @@ def _length(metres: float) -> str:
 
 def import_garment(
     path: str | Path, body: BodyModel, unit: str | None = None, up: str | None = None, clearance: float = CLEARANCE,
-    fit: bool | None = False, fit_params=None,
+    fit: bool | None = False, fit_params=None, fit_search=None,
 ) -> Garment:
     """Import a garment mesh (.obj or .ply) and fit it to ``body``'s rest pose.
 
@@ -216,6 +251,7 @@ def import_garment(
             the Anny shape it was made for, place it there, drape it onto ``body`` with Blender cloth);
             ``None``: only when the direct placement is refused; ``False``: never.
         fit_params: simulation parameters of the fit's drape (defaults when ``None``).
+        fit_search: a :class:`loosefit.garment.body_fit.Search` (defaults when ``None``).
 
     Returns:
         A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, the
@@ -240,6 +276,7 @@ def import_garment(
         raise InputError(f"unsupported garment format {suffix!r}; use .obj or .ply", path)
     verts, faces, repairs = repair(verts, faces, path)
     check_wearable(verts, faces, path)
+    check_outward(verts, faces, path)
     units = _units(verts, unit, path)
     lm = measure_body(body)
     if up is not None and up not in ("y", "z"):
@@ -248,31 +285,31 @@ def import_garment(
     if fit is not True:
         try:
             placement, unit = _place(verts, faces, units, lm, path, up)
+            pushed_verts, moved = _push(to_z_up(verts * UNITS[unit], placement.up) + placement.offset, faces, lm,
+                                        clearance, path, "placed on this body")
         except InputError as err:
             if fit is False or not _has_shapes(body):
                 raise
             refused = err
     if fit is True or refused is not None:
-        from loosefit.garment.body_fit import fit_to_body
+        from loosefit.garment.body_fit import Search, fit_to_body
 
         try:
             fitted, shape_fit, _, info = fit_to_body({u: verts * UNITS[u] for u in units}, faces, body, path, up,
-                                                     params=fit_params)
+                                                     params=fit_params, search=fit_search or Search())
         except InputError as err:
             if refused is None:
                 raise
             raise InputError(f"{refused.problem}; fitted as a garment made for another body: {err.problem}",
                              path) from None
         placement, unit = shape_fit.placement, shape_fit.unit
-        info["why"] = "asked" if refused is None else "no plausible placement on this body"
-        verts = fitted
-    else:
-        verts = to_z_up(verts * UNITS[unit], placement.up) + placement.offset
-    faces = orient_outward(verts, faces, lm.sdf)
-    placed = verts
-    verts = push_out(verts, faces, lm.sdf, clearance)
-    moved = np.linalg.norm(verts - placed, axis=1)
-    pushed = {"max_mm": round(1e3 * float(moved.max()), 2), "over_5mm_percent": round(100.0 * float((moved > 0.005).mean()), 2)}
+        info["why"] = "asked" if refused is None else refused.problem.split(";")[0].split(" (")[0]
+        pushed_verts, moved = _push(fitted, faces, lm, clearance, path, "after the fit's drape")
+    verts = pushed_verts
+    pushed = {"max_mm": round(1e3 * float(moved.max()), 2),
+              "mean_mm": round(1e3 * float(moved[moved > 0].mean()) if (moved > 0).any() else 0.0, 2),
+              "moved_percent": round(100.0 * float((moved > 0).mean()), 2),
+              "over_5mm_percent": round(100.0 * float((moved > 0.005).mean()), 2)}
     report = mesh_report(verts, faces)
     if not report.ok:
         raise InputError(f"mesh is still broken after repair: {report}", path)
@@ -284,6 +321,31 @@ def import_garment(
         info["inside_percent"] = round(inside_percent(verts, lm.sdf), 2)
         params["fit"] = info
     return Garment(verts=verts, faces=faces, pinned=pinned, kind="imported", params=params, name=path.stem)
+
+
+#: Depth inside the body that the placement tolerates in its points (it counts only deeper ones), m.
+TOLERATED_DEPTH = 0.01
+
+
+def max_push(clearance: float) -> float:
+    """The largest push out of the body accepted, m: a vertex the placement tolerates
+    (:data:`TOLERATED_DEPTH` inside) is moved to ``clearance`` outside, plus the pusher's margin, with the
+    same again for an edge midpoint deeper than its ends on the curved body: a quarter more. 20 mm at the
+    5 mm clearance. Deeper cloth is not a dent but a garment cut for another body."""
+    return 1.25 * (TOLERATED_DEPTH + clearance + PUSH_MARGIN)
+
+
+def _push(verts, faces, lm, clearance: float, path, where: str):
+    """:func:`~loosefit.garment.fitting.push_out_bounded`, refused over :func:`max_push`. Returns
+    ``(verts, moved)``."""
+    pushed, moved = push_out_bounded(verts, faces, lm.sdf, clearance)
+    limit = max_push(clearance)
+    if moved.max() > limit:
+        hint = "" if "fit" in where else " (made for another body? --fit drapes it from the body it fits)"
+        raise InputError(f"{where}, {int((moved > limit).sum())} vertices are too deep inside the body: pushing them "
+                         f"out would move them up to {1e3 * moved.max():.0f} mm, over the {1e3 * limit:.0f} mm "
+                         f"limit{hint}", path)
+    return pushed, moved
 
 
 def _has_shapes(body) -> bool:

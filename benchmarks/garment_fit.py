@@ -1,0 +1,224 @@
+"""Garments made for other bodies, fitted to the default body (``loosefit garment import --fit``).
+
+Every template kind (skirt, dress, long_shirt, jumpsuit; ``--seeds``) is made on three other Anny bodies:
+``tall-slim`` and ``heavy`` as in ``configs/datasets/garments.yaml``, and ``short`` (height 0.1, not a shape
+of that plan: the shortest body tall enough to wear every template). Each is written as an OBJ the way
+another tool would: Y up, in centimetres (even cases) or millimetres (odd ones), about the source body's
+pelvis plus an arbitrary origin offset of (0.37, -0.21, 0.55) m. Each file is imported onto the default
+body twice: directly (``fit=False``: is it refused, or how far is it pushed) and with ``fit=True``
+(:mod:`loosefit.garment.body_fit`).
+
+Per case (``<kind>-<seed>/<body>/...``):
+
+* ``landed``: imported without an error; ``seconds``: the fit's wall time;
+* ``inside_percent``: share of vertices more than 2 mm inside the default body after the drape and the
+  final push (floor: at most 1 %);
+* ``shape``: the Anny shape found, beside ``true_shape`` (the body it was made on);
+* ``kept_mm`` (floor: at most 10 mm): the mean distance, after rigid alignment (Kabsch), between the fitted
+  garment and the garment as made with the body change undone: the file's garment, placed on the found
+  body, carried by the body change from the found shape to the default one
+  (:func:`loosefit.garment.body_fit.carry`, what the body's own change does to cloth on it). What is left
+  is what the drape changed beyond the body change (sagging, sliding, folds);
+* ``strain_percent``: mean relative change of the edge lengths from the file's garment (its cut);
+* ``vs_default_template_mm``: mean distance (vertices to surface, both ways) from the same template made on
+  the default body, in the body's frame; reported, no floor: a garment cut for a heavier body is wider
+  whatever the fit does.
+
+Refusals (``refusals/...``, with ``fit=True``): the first case's garment 100 times too small and too large,
+and inside out (faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming the
+file, before any simulation.
+
+Run: nice -n 5 .venv/bin/python benchmarks/garment_fit.py [--kinds skirt,dress] [--bodies tall-slim,heavy,short]
+         [--seeds 0] [--edge-length 0.03] [--render dress-0/tall-slim] [--name garment-fit]
+(writes benchmarks/results/<name>.json after every case and resumes from it; the render to
+benchmarks/results/<name>-<kind>-<seed>-<body>.png)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, save_results  # noqa: E402
+
+BODIES = {
+    "tall-slim": {"height": 0.8, "weight": 0.3, "gender": 0.7},
+    "heavy": {"height": 0.35, "weight": 0.85, "gender": 0.6},
+    "short": {"height": 0.1},
+}
+KINDS = ("skirt", "dress", "long_shirt", "jumpsuit")
+ORIGIN = np.array([0.37, -0.21, 0.55])
+#: Floors.
+MAX_INSIDE_PERCENT = 1.0
+MAX_KEPT_MM = 10.0
+
+
+def write_obj(path: Path, verts: np.ndarray, faces: np.ndarray) -> Path:
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in verts.tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces.tolist()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def as_file(verts: np.ndarray, pelvis: np.ndarray, scale: float) -> np.ndarray:
+    """Z-up metres about the body -> Y-up file coordinates about ``pelvis`` plus :data:`ORIGIN`, times ``scale``."""
+    v = np.asarray(verts, np.float64) - pelvis
+    return (np.stack([v[:, 0], v[:, 2], -v[:, 1]], 1) + ORIGIN) * scale
+
+
+def kabsch_mean_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Mean distance between corresponding points ``a, b (N, 3)`` after the rigid motion that best maps a onto b."""
+    ca, cb = a.mean(0), b.mean(0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    d = np.sign(np.linalg.det(u @ vt))
+    rot = u @ np.diag([1.0, 1.0, d]) @ vt
+    return float(np.linalg.norm((a - ca) @ rot + cb - b, axis=1).mean())
+
+
+def surface_distance(a_verts, a_faces, b_verts, b_faces) -> float:
+    """Mean of the vertex-to-surface distances both ways, m."""
+    import igl
+
+    ab = np.sqrt(igl.point_mesh_squared_distance(np.asarray(a_verts, np.float64), np.asarray(b_verts, np.float64), b_faces)[0])
+    ba = np.sqrt(igl.point_mesh_squared_distance(np.asarray(b_verts, np.float64), np.asarray(a_verts, np.float64), a_faces)[0])
+    return float(0.5 * (ab.mean() + ba.mean()))
+
+
+def edge_strain(verts, reference, faces) -> float:
+    from loosefit.garment.mesh_checks import unique_edges
+
+    e, _, _ = unique_edges(faces)
+    length = lambda v: np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)  # noqa: E731
+    return float(np.abs(length(verts) / length(reference) - 1.0).mean())
+
+
+def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, unit: str, render: Path | None):
+    from loosefit.body import AnnyBody, AnnyShape
+    from loosefit.errors import InputError
+    from loosefit.garment import import_garment, make_garment
+    from loosefit.garment.body_fit import carry
+    from loosefit.garment.placement import to_z_up
+
+    source_shape = AnnyShape(**shape_values)
+    source = AnnyBody(source_shape)
+    made = make_garment(kind, source, seed=seed, edge_length=edge_length)
+    scale = {"cm": 100.0, "mm": 1000.0}[unit]
+    file_verts = as_file(made.verts, source.rest_joints()[0], scale)
+    path = write_obj(workdir / f"{kind}-{seed}-{name}.obj", file_verts, made.faces)
+    row = {"vertices": int(made.num_verts), "unit": unit, "true_shape": shape_values}
+    try:
+        direct = import_garment(path, body)
+        row["direct"] = {"refused": False, "pushed_out_max_mm": direct.params["pushed_out"]["max_mm"]}
+    except InputError as err:
+        row["direct"] = {"refused": True, "error": err.problem[:300]}
+    start = time.perf_counter()
+    try:
+        g = import_garment(path, body, fit=True)
+    except InputError as err:
+        row.update(landed=False, error=str(err)[:600], seconds=round(time.perf_counter() - start, 1))
+        return row
+    row["seconds"] = round(time.perf_counter() - start, 1)
+    fit = g.params["fit"]
+    row.update(landed=True, shape=fit["shape"], inside_percent=fit["inside_percent"], fit=fit,
+               pushed_out=g.params["pushed_out"], attachment=g.params["attachment"])
+    if g.num_verts == made.num_verts and np.array_equal(g.faces, made.faces):
+        found = AnnyShape(**{**vars(body.shape), **fit["shape"]})
+        placed = to_z_up(file_verts / scale, g.params["up"]) + np.asarray(g.params["offset"])
+        undone = placed + carry(placed, body.rest_verts(found), body.rest_verts())
+        row["kept_mm"] = round(1e3 * kabsch_mean_distance(g.verts.astype(np.float64), undone), 2)
+        row["strain_percent"] = round(100.0 * edge_strain(g.verts.astype(np.float64), made.verts.astype(np.float64), made.faces), 2)
+    else:
+        row["kept_mm"] = None  # repair changed the mesh: no vertex correspondence
+    reference = make_garment(kind, body, seed=seed, edge_length=edge_length)
+    row["vs_default_template_mm"] = round(1e3 * surface_distance(g.verts, g.faces, reference.verts, reference.faces), 2)
+    row["passed"] = bool(row["inside_percent"] <= MAX_INSIDE_PERCENT and (row["kept_mm"] or 0.0) <= MAX_KEPT_MM)
+    if render is not None:
+        from loosefit.viz.render import render_video
+        from loosefit.viz.scene import MeshTrack
+
+        panels = [[MeshTrack(body.rest_verts(), body.faces, (0.8, 0.8, 0.8), label="body"),
+                   MeshTrack(g.verts, g.faces, label=f"{kind}-{seed} made for {name}, fitted")]]
+        render_video(panels, render, size=(640, 720), progress=False)
+        row["render"] = str(render.relative_to(RESULTS.parent.parent))
+    return row
+
+
+def refusals(kind, seed, name, shape_values, body, edge_length, workdir: Path) -> dict:
+    from loosefit.body import AnnyBody, AnnyShape
+    from loosefit.errors import InputError
+    from loosefit.garment import import_garment, make_garment
+
+    source = AnnyBody(AnnyShape(**shape_values))
+    made = make_garment(kind, source, seed=seed, edge_length=edge_length)
+    base = as_file(made.verts, source.rest_joints()[0], 100.0)
+    files = {
+        "100x-too-small": (base / 100.0, made.faces),
+        "100x-too-large": (base * 100.0, made.faces),
+        "inside-out": (base, made.faces[:, ::-1]),
+    }
+    out = {}
+    for label, (v, f) in files.items():
+        path = write_obj(workdir / f"{label}.obj", v, f)
+        start = time.perf_counter()
+        try:
+            import_garment(path, body, fit=True)
+            out[label] = {"refused": False}
+        except InputError as err:
+            out[label] = {"refused": True, "names_file": str(path) in str(err), "error": err.problem[:300],
+                          "seconds": round(time.perf_counter() - start, 2)}
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--kinds", default=",".join(KINDS))
+    ap.add_argument("--bodies", default=",".join(BODIES))
+    ap.add_argument("--seeds", default="0")
+    ap.add_argument("--edge-length", type=float, default=0.03)
+    ap.add_argument("--render", default="dress-0/tall-slim", help="the case rendered to PNG")
+    ap.add_argument("--name", default="garment-fit")
+    ap.add_argument("--workdir", default="/tmp/garment-fit")
+    args = ap.parse_args()
+
+    from loosefit.body import AnnyBody
+
+    workdir = Path(args.workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    body = AnnyBody()
+    path = RESULTS / f"{args.name}.json"
+    results = json.loads(path.read_text())["results"] if path.is_file() else {}
+    results.setdefault("cases", {})
+    cases = [(k, int(s), b) for s in args.seeds.split(",") for k in args.kinds.split(",") for b in args.bodies.split(",")]
+    if "refusals" not in results:
+        k, s, b = cases[0]
+        results["refusals"] = refusals(k, s, b, BODIES[b], body, args.edge_length, workdir)
+        save_results(args.name, results)
+    for i, (kind, seed, name) in enumerate(cases):
+        key = f"{kind}-{seed}/{name}"
+        if key in results["cases"]:
+            continue
+        render = RESULTS / f"{args.name}-{kind}-{seed}-{name}.png" if key == args.render else None
+        print(f"== {key}", flush=True)
+        results["cases"][key] = run_case(kind, seed, name, BODIES[name], body, args.edge_length, workdir,
+                                         "cm" if i % 2 == 0 else "mm", render)
+        rows = [r for r in results["cases"].values()]
+        results["summary"] = {
+            "cases": len(rows),
+            "landed": sum(r["landed"] for r in rows),
+            "passed": sum(bool(r.get("passed")) for r in rows),
+            "direct_refused": sum(r["direct"]["refused"] for r in rows),
+            "worst_inside_percent": max((r["inside_percent"] for r in rows if r["landed"]), default=None),
+            "worst_kept_mm": max((r["kept_mm"] for r in rows if r.get("kept_mm") is not None), default=None),
+            "floors": {"inside_percent": MAX_INSIDE_PERCENT, "kept_mm": MAX_KEPT_MM},
+        }
+        save_results(args.name, results)
+
+
+if __name__ == "__main__":
+    main()
