@@ -86,6 +86,34 @@ def test_tables_hold_the_directly_computed_metrics(report, tiny_store):
     assert doc["methods"][0]["pooled"]["rmse_mm"] != pytest.approx(doc["methods"][1]["pooled"]["rmse_mm"], rel=1e-3)
 
 
+def test_reference_runs_put_the_floor_beside_rmse(report, tiny_store, tmp_path):
+    from loosefit.metrics.reference import References
+
+    root, out = report
+    assert "floor mm" not in (out / "report.md").read_text()  # a store without reference runs: columns as before
+    data = tmp_path / "refs.zarr"
+    shutil.copytree(tiny_store, data)
+    with DatasetStore.open(data, mode="a") as store:
+        (name,) = store.sequence_names(split="test")
+        base = np.asarray(store.sequence(name).verts[:])
+        rng = np.random.default_rng(0)
+        for k in (1, 2, 3):  # stand-ins for perturbed simulations: the base moved by a few millimetres
+            store.write_reference(name, k, base + rng.normal(0, 0.003, base.shape).astype(np.float32))
+    build_report(data, [root / "lbs"], tmp_path / "out", results_dir=None, images=False, handling="none")
+    doc = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    (row,) = doc["methods"][0]["rows"]
+    store = DatasetStore.open(data)
+    refs = References(base, store.references(name))
+    pred = Animator(root / "lbs").animate(store.motion(store.sequence(name).motion)).astype(np.float64)
+    assert row["floor_mm"] == pytest.approx(refs.floor_mm, rel=1e-6) and row["references"] == 3
+    assert row["rmse_mm"] == pytest.approx(1000 * np.sqrt(np.mean(np.sum((pred - base) ** 2, -1))), rel=1e-5)
+    assert row["rmse_vs_mean_mm"] == pytest.approx(1000 * np.sqrt(np.mean(np.sum((pred - refs.mean) ** 2, -1))),
+                                                   rel=1e-5)
+    assert doc["methods"][0]["pooled"]["floor_mm"] == pytest.approx(refs.floor_mm, rel=1e-6)
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "RMSE vs mean mm | floor mm |" in md and f"{row['floor_mm']:.2f}" in md and "reference runs" in md
+
+
 def test_figures_are_real_images(report, tiny_store):
     _, out = report
     for plot in json.loads((out / "metrics.json").read_text())["plots"]:

@@ -36,14 +36,22 @@ DEFAULT_RESULTS = _REPO_RESULTS if _REPO_RESULTS.is_dir() else None
 
 #: Metric columns of the report (the keys of :data:`loosefit.metrics.report.COLUMNS` but the sizes).
 METRIC_COLUMNS = tuple(c for c in COLUMNS if c[0] not in ("frames", "vertices"))
+#: Columns of sequences with reference runs (:mod:`loosefit.metrics.reference`): beside RMSE when present.
+REFERENCE_KEYS = ("rmse_vs_mean_mm", "floor_mm")
 
 
 def _fmt(value, fmt: str) -> str:
     return "-" if value is None else fmt.format(value)
 
 
-def _metric_cells(row: dict) -> list[str]:
-    return [_fmt(row.get(k), f) for k, _, f in METRIC_COLUMNS]
+def _metric_cells(row: dict, columns=METRIC_COLUMNS) -> list[str]:
+    return [_fmt(row.get(k), f) for k, _, f in columns]
+
+
+def _shown_columns(evaluations: list[dict]) -> tuple:
+    """The metric columns to show: RMSE against the mean and the floor only when some sequence has reference runs."""
+    runs = any(r.get("floor_mm") is not None for e in evaluations for r in e["rows"])
+    return tuple(c for c in METRIC_COLUMNS if runs or c[0] not in REFERENCE_KEYS)
 
 
 def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequences: list[str] | None = None,
@@ -81,7 +89,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
 
     evaluations = []
     for m in methods:
-        pairs = [SequencePair(s.name, m.predictions[s.name], s.gt, s.faces, s.body_verts, s.body_faces)
+        pairs = [SequencePair(s.name, m.predictions[s.name], s.gt, s.faces, s.body_verts, s.body_faces, s.references)
                  for s in seqs if s.name in m.predictions]
         ev = evaluate(pairs, progress=False)
         evaluations.append({"method": m.label, "run": str(m.run), "rows": ev.rows, "pooled": ev.overall,
@@ -104,6 +112,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         plots.append(entry)
 
     claims, speed = claims_table(results_dir), speed_table(results_dir)
+    columns = _shown_columns(evaluations)
     context = {
         "title": f"loosefit report: {data.name}",
         "data": str(data.resolve()),
@@ -111,14 +120,16 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         "results_dir": None if results_dir is None else str(results_dir),
         "which": ("the named sequences" if sequences is not None else f"the {split} split")
                  + f"; collision handling {handling}",
-        "headers": [h for _, h, _ in METRIC_COLUMNS],
+        "headers": [h for _, h, _ in columns],
+        "references": any(c[0] in REFERENCE_KEYS for c in columns),
         "methods": [{"label": e["method"], "run": e["run"],
-                     "rows": [{"name": r["name"], "frames": r["frames"], "cells": _metric_cells(r)} for r in e["rows"]],
-                     "pooled": {"frames": e["pooled"]["frames"], "cells": _metric_cells(e["pooled"])},
+                     "rows": [{"name": r["name"], "frames": r["frames"], "cells": _metric_cells(r, columns)}
+                              for r in e["rows"]],
+                     "pooled": {"frames": e["pooled"]["frames"], "cells": _metric_cells(e["pooled"], columns)},
                      "warnings": e["warnings"]}
                     for e in evaluations],
-        "sequences": [{"name": s.name, "garment": s.garment, "frames": len(s.gt), "vertices": s.gt.shape[1]}
-                      for s in seqs],
+        "sequences": [{"name": s.name, "garment": s.garment, "frames": len(s.gt), "vertices": s.gt.shape[1],
+                       "references": len(s.references) if s.references is not None else 0} for s in seqs],
         "plots": plots,
         "speed": [{**r, "cells": [r["garment"], str(r["vertices"]), r["method"], _fmt(r["parameters"], "{:,}"),
                                   _fmt(r["simulator_ms"], "{:.0f}"), _fmt(r["stream_fps"], "{:.1f}"),

@@ -19,7 +19,8 @@ from loosefit.errors import InputError
 @dataclass
 class Sequence:
     """One held-out sequence: ``gt (T, V, 3)`` metres on ``faces (F, 3)``, the posed body
-    ``body_verts (T, Vb, 3)`` / ``body_faces (Fb, 3)``, and the inputs the animators need."""
+    ``body_verts (T, Vb, 3)`` / ``body_faces (Fb, 3)``, its stored reference runs ``references (K, T, V, 3)``
+    (K = 0 when it has none) and the inputs the animators need."""
 
     name: str
     garment: str
@@ -31,6 +32,7 @@ class Sequence:
     motion: object = field(repr=False)
     body: object = field(repr=False)
     garment_mesh: object = field(repr=False)
+    references: np.ndarray = field(default=None, repr=False)
 
 
 @dataclass
@@ -65,7 +67,8 @@ def load_sequences(data: str | Path, names: list[str] | None = None, split: str 
         body = AnnyBody(AnnyShape.from_array(store.body(seq.body)), rig=motion.rig)
         garment = store.garment(seq.garment)
         out.append(Sequence(name, seq.garment, np.asarray(seq.verts[:], np.float32), np.asarray(garment.faces),
-                            body.pose(motion).verts, np.asarray(body.faces), float(motion.fps), motion, body, garment))
+                            body.pose(motion).verts, np.asarray(body.faces), float(motion.fps), motion, body, garment,
+                            store.references(name)))
     return out
 
 
