@@ -125,3 +125,38 @@ def test_a_crashed_run_is_stored_failed_and_retried(done, root, tmp_path, monkey
     assert summary["references"]["ok"] == 1
     np.testing.assert_array_equal(DatasetStore.open(copy).references(TEST), DatasetStore.open(out).references(TEST))
     assert load_plan(plan).references.count == 2
+
+
+@pytest.mark.parametrize("value, message", [
+    ({"count": -1}, "'count' must be an integer >= 0"),
+    ({"count": 2.5}, "expected an integer"),
+    ({"noise": 0}, r"'noise' must be a number of metres in \(0, 0.01\)"),
+    ({"cnt": 2}, r"unknown keys \['cnt'\]"),
+    (3, "references must be a mapping"),
+])
+def test_plan_key_is_checked(tmp_path, value, message):
+    from loosefit.errors import InputError
+
+    plan = {"garments": {"s": {"template": "skirt"}}, "motions": {"t": {"procedural": "spin", "seconds": 1}},
+            "split": {"test": {"motions": ["t"]}}, "references": value}
+    path = tmp_path / "p.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    with pytest.raises(InputError, match=message) as err:
+        load_plan(path)
+    assert err.value.path == path
+
+
+def test_plan_key_leaves_job_hashes_alone(tmp_path):
+    plan = {"garments": {"s": {"template": "skirt"}}, "motions": {m: {"procedural": "spin", "seconds": 1}
+                                                                  for m in ("t", "u")},
+            "split": {"test": {"motions": ["t"]}}}
+    (tmp_path / "a.yaml").write_text(yaml.safe_dump(plan))
+    (tmp_path / "b.yaml").write_text(yaml.safe_dump({**plan, "references": {"count": 3, "noise": 2e-5}}))
+    a, b = load_plan(tmp_path / "a.yaml"), load_plan(tmp_path / "b.yaml")
+    assert [j.hash for j in a.jobs] == [j.hash for j in b.jobs]  # stored sequences stay valid
+    assert (a.references.count, a.reference_jobs()) == (0, [])
+    assert [j.motion for j in b.reference_jobs()] == ["t"] and b.references.noise == 2e-5
+    # each run's hash follows the base's hash, the noise and its seed
+    job = b.reference_jobs()[0]
+    hashes = {b.references.run_hash(job, k) for k in (1, 2, 3)} | {a.references.run_hash(job, 1)}
+    assert len(hashes) == 4
