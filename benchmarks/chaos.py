@@ -14,7 +14,8 @@ per probe, each compared with the base (RMSE over the garment, per half second, 
             steps a frame and K at 2N; the mean of each set with its base (the base, and the ``steps`` run at 2N)
             and the RMS distance between the two means, ``<garment>/<motion>/mean_steps_mm``, beside the floor
             of each set (``floor_mm`` at N, ``floor_2n_mm``: :mod:`loosefit.metrics.reference`). When the two
-            means differ by much less than the floor, N steps resolve what a model can learn (the mean)
+            means differ by much less than the floor, N steps resolve what a model can learn (the mean).
+            Not run by default (2K + 1 more simulations a garment and motion): ``--probes mean-steps``
 
 Every simulation runs in a fresh process (``--workers`` at a time), so no run reads another's cache and
 ``repeat`` checks reproducibility across processes. With ``--data`` (a store simulated from the plan), the
@@ -25,7 +26,8 @@ centimetres, no model can follow both simulations, and held-out error stays near
 trains. Floors (the ground-truth targets): spread at most 10 mm on a walk and 20 mm on a spin over 4 s, steps
 at most 10 mm, repeat bit-identical.
 
-Every figure is named ``<garment>/<motion>/<probe>/<measure>`` in the JSON (``skirt/walk-1/noise-0/rmse_mm``).
+Every figure is named ``<garment>/<motion>/<probe>/<measure>`` in the JSON (``skirt/walk-1/noise-0/rmse_mm``),
+the mean-steps probe's ``<garment>/<motion>/<measure>`` (``skirt/spin_test/mean_steps_mm``).
 
 Run: .venv/bin/python benchmarks/chaos.py --plan configs/datasets/bench.yaml [--garments skirt,dress]
          [--motions walk-1,spin-1,jump-1,kick-1] [--seconds 4] [--probes noise,steps,nudge,repeat]
@@ -56,6 +58,7 @@ from loosefit.errors import InputError  # noqa: E402
 #: The joint the nudge probe turns.
 NUDGE_JOINT = "LeftArm"
 PROBES = ("noise", "steps", "nudge", "repeat", "mean-steps")
+DEFAULT_PROBES = ("noise", "steps", "nudge", "repeat")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,7 +167,7 @@ def main() -> None:
     parser.add_argument("--garments", default="skirt,dress", help="comma-separated garments of the plan")
     parser.add_argument("--motions", default="walk-1,spin-1,jump-1,kick-1", help="comma-separated motions of the plan")
     parser.add_argument("--seconds", type=float, default=4.0, help="simulate the first seconds of each motion")
-    parser.add_argument("--probes", default=",".join(PROBES), help=f"comma-separated, of {list(PROBES)}")
+    parser.add_argument("--probes", default=",".join(DEFAULT_PROBES), help=f"comma-separated, of {list(PROBES)}")
     parser.add_argument("--sigma", type=float, default=1e-5, help="start-state noise, metres")
     parser.add_argument("--noise-seeds", default="0,1", help="comma-separated noise seeds")
     parser.add_argument("--nudge-degrees", default="0.5", help="comma-separated arm nudge angles, degrees")
