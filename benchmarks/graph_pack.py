@@ -1,0 +1,300 @@
+"""Paper-width training of FitGar and SwinGar on a GPU machine, from a compact float16 pack of the training tensors.
+
+A lent GPU machine has torch but not loosefit's data stack (Blender, Zarr, the Anny body): ``pack`` turns a prepared
+multi-garment store into every tensor training and scoring read (FitGar: each frame's inputs and targets, the
+statistics the model normalises with and the fit attribute model; SwinGar: every training window with its motion
+history and each held-out sequence whole, as ``swingar_gpu.py export`` makes them), floating tensors in float16
+(at most 50 MB: ``--max-mb``). ``train`` runs there with nothing else: each given config (the paper's widths and
+the CPU preset's) for the same wall-clock budget on the same pack, and writes the training curve of each (held-out
+and training errors against steps and seconds), so the two can be read against each other.
+
+    # here
+    .venv/bin/python benchmarks/graph_pack.py pack --method fitgar --data FG.zarr --out .gpu/fitgar-pack.pt
+    .venv/bin/python benchmarks/graph_pack.py pack --method swingar --data SG.zarr --config configs/models/swingar.yaml \
+        --out .gpu/swingar-pack.pt
+    # there (or here, with --seconds small, to check the path)
+    python3 benchmarks/graph_pack.py train --pack .gpu/fitgar-pack.pt --configs fitgar.yaml,fitgar-cpu.yaml \
+        --seconds 60 --out $OUT/fitgar-curve.json
+
+Both stages of each model train in turn, each for half the budget (FitGar: coarse then detail with the coarse
+frozen, the paper's order; SwinGar: its ``supervised`` then ``all`` stage), Adam at the config's rate.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "src"))
+
+
+def halve(x):
+    """Floating arrays and tensors (nested in dicts, lists, tuples) to float16 tensors; other values as they are."""
+    if isinstance(x, dict):
+        return {k: halve(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return type(x)(halve(v) for v in x)
+    if isinstance(x, np.ndarray):
+        x = torch.from_numpy(x if x.flags.c_contiguous else x.copy())  # (ascontiguousarray makes 0-d arrays 1-d)
+    if torch.is_tensor(x) and x.is_floating_point():
+        return x.half()
+    return x
+
+
+def widen(x, device=None):
+    """The inverse of :func:`halve` (float16 back to float32 numpy arrays or, with ``device``, tensors there)."""
+    if isinstance(x, dict):
+        return {k: widen(v, device) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return type(x)(widen(v, device) for v in x)
+    if torch.is_tensor(x):
+        x = x.float() if x.dtype == torch.float16 else x
+        return x.to(device) if device is not None else x.numpy()
+    return x
+
+
+class PackedFrames:
+    """FitGar's training frames read back from a pack: what :class:`~loosefit.models.fitgar_data.GarmentFrames`
+    gives the model (items, ``sizes``, ``anchor``, ``feature_stats()``, ``fit_model``)."""
+
+    def __init__(self, part: dict, common: dict):
+        from loosefit.rig.fit_attribute import FitAttributeModel
+
+        shared = {key: t.long().numpy() for key, t in common["shared"].items()}
+        self.items = [{k: shared[v] if k in SHARED else v for k, v in widen(it).items()} for it in part["items"]]
+        self.sizes, self.anchor, self._stats = common["sizes"], common["anchor"], widen(common["stats"])
+        self.fit_model = FitAttributeModel(**widen(common["fit_model"]))
+
+    def __len__(self):
+        return len(self.items)
+
+    def __getitem__(self, k):
+        return self.items[k]
+
+    def feature_stats(self):
+        return self._stats
+
+
+#: FitGar item keys that are the same for every frame of a garment: packed once, as int32, named by their digest.
+SHARED = ("edges", "faces")
+
+
+def pack_fitgar(data: Path, stride: int, test_stride: int) -> dict:
+    import hashlib
+    from dataclasses import asdict
+
+    from loosefit.models.fitgar_data import GarmentFrames
+
+    train = GarmentFrames(data, "train", frame_stride=stride)
+    test = GarmentFrames(data, "test", frame_stride=test_stride)
+    shared: dict[str, torch.Tensor] = {}
+
+    def packed(item):
+        out = {}
+        for key, value in item.items():
+            if key in SHARED:
+                digest = hashlib.sha1(np.ascontiguousarray(value).tobytes()).hexdigest()
+                shared.setdefault(digest, torch.from_numpy(np.asarray(value, np.int32)))
+                out[key] = digest
+            else:
+                out[key] = halve(value)
+        return out
+
+    stats = train.feature_stats()
+    fit = train.fit_model
+    fit_fields = asdict(fit) if hasattr(fit, "__dataclass_fields__") else dict(vars(fit))
+    return {"method": "fitgar", "sizes": train.sizes, "anchor": train.anchor, "stats": halve(stats),
+            "fit_model": {k: (torch.from_numpy(np.asarray(v, np.float64)) if isinstance(v, np.ndarray) else v)
+                          for k, v in fit_fields.items()},
+            "train": {"names": train.sequence_names, "items": [packed(train[k]) for k in range(len(train))]},
+            "test": {"names": test.sequence_names, "items": [packed(test[k]) for k in range(len(test))]},
+            "shared": shared}
+
+
+def pack_swingar(data: Path, config: Path, overrides: list[str]) -> dict:
+    import tempfile
+
+    from swingar_gpu import export
+
+    with tempfile.TemporaryDirectory() as tmp:
+        export(data, Path(tmp) / "w.pt", config, overrides)
+        payload = torch.load(Path(tmp) / "w.pt", weights_only=False)
+    return {"method": "swingar", **halve(payload)}
+
+
+def fitgar_curve(pack: dict, config: Path, overrides: list[str], seconds: float, device, evals: int) -> dict:
+    from capacity import errors_mm
+
+    from loosefit.config import load_config
+    from loosefit.models.fitgar import Config, FitGar
+    from loosefit.models.fitgar_data import collate_frames
+
+    train, test = PackedFrames(pack["train"], pack), PackedFrames(pack["test"], pack)
+    cfg = load_config(Config, config, overrides)
+    torch.manual_seed(cfg.train.seed)
+    model = FitGar.from_data(train, cfg.model).to(device)
+    size = cfg.train.batch_size
+    rng = np.random.default_rng(0)
+    on = lambda b: {k: (v.to(device) if torch.is_tensor(v) else v) for k, v in b.items()}  # noqa: E731
+    picked = train.items[:: max(len(train) // len(test), 1)]  # as many training frames as held-out ones
+    seen = [on(collate_frames(picked[i:i + 8])) for i in range(0, len(picked), 8)]
+    held = [on(collate_frames(test.items[i:i + 8])) for i in range(0, len(test), 8)]
+    curve, start, steps = [], time.perf_counter(), 0
+    for n, stage in enumerate(("coarse", "detail")):
+        params = list(model.stage_parameters(stage))
+        for p in model.parameters():
+            p.requires_grad_(False)
+        for p in params:
+            p.requires_grad_(True)
+        opt = torch.optim.Adam(params, lr=cfg.train.lr)
+        stage_end, next_eval = start + seconds * (n + 1) / 2, time.perf_counter()
+        while time.perf_counter() < stage_end:
+            order = rng.permutation(len(train))
+            for a in range(0, len(order), size):
+                loss, _ = model.training_loss(on(collate_frames([train.items[k] for k in order[a:a + size]])), stage)
+                opt.zero_grad()
+                loss.backward()
+                if cfg.train.grad_clip:
+                    torch.nn.utils.clip_grad_norm_(params, cfg.train.grad_clip)
+                opt.step()
+                steps += 1
+                now = time.perf_counter()
+                if now >= next_eval or now >= stage_end:
+                    row = {"stage": stage, "step": steps, "seconds": now - start, "loss": float(loss.detach()),
+                           **{f"train_{k}": v for k, v in errors_mm(model, seen).items()},
+                           **{f"test_{k}": v for k, v in errors_mm(model, held).items()}}
+                    curve.append(row)
+                    print({k: round(v, 2) if isinstance(v, float) else v for k, v in row.items()}, flush=True)
+                    next_eval = time.perf_counter() + seconds / evals
+                if now >= stage_end:
+                    break
+    return {"train_frames": len(train), "test_frames": len(test), "parameters": sum(p.numel() for p in model.parameters()),
+            "curve": curve}
+
+
+def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float, device, evals: int) -> dict:
+    from swingar_gpu import window_errors
+
+    from loosefit.config import load_config
+    from loosefit.models.multi_garment import collate_by_graph
+    from loosefit.models.swingar import Config, SwinGar
+
+    payload = widen({k: v for k, v in pack.items() if k != "method"})
+    payload = {**payload, "stats": {k: [torch.as_tensor(a) for a in v] for k, v in payload["stats"].items()}}
+    cfg = load_config(Config, config, [*payload["overrides"], *overrides])
+    torch.manual_seed(cfg.train.seed)
+    model = SwinGar(payload["sizes"], cfg.model)
+    with torch.no_grad():
+        for key in ("root", "joints"):
+            getattr(model, f"{key}_mean").copy_(payload["stats"][key][0])
+            getattr(model, f"{key}_std").copy_(payload["stats"][key][1])
+    model.to(device)
+
+    def graphs(gs):
+        return [{k: torch.as_tensor(v).to(device) for k, v in g.items()} for g in gs]
+
+    train_graphs, test_graphs = graphs(payload["train_graphs"]), graphs(payload["test_graphs"])
+
+    history = cfg.model.motion_frames - 1 + cfg.model.corrective_frames - 1
+    if history > payload["train"][0]["history_root"].shape[0]:
+        raise SystemExit(f"graph_pack: {config.name} needs {history} frames of history, the pack has fewer: pack with it")
+
+    def on(item, gs):  # the last ``history`` frames before a window are the history of a model that needs fewer
+        out = {k: (torch.as_tensor(v[-history:] if k.startswith("history_") else v).to(device)
+                   if isinstance(v, np.ndarray) else v) for k, v in item.items()}
+        out["graph_tensors"] = gs[item["graph"]]
+        return out
+
+    items = [on(it, train_graphs) for it in payload["train"]]
+    held = collate_by_graph([on(it, test_graphs) for it in payload["test"]])
+    seen = collate_by_graph(items[:: max(len(items) // 16, 1)])
+    opt = torch.optim.Adam(model.parameters(), cfg.train.lr)
+    rng = np.random.default_rng(0)
+    curve, start, steps = [], time.perf_counter(), 0
+    for n, stage in enumerate(cfg.train.stages):
+        stage_end, next_eval = start + seconds * (n + 1) / len(cfg.train.stages), time.perf_counter()
+        while time.perf_counter() < stage_end:
+            order = rng.permutation(len(items))
+            for a in range(0, len(order), cfg.train.batch_size):
+                loss, _ = model.training_loss(collate_by_graph([items[k] for k in order[a:a + cfg.train.batch_size]]), stage)
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                steps += 1
+                now = time.perf_counter()
+                if now >= next_eval or now >= stage_end:
+                    model.eval()
+                    row = {"stage": stage, "step": steps, "seconds": now - start, "loss": float(loss.detach()),
+                           **{f"train_{k}": v for k, v in window_errors(model, seen).items()},
+                           **{f"test_{k}": v for k, v in window_errors(model, held).items()}}
+                    model.train()
+                    curve.append(row)
+                    print({k: round(v, 2) if isinstance(v, float) else v for k, v in row.items()}, flush=True)
+                    next_eval = time.perf_counter() + seconds / evals
+                if now >= stage_end:
+                    break
+    return {"train_windows": len(items), "test_sequences": len(payload["test"]),
+            "parameters": sum(p.numel() for p in model.parameters()), "curve": curve}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("pack")
+    p.add_argument("--method", choices=("fitgar", "swingar"), required=True)
+    p.add_argument("--data", required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--config", help="SwinGar: the config whose windows and history are packed (default: the paper's)")
+    p.add_argument("--set", action="append", default=[])
+    p.add_argument("--frame-stride", type=int, default=1, help="FitGar: every n-th training frame")
+    p.add_argument("--test-stride", type=int, default=3, help="FitGar: every n-th held-out frame")
+    p.add_argument("--max-mb", type=float, default=50.0)
+    p = sub.add_parser("train")
+    p.add_argument("--pack", required=True)
+    p.add_argument("--configs", required=True, help="comma-separated config files (names in configs/models/ or paths)")
+    p.add_argument("--seconds", type=float, default=60.0, help="training wall-clock per config")
+    p.add_argument("--evals", type=int, default=8, help="evaluations per stage")
+    p.add_argument("--set", action="append", default=[])
+    p.add_argument("--out", required=True)
+    a = ap.parse_args()
+    if a.command == "pack":
+        if a.method == "fitgar":
+            payload = pack_fitgar(Path(a.data), a.frame_stride, a.test_stride)
+        else:
+            payload = pack_swingar(Path(a.data), Path(a.config or ROOT / "configs" / "models" / "swingar.yaml"), a.set)
+        out = Path(a.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        torch.save(payload, out)
+        mb = out.stat().st_size / 2**20
+        print(f"{a.method} pack: {out} {mb:.1f} MB")
+        if mb > a.max_mb:
+            out.unlink()
+            sys.exit(f"graph_pack: the pack is {mb:.1f} MB, above --max-mb {a.max_mb:g}: pack fewer frames (--frame-stride)")
+        return
+    from swingar_gpu import stub_missing
+
+    stubbed = stub_missing()
+    pack = torch.load(a.pack, weights_only=False)
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    curve_of = fitgar_curve if pack["method"] == "fitgar" else swingar_curve
+    result = {"method": pack["method"], "device": torch.cuda.get_device_name() if device.type == "cuda" else "cpu",
+              "pack": str(a.pack), "pack_mb": Path(a.pack).stat().st_size / 2**20, "stubbed": stubbed,
+              "seconds_per_config": a.seconds, "overrides": a.set, "runs": {}}
+    for name in a.configs.split(","):
+        config = Path(name) if Path(name).is_file() else ROOT / "configs" / "models" / name
+        print(f"== {pack['method']} {config.name}", flush=True)
+        result["runs"][config.name] = curve_of(pack, config, a.set, a.seconds, device, a.evals)
+        Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.out).write_text(json.dumps(result, indent=1))  # after every config: a cut-off run keeps what it did
+
+
+if __name__ == "__main__":
+    main()
