@@ -24,8 +24,9 @@ Per case (``<kind>-<seed>/<body>/...``):
   the default body, in the body's frame; reported, no floor: a garment cut for a heavier body is wider
   whatever the fit does.
 
-Refusals (``refusals/...``, with ``fit=True``): the first case's garment 100 times too small and too large,
-and inside out (faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming the
+Refusals (``refusals/...``, with ``fit=True``): the first case's garment 100 times too small (in metres) and
+too large (in millimetres; 100 times too small in centimetres is the right size in metres), and inside out
+(faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming the
 file, before any simulation.
 
 Run: nice -n 5 .venv/bin/python benchmarks/garment_fit.py [--kinds skirt,dress] [--bodies tall-slim,heavy,short]
@@ -156,11 +157,13 @@ def refusals(kind, seed, name, shape_values, body, edge_length, workdir: Path) -
 
     source = AnnyBody(AnnyShape(**shape_values))
     made = make_garment(kind, source, seed=seed, edge_length=edge_length)
-    base = as_file(made.verts, source.rest_joints()[0], 100.0)
+    base = as_file(made.verts, source.rest_joints()[0], 1.0)  # metres
+    # 100 times too small in the smallest unit (m) and too large in the largest (mm): a garment 100 times too
+    # small in centimetres reads as the right size in metres.
     files = {
         "100x-too-small": (base / 100.0, made.faces),
-        "100x-too-large": (base * 100.0, made.faces),
-        "inside-out": (base, made.faces[:, ::-1]),
+        "100x-too-large": (base * 1000.0 * 100.0, made.faces),
+        "inside-out": (base * 100.0, made.faces[:, ::-1]),
     }
     out = {}
     for label, (v, f) in files.items():

@@ -202,7 +202,7 @@ def carry(points: np.ndarray, source: np.ndarray, target: np.ndarray, k: int = 8
     nearest source vertices. Returns ``(N, 3)`` float64, m."""
     source = np.asarray(source, np.float64)
     dist, nearest = cKDTree(source).query(np.asarray(points, np.float64), k=k)
-    w = 1.0 / np.maximum(dist, 1e-4)
+    w = 1.0 / np.maximum(dist, 1e-6)
     w /= w.sum(1, keepdims=True)
     change = np.asarray(target, np.float64) - source
     return np.einsum("nk,nkd->nd", w, change[nearest])

@@ -1,0 +1,106 @@
+"""Fitting a garment made for another body: the shape found, the drape onto this body, the cut kept;
+refusals before any simulation; the bounded push out of the body."""
+
+import numpy as np
+import pytest
+
+from loosefit.errors import InputError
+from loosefit.garment import import_garment, make_garment
+from loosefit.garment.body_fit import Search, carry
+from loosefit.garment.fitting import push_out_bounded, outward
+from loosefit.garment.landmarks import measure_body
+from loosefit.garment.mesh_checks import unique_edges
+
+from .test_importer import pelvis_y_up, write_obj
+
+
+@pytest.fixture(scope="module")
+def tall_shirt():
+    """A long shirt cut for a tall Anny (height 0.8): its shoulders are above the default body's."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+
+    tall = AnnyBody(AnnyShape(height=0.8))
+    return tall, make_garment("long_shirt", tall, seed=0, edge_length=0.06)
+
+
+def test_carry_moves_points_with_the_body_change(body):
+    """A body change that is a translation carries every point by it; one that scales about the origin
+    carries a point on the body by its own vertex's change."""
+    rest = body.rest_verts().astype(np.float64)
+    pts = rest[::500] + 0.01
+    np.testing.assert_allclose(carry(pts, rest, rest + [0.01, -0.02, 0.03]), np.tile([0.01, -0.02, 0.03], (len(pts), 1)),
+                               atol=1e-12)
+    np.testing.assert_allclose(carry(rest[::500], rest, 1.1 * rest), 0.1 * rest[::500], atol=1e-5)
+
+
+def test_a_garment_made_for_a_taller_body_is_fitted(tmp_path, body, tall_shirt):
+    tall, shirt = tall_shirt
+    path = write_obj(tmp_path / "tall.obj", pelvis_y_up(tall, shirt.verts, 100.0), shirt.faces)
+    sdf = measure_body(body).sdf
+    # A small search (the default scores 9 shapes, then refines): height 0.5 (this body) or 0.8.
+    search = Search(coarse=(("height", (0.5, 0.8)),), steps=(), morph_seconds=0.4, settle_seconds=0.3)
+    g = import_garment(path, body, fit=True, fit_search=search)
+    fit = g.params["fit"]
+    assert fit["why"] == "asked" and fit["shape"]["height"] == pytest.approx(0.8), fit
+    assert g.params["unit"] == "cm" and g.params["up"] == "y" and g.params["attachment"] == "shoulders"
+    # Draped onto this body: its shoulders came down with the body's, and it is out of the body.
+    neck = lambda b: measure_body(b).joints["neck"][0][2]  # noqa: E731
+    assert g.verts[:, 2].max() - neck(body) == pytest.approx(shirt.verts[:, 2].max() - neck(tall), abs=0.03)
+    assert fit["inside_percent"] <= 1.0 and (sdf.query(g.verts) < -0.002).mean() <= 0.01
+    # The cut is kept: edge lengths within a few percent of the file's garment.
+    e, _, _ = unique_edges(shirt.faces)
+    ratio = np.linalg.norm(g.verts[e[:, 0]] - g.verts[e[:, 1]], axis=1) / np.linalg.norm(
+        shirt.verts[e[:, 0]] - shirt.verts[e[:, 1]], axis=1)
+    assert np.abs(ratio - 1).mean() < 0.03, np.abs(ratio - 1).mean()
+
+
+def test_refusals_before_any_simulation(tmp_path, body, skirt_m):
+    verts, faces = skirt_m
+    for name, v, f, message in [
+        ("small", verts / 100.0, faces, "no unit gives a garment's size"),  # 100 times too small in metres
+        ("large", verts * 1e5, faces, "no unit gives a garment's size"),  # 100 times too large in millimetres
+        ("inside_out", verts, faces[:, ::-1], "inside out"),
+    ]:
+        path = write_obj(tmp_path / f"{name}.obj", v, f)
+        with pytest.raises(InputError, match=message) as err:
+            import_garment(path, body, fit=True)
+        assert str(err.value).startswith(str(path))
+
+
+@pytest.fixture(scope="module")
+def skirt_m(body):
+    g = make_garment("skirt", body, seed=3, edge_length=0.06)
+    return g.verts.astype(np.float64), g.faces
+
+
+def test_push_moves_each_vertex_at_most_its_depth(body, skirt_m):
+    """A 6 mm dent at the hips: every vertex ends at least the clearance out, and none moves more than
+    its own depth short of the clearance (its or its edges' midpoints) plus the 1 mm margin."""
+    verts, faces = skirt_m
+    sdf = measure_body(body).sdf
+    d, direction = outward(sdf, verts)
+    dent = d < d.min() + 0.004
+    v = verts.copy()
+    v[dent] -= (d[dent] + 0.006)[:, None] * direction[dent]
+    e, _, _ = unique_edges(faces)
+    depth = np.maximum(0.005 - sdf.query(v), 0.0)
+    np.maximum.at(depth, e[:, 0], np.maximum(0.005 - sdf.query(0.5 * (v[e[:, 0]] + v[e[:, 1]])), 0.0))
+    np.maximum.at(depth, e[:, 1], np.maximum(0.005 - sdf.query(0.5 * (v[e[:, 0]] + v[e[:, 1]])), 0.0))
+    out, moved = push_out_bounded(v, faces, sdf, 0.005)
+    assert (moved <= np.where(depth > 0, depth + 0.001, 0.0) + 1e-9).all()
+    assert moved.max() >= 0.011 - 1e-6  # the dented vertices went the 6 mm back and 5 mm beyond
+    assert sdf.query(out).min() > 0.005 - 1e-4
+    np.testing.assert_array_equal(out[depth == 0], v[depth == 0])
+
+
+def test_a_deep_dent_is_refused(tmp_path, body, skirt_m):
+    verts, faces = skirt_m
+    sdf = measure_body(body).sdf
+    d, direction = outward(sdf, verts)
+    dent = d < d.min() + 0.004
+    v = verts.copy()
+    v[dent] -= (d[dent] + 0.025)[:, None] * direction[dent]  # 2.5 cm into the hips
+    path = write_obj(tmp_path / "dent.obj", v, faces)
+    with pytest.raises(InputError, match=r"dent.obj: placed on this body, \d+ vertices are too deep inside the body.*--fit"):
+        import_garment(path, body)
