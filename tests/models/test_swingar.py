@@ -587,7 +587,9 @@ def test_corrective_zero_state_shortcut_keeps_the_outputs(model, data, monkeypat
     torch.testing.assert_close(shortcut[1], full[1])
     assert shortcut[2].keys() == full[2].keys()
     for k in full[2]:
-        torch.testing.assert_close(shortcut[2][k], full[2][k], rtol=1e-5, atol=1e-7, msg=k)
+        # float32 round-off of a gradient's sums is relative to its largest terms, not to each element
+        torch.testing.assert_close(shortcut[2][k], full[2][k], rtol=1e-5, atol=1e-4 * float(full[2][k].abs().max()),
+                                   msg=k)
 
 
 # ---------------------------------------------------------------- global descriptor ablation (SwinGar Table I)

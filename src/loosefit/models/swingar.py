@@ -80,6 +80,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.lbs import forward_kinematics, skinning_transforms
 from loosefit.geometry.normals import face_normals_torch
 from loosefit.geometry.rotations import sixd_to_matrix
+from loosefit.models.cuda_graph import capture_or_none, clone_outputs, graphs_enabled
 from loosefit.models.layers.gat_ln import GATLN
 from loosefit.models.layers.lstm_gat_ln import LSTMGATLN
 from loosefit.models.layers.mlp import MLP
@@ -449,6 +450,11 @@ class BoundSwinGar(nn.Module):
     ``faces``), so that :class:`loosefit.animate.Animator` animates it in batches or frame by frame.
     The garment's graph and shape features are computed once here.
 
+    Streaming on CUDA (one frame per call with the previous call's state, autograd off) replays a CUDA graph of
+    the frame, captured at the first such call per batch size (:mod:`loosefit.models.cuda_graph`): the same
+    outputs as the eager step to float round-off, without the host launching each kernel. ``use_graphs = False``
+    (or a failed capture, after one warning) runs every frame eagerly.
+
     Args:
         model: a (trained) SwinGar.
         graph: the garment on its body, :class:`~loosefit.models.multi_garment.GarmentGraph`; any vertex count.
@@ -464,6 +470,8 @@ class BoundSwinGar(nn.Module):
         self.register_buffer("faces", self.g["faces"].clone())
         with torch.no_grad():
             self.features = model.garment_features(self.g)
+        self.use_graphs = True
+        self._graphs: dict = {}  # captured streaming steps by input shapes (None: the capture failed)
 
     def _apply(self, fn, recurse: bool = True):
         # The graph and its features are plain tensors, not buffers: move them with the module (``.to(cuda)``),
@@ -471,6 +479,7 @@ class BoundSwinGar(nn.Module):
         super()._apply(fn, recurse)
         self.g = {k: fn(v) if torch.is_tensor(v) else v for k, v in self.g.items()}
         self.features = tuple(fn(t) for t in self.features)
+        self._graphs = {}  # captured on the old tensors
         return self
 
     def sizes(self) -> dict:
@@ -478,4 +487,39 @@ class BoundSwinGar(nn.Module):
 
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None) -> dict:
         """Raw features ``root (B, T, 11)``, ``joints (B, T, J-1, 6)`` -> :meth:`SwinGar.forward`'s outputs."""
+        if (self.use_graphs and state is not None and "gates" in state and root.shape[1] == 1
+                and graphs_enabled(root.device)):
+            out = self._replay(root, joints, state)
+            if out is not None:
+                return out
         return self.model(self.g, root, joints, state=state, features=self.features)
+
+    def stream_step(self, root: torch.Tensor, joints: torch.Tensor, hist_root: torch.Tensor,
+                    hist_joints: torch.Tensor, gates: torch.Tensor) -> dict:
+        """One streaming call on the state's tensors, ``hist_root (B, m-1, 11)``, ``hist_joints (B, m-1, J-1, 6)``
+        and ``gates (B, K-1, V, 4 corrective_hidden)``, which it overwrites with the state after the call (the
+        step a CUDA graph captures: the recurrent state stays in the same memory). Returns the outputs but the
+        state."""
+        out = self.model(self.g, root, joints, state={"root": hist_root, "joints": hist_joints, "gates": gates},
+                         features=self.features)
+        new = out.pop("state")
+        hist_root.copy_(new["root"])
+        hist_joints.copy_(new["joints"])
+        gates.copy_(new["gates"])
+        return out
+
+    def _replay(self, root: torch.Tensor, joints: torch.Tensor, state: dict) -> dict | None:
+        inputs = [root, joints, state["root"], state["joints"], state["gates"]]
+        key = tuple((tuple(t.shape), t.dtype, t.device) for t in inputs)
+        if key not in self._graphs:
+            m, K = self.model.config.motion_frames, self.model.config.corrective_frames
+            if state["root"].shape[1] != m - 1 or state["gates"].shape[1] != K - 1:
+                return None  # the eager pass reports the malformed state
+            self._graphs[key] = capture_or_none(self.stream_step, inputs, "SwinGar streaming step")
+        captured = self._graphs[key]
+        if captured is None:
+            return None
+        out = clone_outputs(captured(*inputs))
+        r, j, gates = clone_outputs(captured.inputs[2:])  # the state after this frame, written by the graph
+        out["state"] = {"root": r, "joints": j, "gates": gates}
+        return out

@@ -11,16 +11,66 @@ Two streams read the same node features ``x (N, C_in)`` and their outputs are co
 Output ``[s_i, a_i^1, ..., a_i^heads]`` of ``self_channels + heads * channels`` features, no activation
 (the network that stacks blocks chooses it). Attention that is one-hot on the self loop makes the
 block two linear maps of ``x_i``.
+
+:meth:`GATBlock.forward_table` computes the same block over a padded table of each node's incoming edges
+(:func:`incoming_table`, built once per graph) instead of the edge list: no self loops removed and added per
+call, no scatter, every shape fixed by the table, so that a frame can be captured in a CUDA graph
+(:mod:`loosefit.models.fitgar_stream`). The two agree to float round-off (the sums run in another order).
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 from torch_geometric.nn import GATConv
 
 from loosefit.errors import InputError
 from loosefit.models.layers.init import undrawn
+
+
+def incoming_table(edge_index: np.ndarray, num_nodes: int, width: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each node's attention neighbourhood as :class:`GATConv` builds it from ``edge_index (2, E)`` (``source ->
+    target``): itself, then the sources of its incoming edges (self loops left out, repeated edges kept), in
+    increasing order.
+
+    Returns ``table (N, D)`` int64 (slot 0 the node itself, padding the node itself) and ``valid (N, D)`` bool,
+    ``D = width`` or one more than the largest in-degree."""
+    src, dst = np.asarray(edge_index, np.int64).reshape(2, -1)
+    keep = src != dst
+    src, dst = src[keep], dst[keep]
+    order = np.lexsort((src, dst))
+    src, dst = src[order], dst[order]
+    degree = np.bincount(dst, minlength=num_nodes)
+    D = int(degree.max(initial=0)) + 1 if width is None else int(width)
+    if degree.max(initial=0) + 1 > D:
+        raise ValueError(f"a node has {degree.max()} incoming edges, more than a table of width {D} holds")
+    start = np.concatenate([[0], np.cumsum(degree)[:-1]]).astype(np.int64)
+    slot = np.arange(len(dst)) - start[dst] + 1
+    table = np.repeat(np.arange(num_nodes, dtype=np.int64)[:, None], D, 1)
+    valid = np.zeros((num_nodes, D), bool)
+    valid[:, 0] = True
+    table[dst, slot] = src
+    valid[dst, slot] = True
+    return table, valid
+
+
+def gat_conv_table(conv: GATConv, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """``conv(x, edge_index)`` of a concatenating :class:`GATConv` (no edge features, no residual, no dropout at
+    work) over the padded table of :func:`incoming_table`: ``x (N, in)`` -> ``(N, heads * out)``."""
+    H, C = conv.heads, conv.out_channels
+    N, D = table.shape
+    h = conv.lin(x).view(N, H, C)
+    a_src, a_dst = (h * conv.att_src).sum(-1), (h * conv.att_dst).sum(-1)  # (N, H)
+    s = a_src.index_select(0, table.reshape(-1)).view(N, D, H) + a_dst[:, None]
+    s = nn.functional.leaky_relu(s, conv.negative_slope).masked_fill(~valid[:, :, None], float("-inf"))
+    P = torch.softmax(s, 1)  # (N, D, H)
+    columns = table.T.contiguous()
+    out = h.new_zeros(N, H, C)
+    for d in range(D):  # slot by slot: no (N, D, H, C) tensor is written
+        out.addcmul_(P[:, d, :, None], h.index_select(0, columns[d]))
+    out = out.view(N, H * C)
+    return out if conv.bias is None else out + conv.bias
 
 
 class GATBlock(nn.Module):
@@ -75,3 +125,9 @@ class GATBlock(nn.Module):
 
     def forward(self, x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.self_stream(x), self.attention(x, edge_index)], dim=-1)
+
+    def forward_table(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward` over the padded table of :func:`incoming_table` (inference: attention dropout off)."""
+        if self.attention.training and self.attention.dropout > 0:
+            raise ValueError("GATBlock.forward_table runs without attention dropout: put the block in eval mode")
+        return torch.cat([self.self_stream(x), gat_conv_table(self.attention, x, table, valid)], dim=-1)

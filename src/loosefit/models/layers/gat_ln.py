@@ -57,11 +57,15 @@ and why).
 
 The graph is a padded neighbour table (:func:`attention_table`) rather than PyG's edge list: the forward pass
 then scatters nothing (the backward pass scatters one value per vertex, slot and input channel), which matters
-on CPUs where torch's scatter is slow with several threads. Since ``sum_j P_ij W_h x_j = W_h sum_j P_ij x_j``,
-the inputs are aggregated per head first and projected once by all heads' stacked weights: the neighbour
-gather moves ``in`` channels instead of ``heads * out`` (SwinGar at the paper's sizes on a 2.8k-vertex dress,
-one CPU thread: 2.7 s a frame the other way round, 0.2 s this way). Concatenated heads use the same product,
-with each head's rows zero outside its block of columns.
+on CPUs where torch's scatter is slow with several threads. Averaged heads: since ``sum_j P_ij W_h x_j = W_h
+sum_j P_ij x_j``, the inputs are aggregated per head first and projected once by all heads' stacked weights: the
+neighbour gather moves ``in`` channels instead of ``heads * out`` (SwinGar at the paper's sizes on a 2.8k-vertex
+dress, one CPU thread: 2.7 s a frame the other way round, 0.2 s this way). Concatenated heads: every output
+channel belongs to one head, so the inputs are projected once (``in -> out``) and the projections gathered and
+weighted by their channel's head; the stacked product would multiply ``heads - 1`` zeros for every weight (SwinGar's
+streaming frame, 9k vertices, one CPU thread: see ``benchmarks/README.md``). Every shape in the forward pass is
+fixed by the table, with no data-dependent indexing or host synchronisation, so a layer can be captured in a CUDA
+graph (:mod:`loosefit.models.cuda_graph`).
 
 :func:`recording_attention` records each layer's mean attention entropy per vertex (and that of a uniform
 attention over the same neighbourhoods, its upper bound): how far the attention is from a mean filter.
@@ -85,6 +89,9 @@ SCORE_SLOPE = 0.2
 NORM_EPS = 1e-12
 #: Values of ``GATLN(norm=...)``.
 NORMS = ("graph", "node")
+#: Concatenated heads above this count project before aggregating (see the module doc): with few heads the
+#: per-head aggregates are small and one stacked product is faster (measured on SwinGar's layers, one CPU thread).
+PROJECT_FIRST_HEADS = 4
 
 
 def attention_table(faces: np.ndarray, num_verts: int) -> tuple[np.ndarray, np.ndarray]:
@@ -184,8 +191,11 @@ class GATLN(nn.Module):
             self.weight = nn.Parameter(torch.empty(in_channels, out_channels))
             self.att_dst = nn.Parameter(torch.empty(out_channels))
             self.att_src = nn.Parameter(torch.empty(out_channels))
-            # (H, out) 1 where the channel belongs to the head; set by reset_parameters (the layer may be built undrawn)
+            # (H, out) 1 where the channel belongs to the head, and (out,) each channel's head; set by
+            # reset_parameters (the layer may be built undrawn)
             self.register_buffer("head_mask", torch.empty(heads, out_channels), persistent=False)
+            # each channel's place when every head is padded to the widest head's width (heads side by side)
+            self.register_buffer("padded_index", torch.empty(out_channels, dtype=torch.int64), persistent=False)
         else:
             self.weight = nn.Parameter(torch.empty(in_channels, heads * out_channels))
             self.att_dst = nn.Parameter(torch.empty(heads, out_channels))
@@ -200,6 +210,11 @@ class GATLN(nn.Module):
             with torch.no_grad():
                 self.head_mask.copy_(torch.from_numpy(
                     self._head_of[None] == np.arange(self.heads)[:, None]).to(self.head_mask))
+                sizes = np.bincount(self._head_of, minlength=self.heads)
+                first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+                self._widest = int(sizes.max())
+                self.padded_index.copy_(torch.from_numpy(
+                    self._head_of * self._widest + np.arange(self.out_channels) - first[self._head_of]))
             nn.init.uniform_(self.weight, -1.0, 1.0)
             nn.init.uniform_(self.att_dst, -1.0, 1.0)
             nn.init.uniform_(self.att_src, -1.0, 1.0)
@@ -240,21 +255,27 @@ class GATLN(nn.Module):
     def attention(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
                   gathered: torch.Tensor | None = None) -> torch.Tensor:
         """Attention weights ``P (B, V, D, H)`` (rows sum to 1 over the valid slots) of ``x (B, V, in)``;
-        ``gathered``: ``x`` at the table's slots ``(B, V, D, in)`` when already computed."""
+        ``gathered``: ``x`` at the table's slots ``(B, V, D, in)`` when already computed.
+
+        Every step has shapes fixed by the table (no data-dependent indexing, no host synchronisation), so the
+        layer can be captured in a CUDA graph."""
         c_dst, c_src = self.score_vectors()
-        u_dst, u_src = x @ c_dst.T, x @ c_src.T  # (B, V, H)
-        src = u_src[:, table]  # (B, V, D, H)
+        H = c_dst.shape[0]
+        flat = table.reshape(-1)
         mask = valid[None, :, :, None]
         if self.centred:
             if gathered is None:
-                gathered = x.index_select(1, table.reshape(-1)).unflatten(1, table.shape)
-            count = valid.sum(1).to(x.dtype)[None, :, None]  # (1, V, 1)
-            # c . mu_i: the neighbourhood mean of the projections (they are linear)
-            mean_dst = (u_dst[:, table] * mask).sum(2) / count
-            mean_src = (src * mask).sum(2) / count
-            s = (u_dst - mean_dst)[:, :, None] + (src - mean_src[:, :, None])
+                gathered = x.index_select(1, flat).unflatten(1, table.shape)
+            weight = valid.to(x.dtype) / valid.sum(1, keepdim=True).to(x.dtype)  # (V, D): the neighbourhood mean's weights
+            # (B, V, in): each neighbourhood's mean feature, a batched product that reads the gathered features once
+            mu = (weight[None, :, None, :] @ gathered)[:, :, 0]
+            # c . (x_j - mu_i): the scores of the centred features (the projections are linear)
+            u_dst = (x - mu) @ c_dst.T  # (B, V, H)
+            u_src = (x @ c_src.T).index_select(1, flat).unflatten(1, table.shape) - (mu @ c_src.T)[:, :, None]
+            s = u_dst[:, :, None] + u_src  # (B, V, D, H)
         else:
-            s = u_dst[:, :, None] + src  # (B, V, D, H) linear scores
+            u = x @ torch.cat([c_dst, c_src]).T  # (B, V, 2H)
+            s = u[:, :, None, :H] + u[..., H:].index_select(1, flat).unflatten(1, table.shape)
         if self.alpha is not None:
             s = s * mask
             # square roots clamped away from 0: their gradient there is infinite (a zero recurrent state)
@@ -262,8 +283,11 @@ class GATLN(nn.Module):
             rows = s.square().sum(2).clamp_min(tiny).sqrt()  # (B, V, H): each vertex's score row norm
             lip = (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(tiny).sqrt()  # (H,)
             if self.centred:
-                mu = (gathered * valid[None, :, :, None]).sum(2, keepdim=True) / count[..., None]
-                feats = (gathered - mu).square().sum(-1).clamp_min(tiny).sqrt()  # (B, V, D) ||x_j - mu_i||
+                # ||x_j - mu_i|| read off the gathered features without writing their differences (the clamp keeps
+                # the norms off 0, where the square root's gradient is infinite)
+                B, V, D, C = gathered.shape
+                feats = torch.cdist(gathered.reshape(B * V, D, C), mu.reshape(B * V, 1, C),
+                                    compute_mode="donot_use_mm_for_euclid_dist").view(B, V, D).clamp_min(NORM_EPS)
             else:
                 feats = x.square().sum(-1).clamp_min(tiny).sqrt()[:, table]  # (B, V, D) ||x_j||
             feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
@@ -279,14 +303,31 @@ class GATLN(nn.Module):
             raise InputError(f"GAT-LN expects (..., {table.shape[0]}, {self.in_channels}) features, got {tuple(x.shape)}")
         lead = x.shape[:-2]
         x = x.reshape(-1, *x.shape[-2:])
-        gathered = x.index_select(1, table.reshape(-1)).unflatten(1, table.shape)  # (B, V, D, in)
+        flat = table.reshape(-1)
+        gathered = None
+        if self.centred or not self.concat or self.heads <= PROJECT_FIRST_HEADS:
+            gathered = x.index_select(1, flat).unflatten(1, table.shape)  # (B, V, D, in)
         P = self.attention(x, table, valid, gathered)  # (B, V, D, H)
         if self._record is not None:
             self._record.append(tuple(float(v) for v in attention_entropy(P.detach(), valid)))
-        # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j): aggregate the inputs per head, then one product with
-        # the heads' stacked projections
-        z = torch.einsum("bvdh,bvdc->bvhc", P, gathered)  # (B, V, H, in)
-        out = z.flatten(-2) @ self.projection() + self.bias
+        if self.concat and self.heads > PROJECT_FIRST_HEADS:
+            # each output channel belongs to one head: project once (in -> out), then add up the neighbours'
+            # projections slot by slot, each channel weighted by its head's attention (the stacked product
+            # would multiply H - 1 zeros for every weight; slot by slot, no (B, V, D, out) tensor is written)
+            B, V, H, C = x.shape[0], x.shape[1], self.heads, self._widest
+            # heads padded to equal widths (zero columns), so that a head's weight broadcasts over its channels
+            weight = self.weight.new_zeros(self.in_channels, H * C).index_copy(1, self.padded_index, self.weight)
+            y = x @ weight  # (B, V, H * C)
+            columns = table.T.contiguous()
+            acc = y.new_zeros(B, V, H, C)
+            for d in range(table.shape[1]):
+                acc.addcmul_(P[:, :, d, :, None], y.index_select(1, columns[d]).view(B, V, H, C))
+            out = acc.flatten(-2).index_select(-1, self.padded_index) + self.bias
+        else:
+            # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j): aggregate the inputs per head, then one product with
+            # the heads' stacked projections (averaged heads: H * out columns, all of them used)
+            z = torch.einsum("bvdh,bvdc->bvhc", P, gathered)  # (B, V, H, in)
+            out = z.flatten(-2) @ self.projection() + self.bias
         if self.activation == "tanh":
             out = torch.tanh(out)
         return out.reshape(*lead, *out.shape[-2:])
