@@ -1,4 +1,6 @@
-# The GPU check, run from the repository root on a lent GPU machine with .gpu/ carried (scripts/gpu_bundle.py):
+# The GPU check, run from the repository root on a lent GPU machine with .gpu/ carried (scripts/gpu_bundle.py;
+# optional packs .gpu/fitgar-pack.pt and .gpu/swingar-pack.pt from benchmarks/graph_pack.py pack, and the store
+# .gpu/data/train.zarr: each step runs when its input is there, so the bundle fits the carried size):
 #   bash scripts/gpu_run.sh                          # there: $OUT set, python3 with torch (CUDA)
 #   DEVICE=cpu PY=.venv/bin/python OUT=/tmp/gpu-out bash scripts/gpu_run.sh   # here: the same steps, tiny sizes
 # Every step runs under its own timeout within one overall deadline (BUDGET seconds), logs to $OUT/run.log and
@@ -43,18 +45,23 @@ step() {
 }
 STORE=$G/data/train.zarr
 if [ "$DEVICE" = cuda ]; then
-  SIZE=paper; STEPS=${STEPS:-300}
-  step cuda-tests 120 $PY -m pytest -q -p no:cacheprovider -o addopts= tests/models/test_swingar.py \
-    tests/models/test_jointnet.py tests/models/layers -k "cuda or gat_ln or lstm or gru"
-else
-  SIZE=tiny; STEPS=${STEPS:-24}
-fi
-step gpu-smoke 300 $PY benchmarks/gpu_smoke.py --store "$STORE" --device "$DEVICE" --size $SIZE --steps $STEPS \
-  --out "$OUT/gpu-smoke.json"
-if [ "$DEVICE" = cuda ]; then
-  step graph-speed 120 $PY benchmarks/graph_speed.py --device cuda --swingar-vertices 11200 --fitgar-vertices 4000 \
+  SIZE=paper; STEPS=${STEPS:-300}; PACK_SECONDS=${PACK_SECONDS:-45}
+  step cuda-tests 150 $PY -m pytest -q -p no:cacheprovider -o addopts= tests/models/test_swingar.py \
+    tests/models/test_jointnet.py tests/models/layers $(ls tests/models/test_cuda*.py 2>/dev/null) \
+    -k "cuda or gat_ln or lstm or gru"
+  step graph-speed 150 $PY benchmarks/graph_speed.py --device cuda --swingar-vertices 11200 --fitgar-vertices 4000 \
     --threads 1 --frames 20 --batch 10 --repeats 3 --fitgar-frames 20 --name gs-cuda
   cp benchmarks/results/gs-cuda.json "$OUT/" 2>/dev/null
-  [ -n "${EXTRA:-}" ] && step extra 400 bash -c "$EXTRA"
+else
+  SIZE=tiny; STEPS=${STEPS:-24}; PACK_SECONDS=${PACK_SECONDS:-5}
 fi
+# the paper's widths against the CPU preset's, the same seconds each, from the packs (benchmarks/graph_pack.py)
+[ -f "$G/fitgar-pack.pt" ] && step fitgar-pack $((4 * PACK_SECONDS + 40)) $PY benchmarks/graph_pack.py train \
+  --pack "$G/fitgar-pack.pt" --configs fitgar.yaml,fitgar-cpu.yaml --seconds "$PACK_SECONDS" --out "$OUT/graph-pack-fitgar.json"
+[ -f "$G/swingar-pack.pt" ] && step swingar-pack $((4 * PACK_SECONDS + 40)) $PY benchmarks/graph_pack.py train \
+  --pack "$G/swingar-pack.pt" --configs swingar.yaml,swingar-cpu.yaml --seconds "$PACK_SECONDS" \
+  --out "$OUT/graph-pack-swingar.json"
+[ -d "$STORE" ] && step gpu-smoke 300 $PY benchmarks/gpu_smoke.py --store "$STORE" --device "$DEVICE" --size $SIZE \
+  --steps $STEPS --out "$OUT/gpu-smoke.json"
+[ "$DEVICE" = cuda ] && [ -n "${EXTRA:-}" ] && step extra 400 bash -c "$EXTRA"
 echo "=== done in $((SECONDS - START))s; $OUT: $(ls "$OUT" | tr '\n' ' ')" | tee -a "$LOG"
