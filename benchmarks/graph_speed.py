@@ -23,6 +23,13 @@ and so is a CPU LSTM (``mkldnn_rnn_layer``: SwinGar's motion encoder, added anal
 apart). The achieved rate is the counted FLOPs over the measured time, and its ``fraction`` of
 :func:`matmul_rate` at the same thread count says how far the network is from being bound by its products.
 
+On CUDA both models also stream through their captured CUDA graphs (:mod:`loosefit.models.cuda_graph`), timed beside
+the eager frames: SwinGar's ``stream_ms_per_frame`` (eager) and ``stream_graph_ms_per_frame`` (graph replay), FitGar's
+``ms_per_frame`` (eager, PyG's edge list) and ``graph_ms_per_frame``, each with the largest vertex difference from the
+eager frames (``*_max_abs_diff_m``) and whether the capture took (``*_captured``). FitGar's ``tables_ms_per_frame``
+is the captured step run eagerly (:class:`~loosefit.models.fitgar_stream.FitGarStream`: fixed neighbour tables, no
+scatter), on any device.
+
 Thread counts matter on these machines: PyG's scatter (FitGar's GATConv, its pooling) runs many times slower
 with 2 torch threads than with 1 (see the design notes), so every measurement runs at each of ``--threads``.
 With ``--device cuda`` (where CUDA is available) the same runs on the GPU, synchronised around every timing.
@@ -226,13 +233,16 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
         bound = _swingar(body, garment, dev)
         for t in threads:
             with torch_threads(t), torch.no_grad():
-                state, times = None, []
-                for k in range(warmup + frames):
-                    dt, out = _timed(lambda: bound(root[:, k:k + 1], joints[:, k:k + 1], state), dev)
-                    state = out["state"]
-                    times.append(dt)
-                stream = statistics.median(times[warmup:])
+                bound.use_graphs = False  # eager first; the CUDA graph's frames after
+                stream, times, eager_verts, state = _swingar_stream(bound, root, joints, warmup, frames, dev)
                 stream_load = load_average()
+                graph = None
+                if dev.type == "cuda":
+                    bound.use_graphs = True
+                    graph, graph_times, graph_verts, _ = _swingar_stream(bound, root, joints, warmup, frames, dev)
+                    captured = any(g is not None for g in bound._graphs.values())
+                    graph_diff = max(float((a - b).abs().max()) for a, b in zip(eager_verts, graph_verts))
+                    bound.use_graphs = False
                 k = warmup + frames
                 stream_flops, stream_ops = count_flops(lambda: bound(root[:, k:k + 1], joints[:, k:k + 1], state))
                 whole = lambda: bound(root[:, :batch], joints[:, :batch])  # noqa: E731
@@ -246,14 +256,34 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
                    f"batch{batch}_ms_per_frame": batch_s * 1e3, f"batch{batch}_fps": 1.0 / batch_s,
                    "batch_load_average": batch_load, "load_average": batch_load}
             _achieved(row, stream_flops, stream, rates, "stream_")
+            if graph is not None:
+                row.update({"stream_graph_ms_per_frame": graph * 1e3, "stream_graph_fps": 1.0 / graph,
+                            "stream_graph_ms_all": [x * 1e3 for x in graph_times[warmup:]],
+                            "stream_graph_captured": captured, "stream_graph_max_abs_diff_m": graph_diff,
+                            "stream_graph_speedup": stream / graph})
+                _achieved(row, stream_flops, graph, rates, "stream_graph_")
             _achieved(row, batch_flops // batch, batch_s, rates, f"batch{batch}_")
             row["stream_counted_flops_by_op"] = stream_ops
             row["motion_lstm_gflop_per_frame_uncounted"] = lstm_flops(bound.model, 1) / 1e9
             row["paper"] = PAPER["swingar"]
             rows.append(row)
-            print({k: v for k, v in row.items() if k not in ("stream_ms_all", "stream_counted_flops_by_op", "paper")},
+            print({k: v for k, v in row.items()
+                   if k not in ("stream_ms_all", "stream_graph_ms_all", "stream_counted_flops_by_op", "paper")},
                   flush=True)
     return rows
+
+
+def _swingar_stream(bound, root, joints, warmup: int, frames: int, device: torch.device):
+    """Stream ``warmup + frames`` frames one call each from a cold start: the median seconds of the last
+    ``frames``, every call's seconds, each frame's vertices and the last state. On CUDA with ``bound.use_graphs``
+    the second call (the first with a state) captures the CUDA graph, inside the warm-up."""
+    state, times, verts = None, [], []
+    for k in range(warmup + frames):
+        dt, out = _timed(lambda: bound(root[:, k:k + 1], joints[:, k:k + 1], state), device)
+        state = out["state"]
+        times.append(dt)
+        verts.append(out["verts"])
+    return statistics.median(times[warmup:]), times, verts, state
 
 
 def profile_swingar(vertices: int = 10000, threads: int = 1, frames: int = 3, top: int = 15, body=None) -> dict:
@@ -310,6 +340,7 @@ def fitgar_speed(vertices: list[int] = (4000, 10000), threads: list[int] = (1, 2
     from loosefit.models.fitgar import Config, FitGar
     from loosefit.models.fitgar_data import collate_frames, frame_items
     from loosefit.models.fitgar_inputs import GarmentBodyPair
+    from loosefit.models.fitgar_stream import FitGarStream
     from loosefit.motion.procedural import generate
 
     dev = _device(device)
@@ -325,15 +356,38 @@ def fitgar_speed(vertices: list[int] = (4000, 10000), threads: list[int] = (1, 2
         batches = [_to(collate_frames([it]), dev) for it in frame_items(pair, pair.frames(motion))[:frames + 1]]
         for t in threads:
             with torch_threads(t), torch.no_grad():
+                model.use_graphs = False  # FitGar.forward's eager pass on the edge list
                 _timed(lambda: model(batches[0]), dev)  # warm-up
                 times = [_timed(lambda: model(b), dev)[0] for b in batches[1:]]
+                eager = [model(b)["verts"] for b in batches[1:]]
                 load = load_average()
                 flops, by_op = count_flops(lambda: model(batches[0]))
+                # the same frames over fixed tables (FitGarStream), eagerly; on CUDA also as a CUDA graph
+                stream = FitGarStream(model, batches[0], use_graphs=False)
+                _timed(lambda: stream(batches[0]), dev)
+                stream_times = [_timed(lambda: stream(b), dev)[0] for b in batches[1:]]
+                stream_diff = max(float((stream(b)["verts"] - e).abs().max()) for b, e in zip(batches[1:], eager))
+                if dev.type == "cuda":
+                    model.use_graphs = True  # FitGar.forward's own path on CUDA
+                    _timed(lambda: model(batches[0]), dev)  # captures
+                    graph_times = [_timed(lambda: model(b), dev)[0] for b in batches[1:]]
+                    graph_diff = max(float((model(b)["verts"] - e).abs().max()) for b, e in zip(batches[1:], eager))
+                    captured = model._stream._graph is not None
+                    model.use_graphs = False
             per_frame = statistics.median(times)
             row = {"model": "fitgar", "vertices": garment.num_verts, "threads": t, "device": dev.type,
                    "ms_per_frame": per_frame * 1e3, "fps": 1.0 / per_frame, "mean_ms_per_frame": float(np.mean(times)) * 1e3,
                    "load_average": load}
             _achieved(row, flops, per_frame, rates, "")
+            per_frame = statistics.median(stream_times)
+            row.update({"tables_ms_per_frame": per_frame * 1e3, "tables_max_abs_diff_m": stream_diff})
+            _achieved(row, flops, per_frame, rates, "tables_")
+            if dev.type == "cuda":
+                per_frame = statistics.median(graph_times)
+                row.update({"graph_ms_per_frame": per_frame * 1e3, "graph_fps": 1.0 / per_frame,
+                            "graph_captured": captured, "graph_max_abs_diff_m": graph_diff,
+                            "graph_speedup": row["ms_per_frame"] / 1e3 / per_frame})
+                _achieved(row, flops, per_frame, rates, "graph_")
             row["counted_flops_by_op"] = by_op
             row["paper"] = PAPER["fitgar"]
             rows.append(row)

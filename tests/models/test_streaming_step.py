@@ -72,13 +72,13 @@ def test_swingar_stream_step_keeps_the_state_in_place(data):  # noqa: F811
 
 
 def test_incoming_table_is_gatconv_neighbourhood():
-    edge_index = np.array([[1, 2, 0, 3, 2, 1], [0, 0, 1, 1, 1, 1]])  # node 1 has a self loop and a repeated edge
+    edge_index = np.array([[2, 1, 0, 3, 2, 1], [0, 0, 1, 1, 1, 1]])  # node 1 has a self loop
     table, valid = incoming_table(edge_index, 4)
-    assert table[0][valid[0]].tolist() == [0, 1, 2]
-    assert table[1][valid[1]].tolist() == [1, 0, 2, 3]
+    assert table[0][valid[0]].tolist() == [2, 1, 0]  # in the edge list's order, itself last
+    assert table[1][valid[1]].tolist() == [0, 3, 2, 1]
     assert table[2][valid[2]].tolist() == [2] and table[3][valid[3]].tolist() == [3]
     table, valid = incoming_table(np.array([[1, 1], [0, 0]]), 2)
-    assert table[0][valid[0]].tolist() == [0, 1, 1]  # repeated edges count twice, as in GATConv
+    assert table[0][valid[0]].tolist() == [1, 1, 0]  # repeated edges count twice, as in GATConv
 
 
 def test_gat_block_over_a_table_is_the_edge_list_block():
@@ -89,9 +89,8 @@ def test_gat_block_over_a_table_is_the_edge_list_block():
     e = np.unique(np.concatenate([e, e[::-1]], 1), axis=1)
     x = torch.randn(40, 5)
     table, valid = map(torch.from_numpy, incoming_table(e, 40))
-    with torch.no_grad():
-        torch.testing.assert_close(block.forward_table(x, table, valid), block(x, torch.from_numpy(e)),
-                                   rtol=1e-5, atol=1e-6)
+    with torch.no_grad():  # one thread (tests/models/conftest.py): GATConv's own sums, to the bit
+        assert torch.equal(block.forward_table(x, table, valid), block(x, torch.from_numpy(e)))
 
 
 def test_matching_in_rounds_is_the_greedy_matching():
@@ -142,8 +141,9 @@ def fitgar_frames(body):
 
 
 def test_fitgar_stream_equals_the_eager_pass(fitgar_frames):
-    """One frame and three frames of a garment: the stream's outputs (fixed tables, static pooling) equal
-    FitGar.forward's, with and without a round limit on the matching."""
+    """One frame and three frames of a garment: the stream's outputs (fixed tables, static pooling) are
+    FitGar.forward's, with and without a round limit on the matching (the same matching: the pooling's scores
+    are bit-identical, so no near tie can flip)."""
     model, items = fitgar_frames
     for n in (1, 3):
         batch = collate_frames(items[:n])
@@ -152,10 +152,9 @@ def test_fitgar_stream_equals_the_eager_pass(fitgar_frames):
             stream = FitGarStream(model, batch)
             got = stream(batch)
             limited = stream.step(*[batch[k] for k in FRAME_INPUTS], rounds=48)
-        assert bool(got["exact"]) and bool(limited["exact"])
-        for k in ("coarse", "verts", "detail_displacement"):
-            torch.testing.assert_close(got[k], expected[k], rtol=1e-5, atol=1e-6)
-            assert torch.equal(limited[k], got[k])
+        assert bool(limited["exact"]) and "exact" not in got
+        for k in ("coarse", "verts", "detail_displacement"):  # one thread: PyG's sums, to the bit
+            assert torch.equal(got[k], expected[k]) and torch.equal(limited[k], got[k]), k
         assert stream.matches(batch) and not stream.matches(collate_frames(items[:1] if n == 3 else items[:2]))
 
 
@@ -184,15 +183,17 @@ def test_swingar_graph_replay_equals_eager_streaming(data):  # noqa: F811
 
 @CUDA
 def test_fitgar_graph_replay_equals_eager(fitgar_frames):
+    """Replay of the captured frame (as FitGar.forward streams on CUDA) equals the eager pass on the edge list."""
     model, items = fitgar_frames
     model = copy.deepcopy(model).to("cuda")
+    eager = copy.deepcopy(model)
+    eager.use_graphs = False
     with torch.no_grad():
         for n in (1, 2):
             batches = [{k: v.cuda() for k, v in collate_frames(items[t:t + n]).items()} for t in range(3 - n + 1)]
-            stream = FitGarStream(model, batches[0])
             for batch in batches:
-                expected = model(batch)
-                got = stream(batch)
-                assert stream._graph is not None, "the FitGar frame was not captured"
+                expected = eager(batch)
+                got = model(batch)
+                assert model._stream._graph is not None, "the FitGar frame was not captured"
                 torch.testing.assert_close(got["verts"], expected["verts"], rtol=1e-4, atol=1e-5)
                 torch.testing.assert_close(got["coarse"], expected["coarse"], rtol=1e-4, atol=1e-5)

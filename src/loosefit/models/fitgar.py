@@ -70,7 +70,9 @@ from torch import nn
 from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals_torch
 from loosefit.models.fitgar_data import GarmentFrames, check_frame_choice, collate_frames
+from loosefit.models.cuda_graph import graphs_enabled
 from loosefit.models.fitgar_inputs import check_anchor_mode
+from loosefit.models.fitgar_stream import FitGarStream
 from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput
 from loosefit.models.layers.edge_pool import EdgeContractionPooling
 from loosefit.models.layers.gat_block import GATBlock
@@ -380,7 +382,16 @@ class FitGar(nn.Module):
                              f"{given!r} ones: build the garment-body pairs with GarmentBodyPair.build(..., "
                              f"anchor={self.anchor!r}), or train the model again")
 
+    #: On CUDA with autograd off, frames run through :class:`~loosefit.models.fitgar_stream.FitGarStream` (a
+    #: captured CUDA graph per garment graph); False: always the eager pass below.
+    use_graphs = True
+
     def forward(self, batch: dict) -> dict[str, torch.Tensor]:
+        if self.use_graphs and graphs_enabled(batch["anchor"].device):
+            stream = getattr(self, "_stream", None)
+            if stream is None or not stream.matches(batch):
+                self._stream = stream = FitGarStream(self, batch)
+            return stream(batch)
         self.check_anchor(batch)
         coarse_disp = self.coarse_displacement(batch)
         coarse = batch["anchor"] + coarse_disp  # FitGar Eq. 5

@@ -37,6 +37,7 @@ class FitGarStream:
 
     ``stream(batch)`` -> :meth:`FitGar.forward`'s outputs for a batch of the same garments (only the per-frame
     inputs :data:`FRAME_INPUTS` are read from it). ``use_graphs``: capture and replay on CUDA with autograd off.
+    :meth:`FitGar.forward` streams through one automatically there.
     """
 
     def __init__(self, model, batch: dict, use_graphs: bool = True):
@@ -125,6 +126,8 @@ class FitGarStream:
                 self._graph = capture_or_none(self._captured, inputs, "FitGar frame")
             if self._graph is not None:
                 out = clone_outputs(self._graph(*inputs))
-                if bool(out["exact"]):
+                if bool(out.pop("exact")):
                     return out
-        return self.step(*inputs)
+        out = self.step(*inputs)
+        out.pop("exact")
+        return out

@@ -120,10 +120,11 @@ def greedy_contraction_rounds(edge_index: torch.Tensor, score: torch.Tensor, num
 
 def pooled_table(cluster: torch.Tensor, edge_index: torch.Tensor, num_nodes: int,
                  width: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """The pooled graph as :func:`~loosefit.models.layers.gat_block.incoming_table` lays it out, on ``num_nodes``
-    rows (clusters past the last hold no node): each cluster itself, then every other cluster an edge joins to
-    it, once, in increasing order. Returns ``table, valid (N, width)`` and ``fits ()`` bool (False when a cluster
-    has more neighbours than the width holds: the table is then cut short)."""
+    """The pooled graph as :func:`~loosefit.models.layers.gat_block.incoming_table` lays out :meth:`forward`'s
+    pooled edges, on ``num_nodes`` rows (clusters past the last hold no node): every other cluster an edge joins to
+    a cluster, once, in increasing order, then the cluster itself. Returns ``table, valid (N, width)`` and
+    ``fits ()`` bool (False when a cluster has more neighbours than the width holds: the table is then cut
+    short)."""
     N, device = num_nodes, cluster.device
     cs, cd = cluster[edge_index[0]], cluster[edge_index[1]]
     key = torch.where(cs != cd, cd * N + cs, N * N)  # contracted edges (self loops) last, dropped
@@ -134,14 +135,15 @@ def pooled_table(cluster: torch.Tensor, edge_index: torch.Tensor, num_nodes: int
     dst, src = torch.div(key, N, rounding_mode="floor").clamp_max(N - 1), key % N
     count = torch.zeros(N, dtype=torch.long, device=device).index_add_(0, dst, keep.long())
     start = count.cumsum(0) - count
-    slot = keep.long().cumsum(0) - 1 - start[dst] + 1
+    slot = keep.long().cumsum(0) - 1 - start[dst]
     fits = (count < width).all()
-    place = torch.where(keep & (slot < width), dst * width + slot, N * width)  # the rest to a spare cell
+    place = torch.where(keep & (slot < width - 1), dst * width + slot, N * width)  # the rest to a spare cell
     table = torch.arange(N, device=device).repeat_interleave(width)
     table = torch.cat([table, table.new_zeros(1)]).scatter_(0, place, src)[:-1].view(N, width)
-    valid = torch.zeros(N * width + 1, dtype=torch.bool, device=device).scatter_(0, place, keep)[:-1].view(N, width)
-    valid[:, 0] = True
-    return table, valid, fits
+    valid = torch.zeros(N * width + 1, dtype=torch.bool, device=device).scatter_(0, place, keep)[:-1]
+    nodes = torch.arange(N, device=device)
+    valid[nodes * width + count.clamp_max(width - 1)] = True  # the cluster itself, last (the table holds it there)
+    return table, valid.view(N, width), fits
 
 
 class EdgeContractionPooling(nn.Module):

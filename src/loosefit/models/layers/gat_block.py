@@ -31,44 +31,51 @@ from loosefit.models.layers.init import undrawn
 
 def incoming_table(edge_index: np.ndarray, num_nodes: int, width: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each node's attention neighbourhood as :class:`GATConv` builds it from ``edge_index (2, E)`` (``source ->
-    target``): itself, then the sources of its incoming edges (self loops left out, repeated edges kept), in
-    increasing order.
+    target``), in the order it sums them: the sources of the node's incoming edges in the order of
+    ``edge_index`` (self loops left out, repeated edges kept), then the node itself (GATConv's added self loop).
 
-    Returns ``table (N, D)`` int64 (slot 0 the node itself, padding the node itself) and ``valid (N, D)`` bool,
-    ``D = width`` or one more than the largest in-degree."""
+    Returns ``table (N, D)`` int64 (padded with the node itself) and ``valid (N, D)`` bool, ``D = width`` or one
+    more than the largest in-degree."""
     src, dst = np.asarray(edge_index, np.int64).reshape(2, -1)
     keep = src != dst
     src, dst = src[keep], dst[keep]
-    order = np.lexsort((src, dst))
+    order = np.argsort(dst, kind="stable")
     src, dst = src[order], dst[order]
     degree = np.bincount(dst, minlength=num_nodes)
     D = int(degree.max(initial=0)) + 1 if width is None else int(width)
     if degree.max(initial=0) + 1 > D:
         raise ValueError(f"a node has {degree.max()} incoming edges, more than a table of width {D} holds")
     start = np.concatenate([[0], np.cumsum(degree)[:-1]]).astype(np.int64)
-    slot = np.arange(len(dst)) - start[dst] + 1
     table = np.repeat(np.arange(num_nodes, dtype=np.int64)[:, None], D, 1)
     valid = np.zeros((num_nodes, D), bool)
-    valid[:, 0] = True
-    table[dst, slot] = src
-    valid[dst, slot] = True
+    table[dst, np.arange(len(dst)) - start[dst]] = src
+    valid[dst, np.arange(len(dst)) - start[dst]] = True
+    valid[np.arange(num_nodes), degree] = True  # the self loop, last
     return table, valid
 
 
 def gat_conv_table(conv: GATConv, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     """``conv(x, edge_index)`` of a concatenating :class:`GATConv` (no edge features, no residual, no dropout at
-    work) over the padded table of :func:`incoming_table`: ``x (N, in)`` -> ``(N, heads * out)``."""
+    work) over the padded table of :func:`incoming_table`: ``x (N, in)`` -> ``(N, heads * out)``.
+
+    The softmax's sum and the aggregation add the neighbours slot by slot in the table's order, as PyG's
+    one-threaded CPU scatter adds the edges, each product rounded before its sum: on the CPU with one thread the
+    result is GATConv's to the bit (the edge pooling after it then takes the same edges)."""
     H, C = conv.heads, conv.out_channels
     N, D = table.shape
     h = conv.lin(x).view(N, H, C)
     a_src, a_dst = (h * conv.att_src).sum(-1), (h * conv.att_dst).sum(-1)  # (N, H)
     s = a_src.index_select(0, table.reshape(-1)).view(N, D, H) + a_dst[:, None]
     s = nn.functional.leaky_relu(s, conv.negative_slope).masked_fill(~valid[:, :, None], float("-inf"))
-    P = torch.softmax(s, 1)  # (N, D, H)
+    e = (s - s.amax(1, keepdim=True)).exp()  # (N, D, H), zero on padding
+    total = e.new_zeros(N, H)
+    for d in range(D):
+        total = total + e[:, d]
+    P = e / (total + 1e-16)[:, None]  # PyG's softmax, its guard against an empty sum included
     columns = table.T.contiguous()
     out = h.new_zeros(N, H, C)
     for d in range(D):  # slot by slot: no (N, D, H, C) tensor is written
-        out.addcmul_(P[:, d, :, None], h.index_select(0, columns[d]))
+        out = out + P[:, d, :, None] * h.index_select(0, columns[d])
     out = out.view(N, H * C)
     return out if conv.bias is None else out + conv.bias
 
