@@ -1,9 +1,8 @@
 """The streaming steps that CUDA graphs capture: GAT-LN's project-first aggregation, FitGar over fixed tables and
-the static edge pooling equal the eager implementations; on a GPU, graph replay equals eager streaming."""
+the static edge pooling equal the eager implementations (on a GPU, graph replay against eager streaming:
+``test_cuda_graphs.py``)."""
 
 from __future__ import annotations
-
-import copy
 
 import numpy as np
 import pytest
@@ -11,7 +10,7 @@ import torch
 
 from loosefit.models.fitgar import FitGar
 from loosefit.models.fitgar_data import collate_frames
-from loosefit.models.fitgar_stream import FRAME_INPUTS, FitGarStream
+from loosefit.models.fitgar_stream import FRAME_INPUTS, GRAPH_ROUNDS, FitGarStream
 from loosefit.models.layers import gat_ln
 from loosefit.models.layers.edge_pool import EdgeContractionPooling, greedy_contraction, greedy_contraction_rounds
 from loosefit.models.layers.gat_block import GATBlock, incoming_table
@@ -23,7 +22,6 @@ from .layers.test_gat_ln_designs import FACES, IN, OUT, V, by_hand
 from .test_fitgar import SIZES
 from .test_swingar import SMALL, data, store  # noqa: F401  (fixtures)
 
-CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 #: SwinGar with more heads than GAT-LN aggregates before projecting, so both aggregations run.
 MANY_HEADS = SwinGarConfig(**{**SMALL, "graph_heads": [6, 6], "state_heads": 6, "corrective_heads": 2})
 
@@ -151,49 +149,8 @@ def test_fitgar_stream_equals_the_eager_pass(fitgar_frames):
             expected = model(batch)
             stream = FitGarStream(model, batch)
             got = stream(batch)
-            limited = stream.step(*[batch[k] for k in FRAME_INPUTS], rounds=48)
+            limited = stream.step(*[batch[k] for k in FRAME_INPUTS], rounds=GRAPH_ROUNDS)
         assert bool(limited["exact"]) and "exact" not in got
         for k in ("coarse", "verts", "detail_displacement"):  # one thread: PyG's sums, to the bit
             assert torch.equal(got[k], expected[k]) and torch.equal(limited[k], got[k]), k
         assert stream.matches(batch) and not stream.matches(collate_frames(items[:1] if n == 3 else items[:2]))
-
-
-# ---------------------------------------------------------------- on a GPU: graph replay against eager streaming
-
-@CUDA
-def test_swingar_graph_replay_equals_eager_streaming(data):  # noqa: F811
-    torch.manual_seed(0)
-    model = SwinGar.from_data(data, MANY_HEADS).eval()
-    graphed = BoundSwinGar(model, data.graphs[0]).to("cuda")
-    eager = BoundSwinGar(copy.deepcopy(model), data.graphs[0]).to("cuda")
-    eager.use_graphs = False
-    s = data.sequences[0].sequences[0]
-    root, joints = torch.from_numpy(s.root[None, :8]).cuda(), torch.from_numpy(s.joints[None, :8]).cuda()
-    with torch.no_grad():
-        a = b = None
-        for t in range(8):
-            out_a = graphed(root[:, t:t + 1], joints[:, t:t + 1], a)
-            out_b = eager(root[:, t:t + 1], joints[:, t:t + 1], b)
-            a, b = out_a["state"], out_b["state"]
-            torch.testing.assert_close(out_a["verts"], out_b["verts"], rtol=1e-4, atol=1e-5)
-            torch.testing.assert_close(a["gates"], b["gates"], rtol=1e-4, atol=1e-5)
-    captured = [g for g in graphed._graphs.values() if g is not None]
-    assert len(captured) == 1, "the streaming step was not captured"
-
-
-@CUDA
-def test_fitgar_graph_replay_equals_eager(fitgar_frames):
-    """Replay of the captured frame (as FitGar.forward streams on CUDA) equals the eager pass on the edge list."""
-    model, items = fitgar_frames
-    model = copy.deepcopy(model).to("cuda")
-    eager = copy.deepcopy(model)
-    eager.use_graphs = False
-    with torch.no_grad():
-        for n in (1, 2):
-            batches = [{k: v.cuda() for k, v in collate_frames(items[t:t + n]).items()} for t in range(3 - n + 1)]
-            for batch in batches:
-                expected = eager(batch)
-                got = model(batch)
-                assert model._stream._graph is not None, "the FitGar frame was not captured"
-                torch.testing.assert_close(got["verts"], expected["verts"], rtol=1e-4, atol=1e-5)
-                torch.testing.assert_close(got["coarse"], expected["coarse"], rtol=1e-4, atol=1e-5)

@@ -26,9 +26,10 @@ from loosefit.models.layers.gat_block import incoming_table
 
 #: The per-frame inputs of a collated batch (:func:`~loosefit.models.fitgar_data.collate_frames`), in order.
 FRAME_INPUTS = ("anchor", "body_normal", "body_rel", "garment_rel", "alpha", "shape", "pose", "joints")
-#: Matching rounds of the captured pooling (each takes every locally first edge). A 3.6k-vertex dress needed
-#: at most 20 with untrained weights (measured on the CPU); a frame that needs more is recomputed eagerly.
-GRAPH_ROUNDS = 48
+#: Matching rounds of the captured pooling (each takes every locally first edge). FitGar at the paper's sizes
+#: (untrained) on a 3,648-vertex dress needed 6 to 11 (three frames, two poolings each: 21,438 edges; measured on
+#: the CPU); a frame that needs more is recomputed eagerly.
+GRAPH_ROUNDS = 32
 
 
 class FitGarStream:
