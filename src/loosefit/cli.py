@@ -8,8 +8,8 @@ import logging
 import sys
 from pathlib import Path
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, int_at_least, joint_map_option, nonnegative_float, positive_float,
-                               writable)
+from loosefit.cli_args import (JOINT_MAP_FORMAT, int_at_least, joint_map_option, nonnegative_float, piece_choice,
+                               positive_float, writable)
 from loosefit.errors import InputError, LoosefitError
 
 
@@ -117,7 +117,8 @@ def cmd_garment_import(args):
     from loosefit.garment import import_garment
 
     writable(args.out, folder=False)
-    garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up, fit=True if args.fit else None)
+    garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up, fit=True if args.fit else None,
+                             piece=args.piece)
     garment.save(args.out)
     p = garment.params
     if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
@@ -422,6 +423,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--fit", action="store_true",
                     help="a garment made for another body: find the Anny shape it fits, drape it from there onto "
                          "this body with Blender cloth (done anyway when it has no plausible placement here)")
+    sp.add_argument("--piece", type=piece_choice, default=None, metavar="largest|N",
+                    help="keep one connected piece (1 is the largest); default: every piece, when each is attached")
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_garment_import)

@@ -46,6 +46,13 @@ def nonnegative_float(text: str) -> float:
     return _finite_float(text, True, "a number >= 0")
 
 
+def piece_choice(text: str):
+    """An argparse ``type=``: ``largest`` or a piece number >= 1 (1 is the largest piece)."""
+    if text == "largest":
+        return text
+    return int_at_least(1)(text)
+
+
 def writable(path, folder: bool | None = None) -> None:
     """Refuse an output that cannot be written before any work starts (``folder``: default, a path
     without a suffix or ending in ``/``)."""

@@ -105,7 +105,8 @@ class Search:
     settle_seconds: float = SETTLE_SECONDS
 
 
-def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = None, search: Search = Search()) -> ShapeFit:
+def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = None, search: Search = Search(),
+               check=None) -> ShapeFit:
     """The Anny shape the garment was made for (step 1 of the module docstring).
 
     Args:
@@ -115,6 +116,8 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
         path: the file, named in errors.
         up: the file's up axis, or ``None`` to detect it.
         search: the grid, steps and number of shapes scored.
+        check: called as ``check(placed (V, 3), landmarks)`` on the first shape with a placement; it raises to
+            refuse the garment whatever the shape (a piece hanging free).
 
     Raises:
         InputError: no shape of the coarse grid or the search gives a plausible placement.
@@ -144,6 +147,9 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
             except InputError as err:
                 refusals.append(f"{_short(values)}: {err.problem.split('; tried ')[-1][:200]}")
                 continue
+            if check is not None and not checked:
+                checked.append(True)
+                check(to_z_up(verts, p.up) + p.offset, lm)
             pts = to_z_up(verts[pick[unit]], p.up) + p.offset
             score = fit_score(lm.sdf.query(pts), pts[:, 2], SEARCH_BAND)[0] + GAP_WEIGHT * p.top_gap + PRIOR * distance
             if score < best[0]:
@@ -157,6 +163,7 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
     pick = {u: np.linspace(0, len(v) - 1, min(len(v), SEARCH_SAMPLES)).astype(int) for u, v in scaled.items()}
     hints: dict = {}
     best_seen = [None]
+    checked: list = []
     start = tuple(getattr(target, k) for k in SEARCH_KEYS)
     coarse = dict(search.coarse)
     grid = [dict(zip(coarse, combo)) for combo in itertools.product(*coarse.values())]
@@ -260,7 +267,7 @@ def inside_percent(verts: np.ndarray, sdf, depth: float = INSIDE_DEPTH) -> float
 
 
 def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = None, params=None,
-                search: Search = Search()):
+                search: Search = Search(), pieces: np.ndarray | None = None, check=None):
     """Steps 1-3 of the module docstring for a repaired garment.
 
     Args:
@@ -271,14 +278,21 @@ def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = No
         up: the file's up axis or ``None``.
         params: simulation parameters of the drape.
         search: how hard to look for the shape, and how long the drape is.
+        pieces: ``(V,)`` piece label of each vertex (each piece is pinned at its own top); one piece when ``None``.
+        check: called as ``check(placed (V, 3), landmarks of the found body)`` before the drape; it raises
+            to refuse the placement.
 
     Returns:
         ``(verts (V, 3) on the target body, fit (ShapeFit), placed (V, 3) on the found body, info dict)``;
         ``info`` holds the shape found, the drape's statistics and the penetration before and after.
     """
-    fit = find_shape(scaled, faces, body, path, up, search)
+    fit = find_shape(scaled, faces, body, path, up, search, check)
     placed = to_z_up(scaled[fit.unit], fit.placement.up) + fit.placement.offset
-    pinned = placed[:, 2] > placed[:, 2].max() - 0.03
+    from loosefit.garment.importer import top_pins
+
+    pinned = top_pins(placed, np.zeros(len(placed), np.int64) if pieces is None else pieces)
+    if check is not None:
+        check(placed, measure_body(body, fit.shape))
     target_sdf = measure_body(body).sdf
     verts, stats = drape(placed, faces, pinned, body, fit.shape, params=params, morph_seconds=search.morph_seconds,
                          settle_seconds=search.settle_seconds)

@@ -42,6 +42,7 @@ Up axis, attachment (waistband, strapless top, shoulders, straps) and placement:
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -51,13 +52,16 @@ from loosefit.errors import InputError
 from loosefit.garment.fitting import PUSH_MARGIN, push_out_bounded
 from loosefit.garment.garment import Garment
 from loosefit.garment.landmarks import measure_body
-from loosefit.garment.mesh_checks import boundary_loops, face_areas, face_components, mesh_report, unique_edges
+from loosefit.garment.mesh_checks import (boundary_loops, face_areas, face_components, mesh_report, unique_edges,
+                                          vertex_components)
 from loosefit.garment.obj_io import read_obj
-from loosefit.garment.placement import place, to_z_up
+from loosefit.garment.placement import MAX_TOP_GAP, place, to_z_up
 from loosefit.garment.seam_repair import slivers, split_nonmanifold, weld
 from loosefit.garment.templates import CLEARANCE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+#: Pieces under this share of the area are debris and dropped (a flap cut off by a split seam).
+PIECE_SHARE = 0.02
 #: Vertices closer than this fraction of the bounding-box diagonal are welded (0.17 mm on a 1.7 m dress).
 WELD = 1e-4
 #: Plausible garment sizes (largest bounding-box side), m: they pick the file's unit.
@@ -84,9 +88,13 @@ def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return verts, faces
 
 
-def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.ndarray, dict]:
+def repair(verts: np.ndarray, faces: np.ndarray, path, piece: str | int | None = None,
+           several: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """Validate and repair a triangle soup (see the module docstring). Returns the repaired
-    ``(verts, faces)`` and counts of what was repaired."""
+    ``(verts, faces)`` and counts of what was repaired.
+
+    ``piece``: ``"largest"`` or ``N`` (1 the largest) keeps that piece only; ``None`` keeps every piece of at
+    least :data:`PIECE_SHARE` of the area when ``several``, else refuses a file with more than one."""
     if len(verts) == 0 or len(faces) == 0:
         raise InputError("the mesh has no vertices or no faces", path)
     bad = ~np.isfinite(verts).all(1)
@@ -113,27 +121,34 @@ def repair(verts: np.ndarray, faces: np.ndarray, path) -> tuple[np.ndarray, np.n
     repairs.update(split)
     labels = face_components(faces)
     area = np.bincount(labels, weights=face_areas(verts, faces))
-    if len(area[area > 0]) > 1:
-        order = np.argsort(area)[::-1]
-        if area[order[1:]].sum() > 0.02 * area.sum():
-            raise InputError(
-                f"{np.count_nonzero(area)} separate pieces; the second largest has "
-                f"{100 * area[order[1]] / area.sum():.0f}% of the area (join them or keep one)"
-                + (f", after splitting {split['nonmanifold_edges']} non-manifold edges" if split["nonmanifold_edges"] else ""),
-                path,
-            )
-        repairs["dropped_pieces"] = int(np.count_nonzero(area) - 1)
-        faces = faces[labels == order[0]]
+    order = [int(k) for k in np.argsort(area)[::-1] if area[k] > 0]
+    big = [k for k in order if area[k] > PIECE_SHARE * area.sum()]
+    if piece is not None:
+        index = 1 if piece == "largest" else int(piece)
+        if not 1 <= index <= len(big):
+            raise InputError(f"no piece {piece}: the file has {len(big)} piece(s) of at least "
+                             f"{100 * PIECE_SHARE:.0f}% of the area (numbered from the largest, 1)", path)
+        keep = [big[index - 1]]
+    elif len(big) > 1 and not several:
+        raise InputError(_pieces_problem(area, order, split), path)
+    else:
+        keep = big
+    repairs["dropped_pieces"] = int(len(order) - len(keep))
+    faces = faces[np.isin(labels, keep)]
     used = np.zeros(len(verts), bool)
     used[faces.reshape(-1)] = True
     repairs["unreferenced_vertices"] = int((~used).sum())
     remap = np.cumsum(used) - 1
     verts, faces = verts[used], remap[faces]
     faces, flipped = _orient(faces, path)
-    if flipped > len(faces) / 2:  # keep the orientation most of the file's faces have
-        faces, flipped = faces[:, ::-1].copy(), len(faces) - flipped
     repairs["reoriented_faces"] = flipped
     return verts, faces, repairs
+
+
+def _pieces_problem(area: np.ndarray, order: list[int], split: dict) -> str:
+    return (f"{len(order)} separate pieces; the second largest has {100 * area[order[1]] / area.sum():.0f}% of the "
+            f"area (join them, or keep one with --piece largest|N)"
+            + (f", after splitting {split['nonmanifold_edges']} non-manifold edges" if split["nonmanifold_edges"] else ""))
 
 
 def check_wearable(verts: np.ndarray, faces: np.ndarray, path) -> None:
@@ -172,10 +187,13 @@ def outward_flux(verts: np.ndarray, faces: np.ndarray) -> float:
 def check_outward(verts: np.ndarray, faces: np.ndarray, path) -> None:
     """Refuse a garment whose normals point inwards (:func:`outward_flux` negative): inside out, or its
     faces wound the other way. Its faces are consistently oriented already (:func:`repair`)."""
-    if outward_flux(verts, faces) < 0:
-        raise InputError("the garment is inside out: its faces' normals point inwards, towards the body; wind "
-                         "the faces the other way (counter-clockwise seen from outside) or turn it right side out",
-                         path)
+    labels = face_components(faces)
+    for k in np.unique(labels):
+        if outward_flux(verts, faces[labels == k]) < 0:
+            which = "" if labels.max() == 0 else f" (piece of {int((labels == k).sum())} faces)"
+            raise InputError(f"the garment is inside out{which}: its faces' normals point inwards, towards the body; "
+                             "wind the faces the other way (counter-clockwise seen from outside) or turn it right side "
+                             "out", path)
 
 
 def _orient(faces: np.ndarray, path) -> tuple[np.ndarray, int]:
@@ -194,17 +212,23 @@ def _orient(faces: np.ndarray, path) -> tuple[np.ndarray, int]:
         neighbours[f1].append((f2, same))
         neighbours[f2].append((f1, same))
     flip = np.full(nf, -1)
-    flip[0] = 0
-    stack = [0]
-    while stack:
-        f = stack.pop()
-        for g, same in neighbours[f]:
-            want = flip[f] ^ int(same)
-            if flip[g] < 0:
-                flip[g] = want
-                stack.append(g)
-            elif flip[g] != want:
-                raise InputError("the surface is not orientable (a Moebius-like strip)", path)
+    for seed in range(nf):  # one walk per piece; each keeps the orientation most of its faces have
+        if flip[seed] >= 0:
+            continue
+        flip[seed] = 0
+        stack, piece = [seed], [seed]
+        while stack:
+            f = stack.pop()
+            for g, same in neighbours[f]:
+                want = flip[f] ^ int(same)
+                if flip[g] < 0:
+                    flip[g] = want
+                    stack.append(g)
+                    piece.append(g)
+                elif flip[g] != want:
+                    raise InputError("the surface is not orientable (a Moebius-like strip)", path)
+        if 2 * flip[piece].sum() > len(piece):
+            flip[piece] ^= 1
     out = faces.copy()
     out[flip == 1] = out[flip == 1][:, ::-1]
     return out, int((flip == 1).sum())
@@ -237,7 +261,7 @@ def _length(metres: float) -> str:
 
 def import_garment(
     path: str | Path, body: BodyModel, unit: str | None = None, up: str | None = None, clearance: float = CLEARANCE,
-    fit: bool | None = False, fit_params=None, fit_search=None,
+    fit: bool | None = False, fit_params=None, fit_search=None, piece: str | int | None = None,
 ) -> Garment:
     """Import a garment mesh (.obj or .ply) and fit it to ``body``'s rest pose.
 
@@ -252,6 +276,9 @@ def import_garment(
             ``None``: only when the direct placement is refused; ``False``: never.
         fit_params: simulation parameters of the fit's drape (defaults when ``None``).
         fit_search: a :class:`loosefit.garment.body_fit.Search` (defaults when ``None``).
+        piece: ``"largest"`` or ``N`` (1 is the largest): keep that connected piece only. ``None``: keep every
+            piece as one garment when each is attached to the body (:func:`check_attached`: a crop top and a
+            skirt), else refuse.
 
     Returns:
         A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, the
@@ -274,7 +301,18 @@ def import_garment(
         verts, faces = read_ply(path)
     else:
         raise InputError(f"unsupported garment format {suffix!r}; use .obj or .ply", path)
-    verts, faces, repairs = repair(verts, faces, path)
+    verts, faces, repairs = repair(verts, faces, path, piece, several=True)
+    pieces = vertex_components(len(verts), faces)
+    if pieces.max() > 0:  # several pieces are one garment only where each could be worn
+        labels = pieces[faces[:, 0]]
+        area = np.bincount(labels, weights=face_areas(verts, faces))
+        for k in range(len(area)):
+            try:
+                check_wearable(verts, faces[labels == k], path)
+            except InputError as err:
+                raise InputError(f"{_pieces_problem(area, list(np.argsort(area)[::-1]), repairs)}; a piece with "
+                                 f"{100 * area[k] / area.sum():.0f}% of the area is no garment by itself: "
+                                 f"{err.problem}", path) from None
     check_wearable(verts, faces, path)
     check_outward(verts, faces, path)
     units = _units(verts, unit, path)
@@ -285,20 +323,23 @@ def import_garment(
     if fit is not True:
         try:
             placement, unit = _place(verts, faces, units, lm, path, up)
+            check_attached(to_z_up(verts * UNITS[unit], placement.up) + placement.offset, faces, pieces, lm, path)
             pushed_verts, moved = _push(to_z_up(verts * UNITS[unit], placement.up) + placement.offset, faces, lm,
                                         clearance, path, "placed on this body")
         except InputError as err:
-            if fit is False or not _has_shapes(body):
+            if fit is False or not _has_shapes(body) or DETACHED in err.problem.split(":")[0]:
                 raise
             refused = err
     if fit is True or refused is not None:
         from loosefit.garment.body_fit import Search, fit_to_body
 
         try:
-            fitted, shape_fit, _, info = fit_to_body({u: verts * UNITS[u] for u in units}, faces, body, path, up,
-                                                     params=fit_params, search=fit_search or Search())
+            fitted, shape_fit, _, info = fit_to_body(
+                {u: verts * UNITS[u] for u in units}, faces, body, path, up, params=fit_params,
+                search=fit_search or Search(), pieces=pieces,
+                check=lambda placed, lm_found: check_attached(placed, faces, pieces, lm_found, path))
         except InputError as err:
-            if refused is None:
+            if refused is None or DETACHED in err.problem.split(":")[0]:
                 raise
             raise InputError(f"{refused.problem}; fitted as a garment made for another body: {err.problem}",
                              path) from None
@@ -311,10 +352,11 @@ def import_garment(
               "moved_percent": round(100.0 * float((moved > 0).mean()), 2),
               "over_5mm_percent": round(100.0 * float((moved > 0.005).mean()), 2)}
     report = mesh_report(verts, faces)
-    if not report.ok:
+    if report.num_components != pieces.max() + 1 or not dataclasses.replace(report, num_components=1).ok:
         raise InputError(f"mesh is still broken after repair: {report}", path)
-    pinned = verts[:, 2] > verts[:, 2].max() - 0.03
-    params = {"source": str(path), "unit": unit, **placement.as_dict(), "repairs": repairs, "pushed_out": pushed}
+    pinned = top_pins(verts, pieces)
+    params = {"source": str(path), "unit": unit, **placement.as_dict(), "repairs": repairs, "pushed_out": pushed,
+              "pieces": int(pieces.max() + 1)}
     if fitted is not None:
         from loosefit.garment.body_fit import inside_percent
 
@@ -333,6 +375,38 @@ def max_push(clearance: float) -> float:
     same again for an edge midpoint deeper than its ends on the curved body: a quarter more. 20 mm at the
     5 mm clearance. Deeper cloth is not a dent but a garment cut for another body."""
     return 1.25 * (TOLERATED_DEPTH + clearance + PUSH_MARGIN)
+
+
+#: The start of the refusal of a piece that hangs free (not a matter of the body's shape: never fitted).
+DETACHED = "separate pieces, not all attached"
+
+
+def top_pins(verts: np.ndarray, pieces: np.ndarray, depth: float = 0.03) -> np.ndarray:
+    """``(V,)`` bool: the vertices within ``depth`` m of their own piece's top (``pieces (V,)`` labels)."""
+    tops = np.full(pieces.max() + 1, -np.inf)
+    np.maximum.at(tops, pieces, verts[:, 2])
+    return verts[:, 2] > tops[pieces] - depth
+
+
+def check_attached(verts: np.ndarray, faces: np.ndarray, pieces: np.ndarray, lm, path) -> None:
+    """Refuse a garment of several pieces (``pieces (V,)`` labels) placed at ``verts (V, 3)`` where a piece
+    hangs free: its top below the lowest waistband (18 cm under the waist), or its top 4 cm more than
+    :data:`~loosefit.garment.placement.MAX_TOP_GAP` from the body on average. Each piece is pinned at its
+    top, so a piece that is not attached there would hang from nothing."""
+    count = int(pieces.max() + 1)
+    if count == 1:
+        return
+    area = np.bincount(pieces[faces[:, 0]], weights=face_areas(verts, faces), minlength=count)
+    for k in np.argsort(area)[::-1]:
+        mine = verts[pieces == k]
+        top = mine[:, 2].max()
+        gap = float(np.abs(lm.sdf.query(mine[mine[:, 2] > top - 0.04])).mean())
+        if top < lm.waist_z - 0.18 or gap > MAX_TOP_GAP:
+            raise InputError(
+                f"{count} {DETACHED}: a piece with {100 * area[k] / area.sum():.0f}% of the area has its top at "
+                f"{top:.2f} m, {100 * gap:.1f} cm from the body (a piece hangs from its top: at most "
+                f"{100 * MAX_TOP_GAP:.0f} cm away, and no lower than {lm.waist_z - 0.18:.2f} m); join them, or keep "
+                f"one with --piece largest|N", path)
 
 
 def _push(verts, faces, lm, clearance: float, path, where: str):
