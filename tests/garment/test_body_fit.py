@@ -104,3 +104,34 @@ def test_a_deep_dent_is_refused(tmp_path, body, skirt_m):
     path = write_obj(tmp_path / "dent.obj", v, faces)
     with pytest.raises(InputError, match=r"dent.obj: placed on this body, \d+ vertices are too deep inside the body.*--fit"):
         import_garment(path, body)
+
+
+@pytest.fixture(scope="module")
+def heavy_tops():
+    """Garments with each kind of top, cut for a heavy, short Anny (the ``heavy`` shape of the garments
+    plan): ``attachment -> (body, verts, faces)``."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment.level_cut import cut_mesh
+
+    heavy = AnnyBody(AnnyShape(height=0.35, weight=0.85, gender=0.6))
+    lm = measure_body(heavy)
+    straps = make_garment("dress", heavy, seed=2, edge_length=0.05, sleeve_length=0.0)
+    v, f, _ = cut_mesh(straps.verts, straps.faces, straps.verts[:, 2] - (lm.armpit_z - 0.05))
+    sleeves = make_garment("dress", heavy, seed=4, edge_length=0.05, sleeve_length=0.4)
+    skirt = make_garment("skirt", heavy, seed=3, edge_length=0.05)
+    return heavy, {"waistband": (skirt.verts, skirt.faces), "shoulders": (sleeves.verts, sleeves.faces),
+                   "straps": (straps.verts, straps.faces), "strapless": (v, f)}
+
+
+@pytest.mark.parametrize("attachment", ["waistband", "strapless", "straps", "shoulders"])
+def test_attachment_of_garments_for_another_body(heavy_tops, attachment):
+    """Placed on the body they were cut for (as the fit does once it found it), each kind of top is read
+    as its attachment and lands where it was made."""
+    from loosefit.garment.placement import place
+
+    heavy, tops = heavy_tops
+    verts, faces = tops[attachment]
+    p = place(np.asarray(verts, np.float64) + [0.1, -0.2, 0.3], faces, measure_body(heavy), "g.obj", "z")
+    assert p.attachment == attachment
+    np.testing.assert_allclose(p.offset, [-0.1, 0.2, -0.3], atol=0.02)

@@ -63,3 +63,18 @@ def test_a_piece_hanging_free_is_refused_naming_piece(tmp_path, body, two_piece)
     with pytest.raises(InputError, match=r"dropped.obj: 2 separate pieces, not all attached: a piece with \d+% of "
                                          r"the area has its top at 0\.[0-9]+ m.*--piece largest\|N"):
         import_garment(path, body, fit=None)  # refused on the first body shape that places it
+
+
+def test_cli_piece_option(tmp_path, body, two_piece, capsys):
+    from loosefit.cli import main
+
+    verts, faces, (top_v, _), (skirt_v, _) = two_piece
+    path = write_obj(tmp_path / "two.obj", verts, faces)
+    with pytest.raises(SystemExit) as exit_:  # a usage error: pieces are numbered from 1
+        main(["garment", "import", str(path), "--piece", "0", "--out", str(tmp_path / "g.obj")])
+    assert exit_.value.code == 2 and "--piece" in capsys.readouterr().err
+    assert main(["garment", "import", str(path), "--piece", "2", "--out", str(tmp_path / "g.obj")]) == 0
+    assert "wrote" in capsys.readouterr().out
+    from loosefit.garment import Garment
+
+    assert Garment.load(tmp_path / "g.obj").num_verts in (len(top_v), len(skirt_v))

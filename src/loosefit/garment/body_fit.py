@@ -5,14 +5,22 @@ A garment cut for a slimmer body sits inside this one (the direct placement of
 bring it onto the body without changing its cut:
 
 1. **The body it was made for** (:func:`find_shape`): the Anny shape (keys :data:`SEARCH_KEYS`; age and
-   proportions stay the target's) on which the garment's placement scores best. The objective of a shape is
-   the placement's :func:`~loosefit.garment.placement.fit_score` (gap unevenness over the attachment band
-   plus the penalties for cloth inside the body) plus the mean gap at the garment's top 4 cm (a garment
-   sits close to the body it was made for; on a slimmer body it is inside, on a larger one the gap grows),
-   plus :data:`PRIOR` metres per unit of shape distance from the target (where several shapes fit equally
-   well, as the height of a body under a skirt's waistband, the nearest one wins and the drape is
-   shortest). Search: a coarse grid (:data:`COARSE`, 9 shapes) then a coordinate search on every key
-   with steps 0.15, 0.08 and 0.04, each shape scored by the placement on :data:`SEARCH_SAMPLES` points.
+   proportions stay the target's) that minimises interpenetration plus gap at the garment's attachment. Each
+   shape is scored by the existing placement (:func:`~loosefit.garment.placement.place` on
+   :data:`SEARCH_SAMPLES` points): :func:`~loosefit.garment.placement.fit_score` over the garment's top
+   :data:`SEARCH_BAND` (how uneven the gap is there, plus the penalties for cloth more than 3 mm inside the
+   body), plus :data:`GAP_WEIGHT` times the mean gap at the top 4 cm, plus :data:`PRIOR` metres per unit of
+   shape distance from the target. The evenness is what tells the body apart: a strapless top cut for a thin
+   Anny (height 0.45, weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away
+   in a key. The mean gap alone would prefer the largest body the garment does not cut into (2 mm of gap
+   where the garment was made with 14 mm of ease), hence its small weight. The prior breaks ties towards the
+   target (the height of a body under a skirt's waistband is not seen), so that the drape is short. Search:
+   a coarse grid (:data:`COARSE`, 9 shapes, plus the target) scored with the full height window, then a
+   coordinate search on every key with steps :data:`STEPS`, each shape's height window narrowed to 5 cm
+   around where the best shape's attachment landmark (waist, armpits or neck) puts the top; at most
+   :data:`MAX_EVALUATIONS` shapes. Several shapes often fit about as well (bodies differ in more ways than a
+   garment's cut shows), so the shape found is a body the garment fits, not always the one it was made on
+   (``benchmarks/garment_fit.py`` reports both).
 2. **Placed rigidly** on that body (the placement's axis swap and offset; the unit's scale).
 3. **Draped** (:func:`drape`): Blender cloth on the body's collider while the body's vertices move linearly
    from the found shape to the target over :data:`MORPH_SECONDS`, then hold for :data:`SETTLE_SECONDS`.
