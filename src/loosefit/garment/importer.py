@@ -6,13 +6,18 @@ What is repaired (and counted in ``params["repairs"]``): duplicated vertices (we
 zero area), sliver faces (height under 1e-3 of the longest edge), duplicate faces, non-manifold
 edges where three or more panels meet and pinched vertices (split into manifold fans,
 :mod:`loosefit.garment.seam_repair`), unreferenced vertices, inconsistent face orientation
-(re-oriented), small loose pieces (under 2 % of the area: dropped, such as a flap cut off by a
-split seam).
+(re-oriented to the orientation most of each piece's faces have), small loose pieces (under 2 % of the
+area: dropped, such as a flap cut off by a split seam).
+Several pieces (a crop top and a skirt): ``piece`` (``--piece largest|N``) keeps one; without it they are
+one garment when each piece could be worn by itself (:func:`check_wearable`) and is attached once placed
+(:func:`check_attached`: its top no lower than the lowest waistband, at most 6 cm from the body), each
+pinned at its own top.
 What is an error (:class:`~loosefit.errors.InputError` naming the file): unreadable lines, face
 indices out of range, NaN or infinite coordinates, an empty mesh, a non-orientable surface,
-several large pieces, a mesh too small to be worn (:func:`check_wearable`: fewer than two openings,
-or a largest opening of fewer than 8 vertices), normals pointing inwards, no plausible placement on the body,
-a push out of the body over :func:`max_push`.
+several pieces where one is not wearable or hangs free (the message names ``--piece``), a mesh too small
+to be worn (:func:`check_wearable`: fewer than two openings, or a largest opening of fewer than 8
+vertices), normals pointing inwards, no plausible placement on the body, a push out of the body over
+:func:`max_push`.
 
 Units: each of metres, centimetres and millimetres that makes the garment's largest side
 between 0.15 and 2.5 m is tried (at most two of them can), and the better placement wins; a unit that
