@@ -28,8 +28,8 @@ MANY_HEADS = SwinGarConfig(**{**SMALL, "graph_heads": [6, 6], "state_heads": 6, 
 
 @pytest.mark.parametrize("heads, norm, centred", [(6, "node", True), (8, "graph", False), (5, "node", False)])
 def test_project_first_heads_are_the_layer_by_hand(heads, norm, centred):
-    """Concatenated heads past PROJECT_FIRST_HEADS project first: the same layer as written out by hand
-    (float64) and as the stacked product computes it."""
+    """Concatenated heads project first (on the CPU always, elsewhere past PROJECT_FIRST_HEADS): the same layer as
+    written out by hand (float64), as the stacked product computes it and as the slot-by-slot sum of CUDA does."""
     assert heads > gat_ln.PROJECT_FIRST_HEADS
     torch.manual_seed(0)
     layer = GATLN(IN, 2 * OUT + 1, heads=heads, alpha=2.0, norm=norm, centred=centred, concat=True).double()
@@ -39,12 +39,32 @@ def test_project_first_heads_are_the_layer_by_hand(heads, norm, centred):
     x = torch.randn(3, V, IN, generator=torch.Generator().manual_seed(1), dtype=torch.float64) * 2.0 + 1.0
     got = layer(x, table, valid)
     torch.testing.assert_close(got[1], by_hand(layer, x[1]), rtol=1e-10, atol=1e-12)
-    before, gat_ln.PROJECT_FIRST_HEADS = gat_ln.PROJECT_FIRST_HEADS, 10 ** 6
+    before = gat_ln.PROJECT_FIRST_HEADS, gat_ln.CPU_EMBEDDING_BAG
     try:
+        gat_ln.CPU_EMBEDDING_BAG = False  # the slot-by-slot sum of CUDA
+        by_slot = layer(x, table, valid)
+        gat_ln.PROJECT_FIRST_HEADS = 10 ** 6  # the stacked product, as the layer was first written
         stacked = layer(x, table, valid)
     finally:
-        gat_ln.PROJECT_FIRST_HEADS = before
+        gat_ln.PROJECT_FIRST_HEADS, gat_ln.CPU_EMBEDDING_BAG = before
     torch.testing.assert_close(got, stacked, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(got, by_slot, rtol=1e-12, atol=1e-12)
+
+
+def test_neighbour_sums_and_their_gradients_agree():
+    """embedding_bag (CPU) and slot by slot (CUDA) against the gathered sum written out, values and gradients."""
+    g = torch.Generator().manual_seed(0)
+    table = torch.randint(0, 30, (30, 5), generator=g)
+    y = torch.randn(2, 30, 3, 4, generator=g, dtype=torch.float64, requires_grad=True)
+    P = torch.rand(2, 30, 5, 3, generator=g, dtype=torch.float64, requires_grad=True)
+    written = (P[..., None] * y[:, table]).sum(2)  # (B, V, D, H, C) summed over the slots
+    up = torch.randn_like(written)
+    expected = torch.autograd.grad(written, (y, P), up)
+    for fn in (gat_ln.neighbour_sum, gat_ln.neighbour_sum_by_slot):
+        out = fn(y, table, P)
+        torch.testing.assert_close(out, written, rtol=1e-12, atol=1e-12)
+        for got, want in zip(torch.autograd.grad(out, (y, P), up), expected):
+            torch.testing.assert_close(got, want, rtol=1e-12, atol=1e-12)
 
 
 def test_swingar_stream_step_keeps_the_state_in_place(data):  # noqa: F811

@@ -74,8 +74,14 @@ def gat_conv_table(conv: GATConv, x: torch.Tensor, table: torch.Tensor, valid: t
     P = e / (total + 1e-16)[:, None]  # PyG's softmax, its guard against an empty sum included
     columns = table.T.contiguous()
     out = h.new_zeros(N, H, C)
-    for d in range(D):  # slot by slot: no (N, D, H, C) tensor is written
-        out = out + P[:, d, :, None] * h.index_select(0, columns[d])
+    if torch.is_grad_enabled() and (x.requires_grad or h.requires_grad):
+        for d in range(D):  # slot by slot: no (N, D, H, C) tensor is written
+            out = out + P[:, d, :, None] * h.index_select(0, columns[d])
+    else:  # the same sums into buffers allocated once (large temporaries cost page faults on every call)
+        row, product = torch.empty_like(out), torch.empty_like(out)
+        for d in range(D):
+            torch.index_select(h, 0, columns[d], out=row)
+            out.add_(torch.mul(P[:, d, :, None], row, out=product))
     out = out.view(N, H * C)
     return out if conv.bias is None else out + conv.bias
 
