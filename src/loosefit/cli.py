@@ -129,7 +129,8 @@ def cmd_garment_import(args):
     repaired = {k: v for k, v in p["repairs"].items() if v}
     print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces; {p['unit']}, {p['up']} up, "
           f"attachment {p['attachment']}, top at {p['top_z']:.3f} m (moved by {p['offset']} m); pushed out of the body "
-          f"by {p['pushed_out']['max_mm']:g} mm at most" + (f"; repaired {repaired}" if repaired else ""))
+          f"by {p['pushed_out']['max_mm']:g} mm at most (mean {p['pushed_out']['mean_mm']:g} mm over "
+          f"{p['pushed_out']['moved_percent']:g}% of vertices)" + (f"; repaired {repaired}" if repaired else ""))
 
 
 def cmd_info(args):
