@@ -56,9 +56,9 @@ else
   SIZE=tiny; STEPS=${STEPS:-24}; PACK_SECONDS=${PACK_SECONDS:-5}
 fi
 # the paper's widths against the CPU preset's, the same seconds each, from the packs (benchmarks/graph_pack.py)
-[ -f "$G/fitgar-pack.pt" ] && step fitgar-pack $((4 * PACK_SECONDS + 40)) $PY benchmarks/graph_pack.py train \
+[ -z "${NO_PACKS:-}" ] && [ -f "$G/fitgar-pack.pt" ] && step fitgar-pack $((4 * PACK_SECONDS + 40)) $PY benchmarks/graph_pack.py train \
   --pack "$G/fitgar-pack.pt" --configs fitgar.yaml,fitgar-cpu.yaml --seconds "$PACK_SECONDS" --out "$OUT/graph-pack-fitgar.json"
-[ -f "$G/swingar-pack.pt" ] && step swingar-pack $((4 * PACK_SECONDS + 40)) $PY benchmarks/graph_pack.py train \
+[ -z "${NO_PACKS:-}" ] && [ -f "$G/swingar-pack.pt" ] && step swingar-pack $((4 * PACK_SECONDS + 40)) $PY benchmarks/graph_pack.py train \
   --pack "$G/swingar-pack.pt" --configs swingar.yaml,swingar-cpu.yaml --seconds "$PACK_SECONDS" \
   --out "$OUT/graph-pack-swingar.json"
 [ -d "$STORE" ] && step gpu-smoke 300 $PY benchmarks/gpu_smoke.py --store "$STORE" --device "$DEVICE" --size $SIZE \

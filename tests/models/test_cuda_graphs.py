@@ -21,8 +21,9 @@ pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUD
 def test_swingar_cuda_graph_replay_equals_eager_streaming(data):  # noqa: F811
     torch.manual_seed(0)
     model = SwinGar.from_data(data, MANY_HEADS).eval()
+    twin = copy.deepcopy(model)  # before .to(cuda) moves ``model`` with the first binding
     graphed = BoundSwinGar(model, data.graphs[0]).to("cuda")
-    eager = BoundSwinGar(copy.deepcopy(model), data.graphs[0]).to("cuda")
+    eager = BoundSwinGar(twin, data.graphs[0]).to("cuda")
     eager.use_graphs = False
     s = data.sequences[0].sequences[0]
     root, joints = torch.from_numpy(s.root[None, :8]).cuda(), torch.from_numpy(s.joints[None, :8]).cuda()

@@ -142,7 +142,9 @@ def pooled_table(cluster: torch.Tensor, edge_index: torch.Tensor, num_nodes: int
     table = torch.cat([table, table.new_zeros(1)]).scatter_(0, place, src)[:-1].view(N, width)
     valid = torch.zeros(N * width + 1, dtype=torch.bool, device=device).scatter_(0, place, keep)[:-1]
     nodes = torch.arange(N, device=device)
-    valid[nodes * width + count.clamp_max(width - 1)] = True  # the cluster itself, last (the table holds it there)
+    # the cluster itself, last (the table holds it there); index_fill_ takes the value as a kernel argument, where
+    # ``valid[...] = True`` copies a host scalar to the device, which a CUDA graph capture refuses
+    valid.index_fill_(0, nodes * width + count.clamp_max(width - 1), True)
     return table, valid.view(N, width), fits
 
 
