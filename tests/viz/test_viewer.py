@@ -177,9 +177,6 @@ def test_bad_inputs_name_the_file(known, tmp_path):
     with pytest.raises(InputError, match=r"120 vertices but the simulation \(.*sim.npz, the first input\) has 144") as err:
         build_scene([str(known.sim_path), str(tmp_path / "other.npz")])
     assert err.value.path == tmp_path / "other.npz"
-    MeshSequence(known.pred[:4], known.faces).save(tmp_path / "short.npz")
-    with pytest.raises(InputError, match="4 frames but the simulation .* has 6"):
-        build_scene([str(known.sim_path), str(tmp_path / "short.npz")])
     with pytest.raises(InputError, match="DATA.zarr:SEQUENCE or RUN:MOTION"):
         build_scene([str(tmp_path)])
 
@@ -380,3 +377,53 @@ def test_dataset_sequence_and_run_inputs(tmp_path, body):
         build_scene([f"{tmp_path / 'run'}:{tmp_path / 'walk.npz'}"], body=body)
     with pytest.raises(InputError, match="no such motion file"):
         build_scene([f"{tmp_path / 'run'}:{tmp_path / 'missing.npz'}"], body=body)
+
+
+def test_inputs_of_other_lengths_play_their_own_frames(browser, known, tmp_path, capsys):
+    """A prediction 2 frames shorter and one 2 frames longer than the 6-frame simulation: each plays its own
+    frames and the shorter ones hold their last; errors, RMSE and the heat map only where both exist."""
+    long_pred = np.concatenate([known.pred, known.pred[-1:] + [[0.0, 0.0, 0.01]], known.pred[-1:] + [[0.0, 0.0, 0.02]]])
+    body = np.concatenate([known.body, known.body[-2:]])
+    extra = {"body_verts": body, "body_faces": known.body_faces}
+    MeshSequence(known.pred[:4], known.faces, 30.0, {"body_verts": known.body[:4], "body_faces": known.body_faces}
+                 ).save(tmp_path / "short.npz")
+    MeshSequence(long_pred.astype(np.float32), known.faces, 30.0, extra).save(tmp_path / "long.npz")
+    inputs = [str(known.sim_path), str(tmp_path / "short.npz"), str(tmp_path / "long.npz")]
+    scene = build_scene(inputs)
+    sim, short, long = scene.panels
+    assert scene.num_frames == T + 2
+    np.testing.assert_allclose(short.garment.errors, known.errors_mm[:4], atol=2e-3)
+    np.testing.assert_allclose(short.metrics["rmse_mm"], known.rmse_mm[:4], atol=2e-3)
+    np.testing.assert_allclose(long.garment.errors, known.errors_mm, atol=2e-3)
+    np.testing.assert_allclose(long.metrics["rmse_mm"], known.rmse_mm, atol=2e-3)
+    assert len(long.metrics["collision_pct"]) == T + 2 and len(short.metrics["collision_pct"]) == 4
+    np.testing.assert_allclose(long.metrics["collision_pct"][:T], known.pred_collision)
+    assert any("4 frames, the simulation" in w and "first 4 frames" in w for w in short.warnings)
+    assert any("8 frames, the simulation" in w and "first 6 frames" in w for w in long.warnings)
+    with ViewerServer(scene, port=0) as server:
+        page, errors = open_page(browser, server.url)
+        try:
+            assert page.evaluate("loosefitViewer.numFrames") == T + 2
+            page.evaluate("loosefitViewer.setFrame(3)")  # every input has frame 3: heat maps on both
+            np.testing.assert_array_equal(positions(page, 1, 1), known.pred[3])
+            assert page.evaluate("loosefitViewer.errorAt(1, 1, 0)") == pytest.approx(known.errors_mm[3, 0], abs=2e-3)
+            assert page.evaluate("loosefitViewer.vertexColor(2, 1, 0)") is not None
+            page.evaluate("loosefitViewer.setFrame(5)")  # the short one holds its frame 3, without an error
+            np.testing.assert_array_equal(positions(page, 1, 1), known.pred[3])
+            np.testing.assert_array_equal(positions(page, 1, 0), known.body[3])
+            assert page.evaluate("loosefitViewer.errorAt(1, 1, 0)") is None
+            assert page.evaluate("loosefitViewer.vertexColor(1, 1, 0)") is None
+            assert page.evaluate("loosefitViewer.errorAt(2, 1, 0)") == pytest.approx(known.errors_mm[5, 0], abs=2e-3)
+            page.evaluate(f"loosefitViewer.setFrame({T + 1})")  # past the simulation: it holds its last frame
+            np.testing.assert_array_equal(positions(page, 0, 1), known.sim[T - 1])
+            np.testing.assert_array_equal(positions(page, 2, 1), long_pred[T + 1].astype(np.float32))
+            assert page.evaluate("loosefitViewer.errorAt(2, 1, 0)") is None
+            assert page.evaluate("loosefitViewer.vertexColor(2, 1, 0)") is None
+            data = page.evaluate("loosefitViewer.plotData()")
+            assert len(data[0]) == T + 2
+            assert errors == []
+        finally:
+            page.close()
+    # The CLI prints the difference as a warning and exports the page.
+    assert main(["view", *inputs, "--export", str(tmp_path / "page"), "--no-collisions"]) == 0
+    assert "4 frames, the simulation" in capsys.readouterr().err

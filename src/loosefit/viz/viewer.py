@@ -85,6 +85,8 @@ def pack_scene(scene: ViewerScene) -> tuple[dict, bytes]:
                 "verts": add(t.verts, "float32"),
                 "faces": add(t.faces, "uint32"),
                 "errors": None if t.errors is None else add(t.errors, "float32"),
+                # frames with an error (the reference's too): the page shows the heat map only there
+                "errorFrames": 0 if t.errors is None else int(t.errors.shape[0]),
             })
         metrics = {k: [None if not np.isfinite(x) else float(x) for x in v] for k, v in panel.metrics.items()}
         panels.append({"title": panel.title, "source": panel.source, "tracks": tracks, "metrics": metrics})

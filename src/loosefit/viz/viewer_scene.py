@@ -10,10 +10,13 @@ Inputs (one panel each, side by side, in the order given):
   with the body posed along the motion.
 
 The first input is the reference (the simulation). Every later input is a prediction of the same garment:
-it must have the reference's garment vertex count and frame count. For a prediction the viewer shows the
-per-vertex error ``e_ti = 1000 * ||pred_ti - ref_ti||`` (mm) as a heat map and its per-frame RMSE
-``sqrt(mean_i e_ti^2)`` (mm, :mod:`loosefit.metrics.errors`); for every panel with a body, the per-frame
-collision ratio (% of garment vertices inside the body by more than 1 mm, :mod:`loosefit.metrics.collision`).
+it must have the reference's garment vertex count. Each input plays for its own length (a run animated on a
+motion longer or shorter than the simulated sequence): the page plays the longest, and a shorter input holds
+its last frame. For a prediction the viewer shows the per-vertex error ``e_ti = 1000 * ||pred_ti - ref_ti||``
+(mm) as a heat map and its per-frame RMSE ``sqrt(mean_i e_ti^2)`` (mm, :mod:`loosefit.metrics.errors`) over the
+frames both have (``t < min(T_ref, T_pred)``; past them the garment takes its plain colour); for every panel
+with a body, the per-frame collision ratio (% of garment vertices inside the body by more than 1 mm,
+:mod:`loosefit.metrics.collision`) over its own frames.
 """
 
 from __future__ import annotations
@@ -40,8 +43,8 @@ DEFAULT_COLLISION_FRAMES = 100
 @dataclass
 class ViewerTrack:
     """One mesh sequence of a panel: ``verts (T, V, 3)`` float32 metres, ``faces (F, 3)`` int64;
-    ``errors (T, V)`` float32 mm against the reference (predicted garments only); ``role`` is ``"body"`` or
-    ``"garment"``."""
+    ``errors (Te, V)`` float32 mm against the reference (predicted garments only) at the first ``Te <= T``
+    frames, those the reference has too; ``role`` is ``"body"`` or ``"garment"``."""
 
     role: str
     verts: np.ndarray
@@ -53,8 +56,9 @@ class ViewerTrack:
 @dataclass
 class ViewerPanel:
     """One input: its title, the source it came from, its tracks (body first), its per-frame metrics
-    (``{"rmse_mm": (T,), "collision_pct": (T,)}``, each present only when defined) and warnings about it
-    (a run's motion outside the run's training range: :mod:`loosefit.motion_range`)."""
+    (``{"rmse_mm": (Te,), "collision_pct": (T,)}``, each present only when defined; ``Te`` the frames both the
+    prediction and the reference have) and warnings about it (its length differs from the reference's;
+    a run's motion outside the run's training range: :mod:`loosefit.motion_range`)."""
 
     title: str
     source: str
@@ -237,8 +241,9 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
             on the 2-core machines).
 
     Raises:
-        InputError: a bad input (naming it), or a prediction whose garment vertex count or frame count
-            differs from the reference's.
+        InputError: a bad input (naming it), or a prediction whose garment vertex count differs from the
+            reference's. A prediction of another frame count plays for its own length; its error and RMSE
+            cover the frames both have, and the panel warns of the difference.
     """
     if not inputs:
         raise InputError("give at least one input: SEQ.npz, DATA.zarr:SEQUENCE or RUN:MOTION")
@@ -258,11 +263,13 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
             raise InputError(
                 f"the garment has {garment.verts.shape[1]} vertices but the simulation ({ref.source}, the first input) "
                 f"has {ref_garment.verts.shape[1]}: a prediction must be of the same garment", panel.source)
-        if garment.verts.shape[0] != ref_garment.verts.shape[0]:
-            raise InputError(
-                f"the garment has {garment.verts.shape[0]} frames but the simulation ({ref.source}, the first input) "
-                f"has {ref_garment.verts.shape[0]}: animate the simulation's motion", panel.source)
-        diff = garment.verts.astype(np.float64) - ref_garment.verts.astype(np.float64)
+        n, n_ref = garment.verts.shape[0], ref_garment.verts.shape[0]
+        both = min(n, n_ref)
+        if n != n_ref:
+            panel.warnings.append(
+                f"{panel.source}: {n} frames, the simulation ({ref.source}) {n_ref}: each plays its own length "
+                f"(the shorter holds its last frame); error and RMSE over the first {both} frames")
+        diff = garment.verts[:both].astype(np.float64) - ref_garment.verts[:both].astype(np.float64)
         garment.errors = (1000.0 * np.linalg.norm(diff, axis=-1)).astype(np.float32)
         panel.metrics["rmse_mm"] = _rmse_per_frame(garment.errors)
     if collisions:

@@ -107,11 +107,12 @@
     pos.array.set(track.verts.subarray(f * n, (f + 1) * n));
     pos.needsUpdate = true;
     track.geometry.computeVertexNormals();
-    const heat = heatOn && track.errors !== null;
+    // an input longer than the reference has no error past the reference's end: its plain colour there
+    const heat = heatOn && track.errors !== null && k < track.info.errorFrames;
     if (heat) {
       const col = track.geometry.attributes.color;
       const V = track.info.numVerts;
-      const e = track.errors.subarray(f * V, (f + 1) * V);
+      const e = track.errors.subarray(k * V, (k + 1) * V);
       for (let i = 0; i < V; i++) {
         const j = 3 * lutIndex(e[i]);
         col.array[3 * i] = LUT[j] / 255;
@@ -337,7 +338,8 @@
     // The error (mm) shown at a vertex in the current frame.
     errorAt: (panel, track, i) => {
       const t = panels[panel].tracks[track];
-      return t.errors === null ? null : t.errors[frameOf(t, viewer.frame) * t.info.numVerts + i];
+      const k = viewer.frame;
+      return t.errors === null || k >= t.info.errorFrames ? null : t.errors[k * t.info.numVerts + i];
     },
     // The legend bar's colour [r, g, b] (0-255) at an error value, read from its pixels.
     legendColorAt: (e) => {
