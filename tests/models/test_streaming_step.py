@@ -4,6 +4,7 @@ the static edge pooling equal the eager implementations (on a GPU, graph replay 
 
 from __future__ import annotations
 
+import copy
 import numpy as np
 import pytest
 import torch
@@ -174,3 +175,34 @@ def test_fitgar_stream_equals_the_eager_pass(fitgar_frames):
         for k in ("coarse", "verts", "detail_displacement"):  # one thread: PyG's sums, to the bit
             assert torch.equal(got[k], expected[k]) and torch.equal(limited[k], got[k]), k
         assert stream.matches(batch) and not stream.matches(collate_frames(items[:1] if n == 3 else items[:2]))
+
+
+# ---------------------------------------------------------------- what a CUDA graph needs, checked without a GPU
+
+def test_captured_steps_have_no_data_dependent_host_work(data, fitgar_frames):  # noqa: F811
+    """The steps CUDA graphs capture run on the meta device, which has no values: any ``.item()``, ``bool()``,
+    ``nonzero``, boolean-mask indexing or shape taken from values would raise there (on a GPU they are the
+    host synchronisations that break a capture). Shapes come out as the real frame's."""
+    torch.manual_seed(0)
+    bound = BoundSwinGar(SwinGar.from_data(data, MANY_HEADS).eval(), data.graphs[0])
+    s = data.sequences[0].sequences[0]
+    root, joints = torch.from_numpy(s.root[None, :2]), torch.from_numpy(s.joints[None, :2])
+    with torch.no_grad():
+        state = bound(root[:, :1], joints[:, :1])["state"]
+        real = bound(root[:, 1:], joints[:, 1:], state)
+        bound.to("meta")
+        meta = bound.stream_step(root[:, 1:].to("meta"), joints[:, 1:].to("meta"),
+                                 *(state[k].to("meta") for k in ("root", "joints", "gates")))
+    assert {k: v.shape for k, v in meta.items()} == {k: real[k].shape for k in meta}
+
+    model, items = fitgar_frames
+    batch = collate_frames(items[:2])
+    with torch.no_grad():
+        real = model(batch)
+        stream = FitGarStream(copy.deepcopy(model), batch, use_graphs=False)  # tables built from the garment
+        stream.model.to("meta")
+        for name in ("table", "valid", "edge_index", "faces", "index"):
+            setattr(stream, name, getattr(stream, name).to("meta"))
+        meta = stream.step(*[batch[k].to("meta") for k in FRAME_INPUTS], rounds=GRAPH_ROUNDS)
+    assert meta["exact"].device.type == "meta"
+    assert all(meta[k].shape == real[k].shape for k in real)
