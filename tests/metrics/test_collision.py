@@ -34,3 +34,31 @@ def test_bad_bodies():
         collision_ratio(np.stack([POINTS] * 3), np.stack([BV, BV]), BF)
     with pytest.raises(InputError, match="tolerance"):
         collision_ratio(POINTS, BV, BF, tolerance=-1)
+
+
+def test_posed_frames_share_the_edge_map_and_give_the_same_distances():
+    """A deformed sphere over three frames (a non-rigid squash and a shear): each frame's PosedBodySDF, built
+    with the first frame's edge map, gives BodySDF's distances, closest points and faces bit for bit, at
+    points near the surface where the edge and vertex pseudonormals decide the sign."""
+    from loosefit.metrics.collision import PosedBodySDF, posed_body_sdfs
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.3)
+    v0, faces = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    frames = np.stack([v0, v0 * [1.3, 1.0, 0.7], v0 + np.outer(v0[:, 2], [0.5, 0.0, 0.0])])
+    rng = np.random.default_rng(0)
+    for verts, sdf in zip(frames, posed_body_sdfs(frames, faces)):
+        full = BodySDF(verts, faces)
+        # points just inside and outside the surface, over vertices, edge midpoints and face centres
+        edges = verts[faces[:, [0, 1]]].mean(1)
+        anchors = np.concatenate([verts, edges, verts[faces].mean(1)])
+        points = anchors * (1 + rng.uniform(-0.05, 0.05, (len(anchors), 1)))
+        for a, b in zip(sdf.closest(points), full.closest(points)):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(sdf._edge_normals, full._edge_normals)
+        assert ((sdf.query(points) < 0) == (np.linalg.norm(points, axis=1) < np.linalg.norm(anchors, axis=1))).mean() > 0.95
+    with pytest.raises(InputError, match="like its first frame"):
+        PosedBodySDF(v0[:-1], BodySDF(v0, faces))
+    # the ratio over a posed sequence (the generator path) is the one from a BodySDF a frame
+    garment = frames[:, ::3] * 0.98
+    assert collision_ratio_per_frame(garment, frames, faces).tolist() == pytest.approx(
+        collision_ratio_per_frame(garment, [BodySDF(v, faces) for v in frames]).tolist())

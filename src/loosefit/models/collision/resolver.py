@@ -33,6 +33,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
 from loosefit.geometry.ray_cull import AxisRayCuller
 from loosefit.geometry.signed_distance import BodySDF
+from loosefit.metrics.collision import posed_body_sdfs
 from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF, flushed_denormals, value_and_gradient_fn
 from loosefit.models.collision.network import BodySDFNet, SDFFunction, motion_sdf_inputs
 from loosefit.threads import torch_threads
@@ -400,8 +401,9 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     if mode == "neural":
         code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
         return correct_motion(out, resolver, net.eval(), code, rot, origin, posed, culler, margin)[0]
+    meshes = posed_body_sdfs(posed, proxy.faces)
     for t in range(len(out)):
-        mesh = BodySDF(posed[t], proxy.faces)
+        mesh = next(meshes)  # each frame's tree; the edge map built once
         if mode == "pushout":
             out[t] = push_out(out[t], mesh, push_distance)[0]
         else:
