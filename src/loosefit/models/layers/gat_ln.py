@@ -297,11 +297,14 @@ class GATLN(nn.Module):
         flat = table.reshape(-1)
         mask = valid[None, :, :, None]
         if self.centred:
-            if gathered is None:
-                gathered = x.index_select(1, flat).unflatten(1, table.shape)
             weight = valid.to(x.dtype) / valid.sum(1, keepdim=True).to(x.dtype)  # (V, D): the neighbourhood mean's weights
-            # (B, V, in): each neighbourhood's mean feature, a batched product that reads the gathered features once
-            mu = (weight[None, :, None, :] @ gathered)[:, :, 0]
+            # (B, V, in): each neighbourhood's mean feature; from the gathered features when there are (a batched
+            # product reads them once), else as a neighbour sum (no (B, V, D, in) tensor)
+            if gathered is not None:
+                mu = (weight[None, :, None, :] @ gathered)[:, :, 0]
+            else:
+                B, V, D = x.shape[0], x.shape[1], table.shape[1]
+                mu = neighbour_sum(x[:, :, None], table, weight[None, :, :, None].expand(B, V, D, 1))[:, :, 0]
             # c . (x_j - mu_i): the scores of the centred features (the projections are linear)
             u_dst = (x - mu) @ c_dst.T  # (B, V, H)
             u_src = (x @ c_src.T).index_select(1, flat).unflatten(1, table.shape) - (mu @ c_src.T)[:, :, None]
@@ -315,12 +318,16 @@ class GATLN(nn.Module):
             tiny = NORM_EPS * NORM_EPS
             rows = s.square().sum(2).clamp_min(tiny).sqrt()  # (B, V, H): each vertex's score row norm
             lip = (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(tiny).sqrt()  # (H,)
-            if self.centred:
+            if self.centred and gathered is not None:
                 # ||x_j - mu_i|| read off the gathered features without writing their differences (the clamp keeps
                 # the norms off 0, where the square root's gradient is infinite)
                 B, V, D, C = gathered.shape
                 feats = torch.cdist(gathered.reshape(B * V, D, C), mu.reshape(B * V, 1, C),
                                     compute_mode="donot_use_mm_for_euclid_dist").view(B, V, D).clamp_min(NORM_EPS)
+            elif self.centred:  # slot by slot: each slot's neighbours gathered and measured, no (B, V, D, in) tensor
+                columns = table.T.contiguous()
+                feats = torch.stack([torch.linalg.vector_norm(x.index_select(1, columns[d]) - mu, dim=-1)
+                                     for d in range(table.shape[1])], 2).clamp_min(NORM_EPS)
             else:
                 feats = x.square().sum(-1).clamp_min(tiny).sqrt()[:, table]  # (B, V, D) ||x_j||
             feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
@@ -338,8 +345,7 @@ class GATLN(nn.Module):
         x = x.reshape(-1, *x.shape[-2:])
         flat = table.reshape(-1)
         gathered = None
-        if self.centred or not self.concat or (self.heads <= PROJECT_FIRST_HEADS
-                                               and not (CPU_EMBEDDING_BAG and x.device.type == "cpu")):
+        if not self.concat or (self.heads <= PROJECT_FIRST_HEADS and not (CPU_EMBEDDING_BAG and x.device.type == "cpu")):
             gathered = x.index_select(1, flat).unflatten(1, table.shape)  # (B, V, D, in)
         P = self.attention(x, table, valid, gathered)  # (B, V, D, H)
         if self._record is not None:
