@@ -37,6 +37,15 @@ too large (in millimetres; 100 times too small in centimetres is the right size 
 (faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming the
 file, before any simulation.
 
+Measured (seed 0, 3 cm edges, the 2-core machine, ``benchmarks/results/garment-fit.json``): all 12 land with
+no vertex over 2 mm inside the body (the direct placement refused 2: the short body's skirt and long shirt);
+edge lengths change 0.8-3 %; ``kept_mm`` is within 10 mm in 6 of 12 (skirts 7.1-10.5, jumpsuits 1.5-15.6,
+long shirts 5.2-19.5, dresses 6.3-37.2; the worst, the dress for the tall-slim body, was placed on a body of
+weight 0.85 where it was cut for 0.3; its hem stays 12 cm above the floor, so the floor is not the cause,
+and a three times longer settle changes it by 3 mm only: 37.5 to 34.0). The shape found is a body the
+garment fits, often not the one it was cut on (tall-slim dress: height 0.8, weight 0.85, gender 0.46).
+The three refusals come in under a second. A fit takes 50-260 s, most of it the shape search.
+
 Run: nice -n 5 .venv/bin/python benchmarks/garment_fit.py [--kinds skirt,dress] [--bodies tall-slim,heavy,short]
          [--seeds 0] [--edge-length 0.03] [--render dress-0/tall-slim] [--name garment-fit]
 (writes benchmarks/results/<name>.json after every case and resumes from it; the render to
