@@ -87,10 +87,6 @@ class ShapeFit:
     objective: float
     evaluations: int
 
-    def shape_text(self, target) -> str:
-        """The searched keys as ``height=0.62,weight=0.31,...`` (others are the target's)."""
-        return ",".join(f"{k}={getattr(self.shape, k):.2f}" for k in SEARCH_KEYS)
-
 
 def _anny(body, path):
     from loosefit.body.anny_body import AnnyBody
