@@ -93,8 +93,9 @@ def test_resume_simulates_only_missing_runs_and_follows_the_plan(done, root, tmp
     np.testing.assert_array_equal(store.references(TEST), DatasetStore.open(out).references(TEST))
     # fewer runs asked for: the extra one goes, nothing is simulated
     calls.clear()
-    run_plan(write_plan(root, {"count": 1}), copy, progress=False)
+    summary = run_plan(write_plan(root, {"count": 1}), copy, progress=False)
     assert calls == [] and list(DatasetStore.open(copy).reference_runs(TEST)) == [1]
+    assert runner.summary_line(summary, copy).endswith("; reference runs: all 1 done before")
     # other noise: the run is simulated again; no references key: the runs stay, nothing is simulated
     summary = run_plan(write_plan(root, {"count": 1, "noise": 2.0e-5}), copy, progress=False)
     assert calls == [True] and DatasetStore.open(copy).reference_runs(TEST)[1]["noise_m"] == 2e-5

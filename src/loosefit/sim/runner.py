@@ -231,7 +231,9 @@ def summary_line(summary: dict[str, Any], store) -> str:
     if summary["skipped"]:
         line += f" ({summary['skipped']} of {summary['jobs']} were done before)"
     refs = summary.get("references") or {}
-    if refs.get("jobs"):
+    if refs.get("jobs") and not refs["ok"] + refs["failed"] + refs["crashed"]:
+        line += f"; reference runs: all {refs['jobs']} done before"
+    elif refs.get("jobs"):
         made = refs["ok"] + refs["failed"] + refs["crashed"]
         line += f"; {refs['ok']} of {made} reference runs ok"
         if refs["failed"] or refs["crashed"]:
