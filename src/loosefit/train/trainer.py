@@ -436,7 +436,9 @@ def train(
     Args:
         model: an ``nn.Module`` following :class:`loosefit.train.protocol.TrainableModel`; it is moved
             to the training device and left there, holding the final weights.
-        train_set: training samples (any map-style Dataset the model's ``collate`` can batch).
+        train_set: training samples (any map-style Dataset the model's ``collate`` can batch). A dataset
+            with a ``batch_sampler(batch_size, generator, shuffle)`` method orders its own batches (the
+            stateful windows of :class:`loosefit.models.streams.StreamWindows`; one process only).
         val_set: validation samples (held-out motions), or ``None``.
         config: the :class:`TrainConfig`.
         out_dir: the run folder (layout in :mod:`loosefit.train.run`).
