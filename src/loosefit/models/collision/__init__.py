@@ -22,7 +22,8 @@ from loosefit.models.collision.network import (SOFTPLUS_BETA, BodySDFConfig, Bod
                                                bone_frame_code, bone_local_points, fold_bone_frames, load_body_sdf,
                                                motion_sdf_inputs, posed_joints, save_body_sdf)
 from loosefit.models.collision.resolver import (CULL_CELL, FRAME_CHUNK, CollisionResolver, ExactSDF, correct_frame,
-                                                correct_motion, handle_motion_collisions, POST_PROCESSES,
+                                                correct_motion, handle_motion_collisions, inflated, POST_PROCESSES,
+                                                PROXY_INFLATE,
                                                 check_post_process, post_process, push_out,
                                                 resolve_collisions, vertex_neighbours)
 from loosefit.models.collision.training import (CALIBRATION_QUANTILE, EIKONAL_WEIGHT, SDF_FILE, SDF_META,
@@ -39,7 +40,7 @@ __all__ = [
     "BoundBodySDF", "MotionBodySDF", "FramedSDF", "flushed_denormals", "sdf_and_gradient", "value_and_gradient_fn",
     # resolver
     "ExactSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out", "CULL_CELL",
-    "correct_frame", "FRAME_CHUNK", "correct_motion", "handle_motion_collisions",
+    "correct_frame", "FRAME_CHUNK", "correct_motion", "handle_motion_collisions", "PROXY_INFLATE", "inflated",
     "POST_PROCESSES", "check_post_process", "post_process",
     # training
     "EIKONAL_WEIGHT", "sdf_loss", "sdf_samples", "SDFTrainConfig", "random_anny_shapes", "random_procedural_motions",

@@ -1,0 +1,138 @@
+"""How much of an animated garment ends up inside the body on motions outside the training set, with the
+collision handling ``loosefit animate`` applies by default and without it, and what that handling costs.
+
+For each run and motion the garment is animated as ``loosefit animate RUN --motion M`` does with its defaults
+(:class:`~loosefit.animate.Animator` with the best checkpoint, one torch thread, on the CPU; then
+:func:`~loosefit.models.collision.handle_motion_collisions` in mode ``exact``, margin 0), and measured with
+:func:`~loosefit.metrics.collision.inside_body_report`'s measure (vertices more than 5 mm inside the body's collision
+proxy) on every frame, against the same animation with ``--collision none``. Frames per second: the model alone
+(``--collision none``) and the model plus the handling, both timed on a second, warm pass.
+
+    python benchmarks/penetration.py --run vb=/work/stores/demo/runs/vb-e2 \\
+        --run jn=/work/stores/pen-runs/jointnet \\
+        --run swingar=/work/stores/runs/node-centred-alpha-2-seed-0@/work/stores/swingar-attention.zarr:skirt-6+average
+
+``NAME=RUN`` for a one-garment run (VirtualBones, JointNet, body-LBS); ``NAME=RUN@DATA.zarr:GARMENT`` for a
+multi-garment run (SwinGar) animating ``GARMENT`` of a store (a garment it never trained on). Motions:
+``--motion kind:seed:seconds`` (procedural) or a BVH / motion file (``--joint-map cc`` for the CMU clips of
+``../shared/mocap``). Writes ``benchmarks/results/penetration.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from _common import save_results
+
+DEFAULT_MOTIONS = ["walk:1234:4", "spin:1234:4"]
+DEFAULT_BVH = Path(__file__).resolve().parents[2] / "shared" / "mocap" / "cmu-cc" / "007_01.bvh"
+
+
+def load_motions(specs: list[str], body, joint_map: str | None) -> dict:
+    """``{label: Motion}`` for ``kind:seed:seconds`` specs and motion files."""
+    from loosefit.motion.io import load_motion
+    from loosefit.motion.procedural import generate
+
+    motions = {}
+    for spec in specs:
+        parts = spec.split(":")
+        if len(parts) == 3 and not Path(spec).exists():
+            kind, seed, seconds = parts[0], int(parts[1]), float(parts[2])
+            motions[f"{kind}-seed{seed}-{seconds:g}s"] = generate(kind, seconds, seed, body)
+        else:
+            motions[Path(spec).stem] = load_motion(spec, body, joint_map=joint_map if spec.endswith(".bvh") else None)
+    return motions
+
+
+def parse_run(spec: str) -> tuple[str, Path, object]:
+    """``NAME=RUN`` or ``NAME=RUN@DATA.zarr:GARMENT`` -> name, run folder, garment (None or a Garment)."""
+    name, _, rest = spec.partition("=")
+    run, _, garment = rest.partition("@")
+    if not garment:
+        return name, Path(run), None
+    from loosefit.data import DatasetStore
+
+    data, _, gname = garment.rpartition(":")
+    with DatasetStore.open(data) as store:
+        return name, Path(run), store.garment(gname)
+
+
+def animate_as_cli(run: Path, garment, body, motion):
+    """What ``loosefit animate RUN --motion M [--garment G]`` computes with its defaults, split into its two
+    timed steps: ``(animator, raw (T, V, 3), corrected (T, V, 3), model seconds, handling seconds)``."""
+    from loosefit.animate import Animator
+    from loosefit.models.collision import handle_motion_collisions
+
+    animator = Animator(run, checkpoint="best", threads=1, garment=garment, body=body if garment is not None else None,
+                        device="cpu")
+    animator.animate_batch([motion])  # warm-up pass: first-call allocations are not what a frame costs
+    t = time.perf_counter()
+    raw = animator.animate_batch([motion])[0]
+    t_model = time.perf_counter() - t
+    handle_motion_collisions(raw, animator.faces, body, motion, "exact", None, margin=0.0)  # warm-up (kernels)
+    t = time.perf_counter()
+    fixed = handle_motion_collisions(raw, animator.faces, body, motion, "exact", None, margin=0.0)
+    t_coll = time.perf_counter() - t
+    return animator, raw, fixed, t_model, t_coll
+
+
+def main() -> None:
+    from loosefit.body import AnnyBody, AnnyShape
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--run", action="append", required=True, help="NAME=RUN or NAME=RUN@DATA.zarr:GARMENT")
+    ap.add_argument("--motion", action="append", default=None,
+                    help="kind:seed:seconds or a motion file (default: walk and spin, seed 1234, 4 s, and CMU 07_01)")
+    ap.add_argument("--joint-map", default="cc", help="joint map of BVH motions (default cc: ../shared/mocap)")
+    ap.add_argument("--out", default="penetration")
+    args = ap.parse_args()
+
+    body = AnnyBody(AnnyShape.parse(None))  # loosefit animate's body without --shape
+    specs = args.motion or DEFAULT_MOTIONS + ([str(DEFAULT_BVH)] if DEFAULT_BVH.is_file() else [])
+    motions = load_motions(specs, body, args.joint_map)
+    rows = []
+    for spec in args.run:
+        name, run, garment = parse_run(spec)
+        for label, motion in motions.items():
+            animator, raw, fixed, t_model, t_coll = animate_as_cli(run, garment, body, motion)
+            T = len(raw)
+            # inside_body_report's measure (the proxy, 5 mm) on every frame
+            before, after = _per_frame(raw, body, motion), _per_frame(fixed, body, motion)
+            full = _per_frame(fixed, body, motion, proxy=False)  # what a viewer sees: the full-resolution body
+            row = {
+                "run": name, "run_dir": str(run), "method": animator.method, "motion": label, "frames": T,
+                "vertices": int(raw.shape[1]), "garment": None if garment is None else garment.name,
+                "collision": "exact",
+                "inside_5mm_percent_mean": float(after.mean()), "inside_5mm_percent_worst": float(after.max()),
+                "worst_frame": int(np.argmax(after)),
+                "full_body_inside_5mm_percent_mean": float(full.mean()),
+                "full_body_inside_5mm_percent_worst": float(full.max()),
+                "none_inside_5mm_percent_mean": float(before.mean()),
+                "none_inside_5mm_percent_worst": float(before.max()), "none_worst_frame": int(np.argmax(before)),
+                "fps_none": T / t_model, "fps_exact": T / (t_model + t_coll),
+                "model_ms_per_frame": 1e3 * t_model / T, "collision_ms_per_frame": 1e3 * t_coll / T,
+                "floor_met": bool(after.mean() <= 1.0),
+            }
+            rows.append(row)
+            print(f"{name:10s} {label:22s} inside>5mm {row['inside_5mm_percent_mean']:5.2f} % (worst "
+                  f"{row['inside_5mm_percent_worst']:5.2f} %), none {row['none_inside_5mm_percent_mean']:5.2f} % (worst "
+                  f"{row['none_inside_5mm_percent_worst']:5.2f} %), full body {row['full_body_inside_5mm_percent_mean']:5.2f} % "
+                  f"(worst {row['full_body_inside_5mm_percent_worst']:5.2f} %); {row['fps_exact']:.0f} fps with, "
+                  f"{row['fps_none']:.0f} without; handling {row['collision_ms_per_frame']:.1f} ms/frame", flush=True)
+    save_results(args.out, {"depth_m": 0.005, "floor_percent": 1.0, "torch_threads": 1, "rows": rows})
+
+
+def _per_frame(verts, body, motion, proxy: bool = True) -> np.ndarray:
+    """Percent of vertices more than 5 mm inside the body's collision proxy (what the handling corrects
+    against and ``loosefit animate`` reports), or inside the full-resolution body, per frame ``(T,)``."""
+    from loosefit.metrics.collision import REPORT_DEPTH, collision_ratio_per_frame
+
+    mesh = body.collision_proxy() if proxy else body
+    return collision_ratio_per_frame(verts, mesh.pose(motion).verts, mesh.faces, REPORT_DEPTH)
+
+
+if __name__ == "__main__":
+    main()
