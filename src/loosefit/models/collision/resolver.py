@@ -370,7 +370,7 @@ def post_process(verts: np.ndarray, faces: np.ndarray, body, motion, handling: s
 #: Metres the exact handling moves the posed collision proxy's surface out along its vertex normals. The
 #: 1,229-vertex proxy lies inside the full-resolution body a user sees (over hips and legs by 2 mm at the
 #: median, 12 mm at the 99th percentile, on a spin), so a vertex put on the proxy's surface could stay more
-#: than 5 mm inside the body: held-out spin, VirtualBones skirt, 1.03 % of the vertices, 0.29 % with 4 mm,
+#: than 5 mm inside the body: held-out spin, VirtualBones skirt, 1.03 % of the vertices, 0.3 % with 4 mm,
 #: 0.14 % with 7 mm (benchmarks/README.md, ``penetration.py``); 4 mm keeps cloth resting on the body close to it.
 PROXY_INFLATE = 0.004
 
