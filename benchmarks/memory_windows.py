@@ -8,9 +8,11 @@ and JointNet trained three ways, with the same networks and epochs.
   of 64 frames for VirtualBones, 50 for JointNet, the GRU state carried across them; :mod:`loosefit.models.streams`).
 
 Each variant is one ``benchmarks/accuracy.py`` run (``--preset cpu``, 32 bones, the demo's JointNet sizes; epochs:
-VirtualBones 40 + 15 as in the demo, JointNet 20 + 8, fewer than the demo's for the loaded machine) into ``--runs/<variant>``, writing ``benchmarks/results/memory-<variant>.json``;
-``--summarise`` collects the RMSE per motion kind and split (train / val / test) and the training times of every
-variant into ``benchmarks/results/memory-windows.json``.
+VirtualBones 40 + 15 as in the demo, JointNet 20 + 8, fewer than the demo's for the loaded machine) into
+``--runs/<variant>``, writing ``benchmarks/results/memory-<variant>.json`` (``--only-virtualbones``: VirtualBones
+alone, as the long windows were measured); ``--summarise`` collects the RMSE per motion kind and split
+(train / val / test) and the training steps and times of every variant into
+``benchmarks/results/memory-comparison.json``.
 
 Run: .venv/bin/python benchmarks/memory_windows.py --data /work/stores/memory.zarr --runs RUNS --variant windows
      .venv/bin/python benchmarks/memory_windows.py --summarise
@@ -117,7 +119,7 @@ def main() -> None:
         else:
             run_variant(args.data, args.runs, variant, args.bones)
     if args.summarise:
-        save_results("memory-windows", summarise())
+        save_results("memory-comparison", summarise())
 
 
 if __name__ == "__main__":

@@ -277,7 +277,7 @@ def test_config_file_holds_the_defaults():
     assert config == Config()
     assert (config.model.gru_hidden, config.model.features, config.model.bone_mlp) == (600, 480, [1024, 2048, 1024])
     assert (config.train.optimizer, config.train.step_gamma, config.train.step_epochs) == ("rmsprop", 0.7, 30)
-    assert config.data == MemoryWindowConfig(window=60, stride=50, burn_in=10)
+    assert config.data == MemoryWindowConfig(window=50, stride=50, burn_in=10, carry_state=True)
     with pytest.raises(InputError, match="even"):
         JointNetConfig(features=31)
 

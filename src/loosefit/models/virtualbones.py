@@ -30,7 +30,15 @@ authors' released code, which feeds raw positions. Loss: mean vertex distance to
 
 Training (trainer stages ``["low", "high"]``): "low" optimises the low-frequency module alone; "high"
 optimises the high-frequency module with the low-frequency module frozen and its output detached.
-Windows with a burn-in give truncated back-propagation through time over long sequences.
+Windows with a burn-in give truncated back-propagation through time over long sequences: by default windows
+of 64 frames from a zero state, the first 16 warming the GRUs up; ``data.carry_state`` trains consecutive
+windows of each sequence instead, each from the state the previous one ended in (:mod:`loosefit.models.streams`).
+Measured on ``configs/datasets/memory.yaml`` (1.2k-vertex skirt, 8 training motions of 6-8 s; held out a 10 s
+spin and a 10 s jump; 32 bones, the CPU preset, 40 + 15 epochs; ``benchmarks/results/memory-comparison.json``),
+held-out RMSE spin / jump: zero-state windows of 64 every 48, 107.4 / 48.5 mm (275 steps); the state carried
+over windows of 64, 112.8 / 47.2 mm (220 steps); windows of 176 every 88 with 48 warm-up frames, 121.6 / 53.6 mm
+(110 steps). The training spins are fitted to 37-59 mm in every case: the held-out spin's error is
+generalisation from two training spins, not memory, so the zero-state windows stay the default.
 """
 
 from __future__ import annotations
