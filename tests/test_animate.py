@@ -129,18 +129,17 @@ def test_animate_handles_collisions_by_default_and_reports_what_is_inside(lbs_ru
 
 
 def test_inside_body_report_counts_what_is_deeper_than_the_depth(body):
-    """Vertices of the posed proxy moved along their inward normals by 2 and 8 mm: at a 5 mm depth exactly the
-    8 mm ones count; frames are evenly spaced and capped."""
+    """Vertices of the posed full-resolution body moved along their inward normals by 2 and 8 mm: at a 5 mm depth
+    exactly the 8 mm ones count; frames are evenly spaced and capped."""
     from loosefit.geometry.normals import vertex_normals
     from loosefit.metrics.collision import inside_body_report
     from loosefit.motion.procedural import generate
 
     motion = generate("walk", 1.0, 0, body)
-    proxy = body.collision_proxy()
-    posed = proxy.pose(motion).verts
-    picked = np.arange(0, proxy.num_verts, 7)
+    posed = body.pose(motion).verts
+    picked = np.arange(0, body.num_verts, 29)
     depth = np.where(np.arange(len(picked)) % 4 == 0, 0.008, 0.002)  # a quarter deep, the rest shallow
-    normals = np.stack([vertex_normals(v, proxy.faces) for v in posed])[:, picked]
+    normals = np.stack([vertex_normals(v, body.faces) for v in posed])[:, picked]
     garment = posed[:, picked] - depth[None, :, None] * normals
     report = inside_body_report(garment, body, motion, max_frames=10)
     assert report["frames"] == 10 and report["of_frames"] == motion.num_frames

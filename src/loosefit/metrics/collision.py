@@ -125,7 +125,8 @@ def inside_body_report(garment_verts: np.ndarray, body, motion, depth: float = R
 
     Args:
         garment_verts: ``(T, V, 3)`` world garment vertices along ``motion``, metres.
-        body: the body the garment is worn on (its low-resolution collision proxy is measured, where it has one).
+        body: the body the garment is worn on, measured at its full resolution: the collision handling corrects
+            against a coarser proxy that lies up to about a centimetre inside it, so the proxy would under-report.
         depth: metres inside the body a vertex must exceed to count.
         max_frames: frames measured at most, evenly spaced over the motion.
 
@@ -135,10 +136,9 @@ def inside_body_report(garment_verts: np.ndarray, body, motion, depth: float = R
     """
     T = len(garment_verts)
     frames = np.unique(np.linspace(0, T - 1, min(T, max_frames)).round().astype(int))
-    proxy = body.collision_proxy() if hasattr(body, "collision_proxy") else body
-    posed = proxy.pose(dataclasses.replace(motion, rotations=motion.rotations[frames],
-                                          translation=motion.translation[frames])).verts
-    ratio = collision_ratio_per_frame(np.asarray(garment_verts)[frames], posed, proxy.faces, depth)
+    posed = body.pose(dataclasses.replace(motion, rotations=motion.rotations[frames],
+                                         translation=motion.translation[frames])).verts
+    ratio = collision_ratio_per_frame(np.asarray(garment_verts)[frames], posed, body.faces, depth)
     return {"mean_percent": float(ratio.mean()), "worst_percent": float(ratio.max()), "frames": int(len(frames)),
             "of_frames": int(T), "depth_m": depth}
 
