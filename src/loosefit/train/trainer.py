@@ -251,7 +251,8 @@ class _Trainer:
     def _loader(self, dataset: Dataset, size: int, shuffle: bool, generator: torch.Generator) -> DataLoader:
         if hasattr(dataset, "batch_sampler"):  # a dataset that orders its own batches (stateful windows)
             if distributed.is_distributed():
-                raise InputError(f"{type(dataset).__name__} orders its batches itself: train it in one process")
+                raise InputError(f"{type(dataset).__name__} orders its batches itself (the GRU state carried from window to "
+                                 "window): train in one process, or on several with --set data.carry_state=false")
             return DataLoader(dataset, batch_sampler=dataset.batch_sampler(size, generator, shuffle),
                               collate_fn=self.collate, num_workers=self.config.num_workers,
                               pin_memory=self.device.type == "cuda")
