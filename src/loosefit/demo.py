@@ -27,8 +27,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 #: Short training for the demo, in minutes on 2 cores: the paper's layer sizes for VirtualBones, a narrower
 #: JointNet (its paper sizes need a GPU to train). Every 3 s motion is one training window from the zero state,
-#: as animation starts (90 frames, no warm-up), four to a batch. VirtualBones' longer low-frequency stage took
-#: the held-out spin from 127 to 93 mm and the training motions from 19-76 to 16-22 mm.
+#: as animation starts (90 frames, no warm-up), four to a batch. With the longer low-frequency stage VirtualBones
+#: fits the training motions to 15-22 mm (was 19-76); the held-out spin is the data's part (demo.yaml).
 WHOLE_SEQUENCES = ["data.window=90", "data.stride=90", "data.burn_in=0", "train.batch_size=4", "train.progress=false"]
 DEMO_TRAINING = {
     "body-lbs": [],
