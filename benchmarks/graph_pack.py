@@ -181,22 +181,17 @@ def fitgar_curve(pack: dict, config: Path, overrides: list[str], seconds: float,
 
 
 def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float, device, evals: int) -> dict:
-    from swingar_gpu import window_errors
+    from swingar_gpu import model_from_payload, window_errors
 
     from loosefit.config import load_config
     from loosefit.models.multi_garment import collate_by_graph
-    from loosefit.models.swingar import Config, SwinGar
+    from loosefit.models.swingar import Config
 
     payload = widen({k: v for k, v in pack.items() if k != "method"})
     payload = {**payload, "stats": {k: [torch.as_tensor(a) for a in v] for k, v in payload["stats"].items()}}
     cfg = load_config(Config, config, [*payload["overrides"], *overrides])
     torch.manual_seed(cfg.train.seed)
-    model = SwinGar(payload["sizes"], cfg.model)
-    with torch.no_grad():
-        for key in ("root", "joints"):
-            getattr(model, f"{key}_mean").copy_(payload["stats"][key][0])
-            getattr(model, f"{key}_std").copy_(payload["stats"][key][1])
-    model.to(device)
+    model = model_from_payload(payload, cfg).to(device)
 
     def graphs(gs):
         return [{k: torch.as_tensor(v).to(device) for k, v in g.items()} for g in gs]

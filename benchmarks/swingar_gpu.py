@@ -98,18 +98,25 @@ def export(store: Path, out: Path, config: Path, overrides: list[str]) -> None:
     print(f"{len(payload['train'])} training windows, {len(payload['test'])} held-out sequences -> {out}")
 
 
-def train_and_score(payload: dict, cfg, device: torch.device, seed: int) -> dict:
-    from loosefit.models.layers.gat_ln import recording_attention
-    from loosefit.models.multi_garment import collate_by_graph
+def model_from_payload(payload: dict, cfg):
+    """A SwinGar of the exported sizes with the exported input statistics (``payload["stats"]``: root and joints,
+    each ``[mean, std]`` tensors), untrained, on the CPU."""
     from loosefit.models.swingar import SwinGar
 
-    torch.manual_seed(seed)
     model = SwinGar(payload["sizes"], cfg.model)
     with torch.no_grad():
         for key in ("root", "joints"):
             getattr(model, f"{key}_mean").copy_(payload["stats"][key][0])
             getattr(model, f"{key}_std").copy_(payload["stats"][key][1])
-    model.to(device)
+    return model
+
+
+def train_and_score(payload: dict, cfg, device: torch.device, seed: int) -> dict:
+    from loosefit.models.layers.gat_ln import recording_attention
+    from loosefit.models.multi_garment import collate_by_graph
+
+    torch.manual_seed(seed)
+    model = model_from_payload(payload, cfg).to(device)
 
     def on_device(item, graphs):
         out = {k: (v.to(device) if torch.is_tensor(v) else v) for k, v in item.items()}
@@ -207,12 +214,7 @@ def memorise(windows: Path, out: Path, names: list[str], steps: int, count: int,
             cfg = load_config(sw.Config, ROOT / "configs" / "models" / "swingar-cpu.yaml",
                               [*payload["overrides"], *extra, *overrides])
             torch.manual_seed(0)
-            model = sw.SwinGar(payload["sizes"], cfg.model)
-            with torch.no_grad():
-                for key in ("root", "joints"):
-                    getattr(model, f"{key}_mean").copy_(payload["stats"][key][0])
-                    getattr(model, f"{key}_std").copy_(payload["stats"][key][1])
-            model.to(device)
+            model = model_from_payload(payload, cfg).to(device)  # the patched module constants apply
             opt = torch.optim.Adam(model.parameters(), lr)
             curve, t0 = [], time.time()
             for step in range(steps + 1):

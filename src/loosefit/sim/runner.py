@@ -259,16 +259,12 @@ def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bo
 
     def record(job: SequenceJob, result: dict[str, Any]) -> None:
         stats = {**result["stats"], "job_hash": job.hash}
-        verts = result["verts"]
-        if verts is None:
-            verts = np.zeros((0, store.garment_num_verts(job.garment_entry), 3), np.float32)
         store.write_sequence(
-            job.id, verts, garment=job.garment_entry, body=job.shape, motion=job.motion,
+            job.id, _stored_verts(store, job, result), garment=job.garment_entry, body=job.shape, motion=job.motion,
             sim_params=plan.sim_params[job.sim_params].to_dict(), stats=stats, split=job.split,
             status=result["status"], reason=result["reason"],
         )
-        kind = "crashed" if result["reason"].startswith(CRASHED) else result["status"]
-        summary[kind] += 1
+        _count(summary, result)
         summary["sequences"][job.id] = {"status": result["status"], "reason": result["reason"],
                                         "ms_per_frame": stats.get("ms_per_frame"), "wall_s": stats.get("wall_s")}
         if progress:
@@ -283,6 +279,18 @@ def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bo
     summary["references"] = _run_references(plan, store, workers, address, progress)
     summary["wall_s"] = time.perf_counter() - start
     return summary
+
+
+def _stored_verts(store, job: SequenceJob, result: dict[str, Any]) -> np.ndarray:
+    """A simulation's vertices ``(T, V, 3)`` as stored: no frames (``(0, V, 3)``) for a run that crashed."""
+    if result["verts"] is None:
+        return np.zeros((0, store.garment_num_verts(job.garment_entry), 3), np.float32)
+    return result["verts"]
+
+
+def _count(summary: dict[str, Any], result: dict[str, Any]) -> None:
+    """One more ``ok``, ``failed`` (the gate) or ``crashed`` run in ``summary``."""
+    summary["crashed" if result["reason"].startswith(CRASHED) else result["status"]] += 1
 
 
 def _dispatch(keys: list, payloads: list[dict[str, Any]], workers: int, address: str | None, record) -> None:
@@ -343,14 +351,11 @@ def _run_references(plan: Plan, store, workers: int, address: str | None, progre
 
     def record(key: tuple, result: dict[str, Any]) -> None:
         job, index, run_hash, steps = key
-        verts = result["verts"]
-        if verts is None:
-            verts = np.zeros((0, store.garment_num_verts(job.garment_entry), 3), np.float32)
         info = {"noise_seed": index, "noise_m": refs.noise, "run_hash": run_hash, "quality": steps,
                 "stats": result["stats"]}
-        store.write_reference(job.id, index, verts, status=result["status"], reason=result["reason"], info=info)
-        kind = "crashed" if result["reason"].startswith(CRASHED) else result["status"]
-        summary[kind] += 1
+        store.write_reference(job.id, index, _stored_verts(store, job, result), status=result["status"],
+                              reason=result["reason"], info=info)
+        _count(summary, result)
         summary["runs"][f"{job.id}#{index}"] = {"status": result["status"], "reason": result["reason"],
                                                 "wall_s": result["stats"].get("wall_s")}
         if progress:
