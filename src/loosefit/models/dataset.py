@@ -153,6 +153,24 @@ class GarmentSequences:
         return out
 
 
+#: The per-frame arrays of a sequence that a training window carries (those a sequence has: None ones are left out).
+FRAME_KEYS = ("root", "joints", "verts", "lf", "bone_rot", "bone_trans", "body", "body_normals", "body_nearest")
+
+
+def window_arrays(seq: "SequenceData", start: int, stop: int, pad: int = 0) -> dict[str, torch.Tensor]:
+    """Frames ``start:stop`` of each of ``seq``'s :data:`FRAME_KEYS` arrays as tensors, the last frame repeated
+    ``pad`` more times (finite inputs for frames that carry no loss)."""
+    out = {}
+    for key in FRAME_KEYS:
+        value = getattr(seq, key)
+        if value is not None:
+            part = value[start:stop]
+            if pad:
+                part = np.concatenate([part, np.repeat(part[-1:], pad, 0)])
+            out[key] = torch.from_numpy(np.ascontiguousarray(part))
+    return out
+
+
 class WindowDataset(Dataset):
     """Windows of ``window`` consecutive frames, starting every ``stride`` frames (frame 0 always
     included, so training sees the zero initial state used at inference). A window shorter than
@@ -182,9 +200,4 @@ class WindowDataset(Dataset):
         i, a = self.index[k]
         s = self.data.sequences[i]
         b = min(a + self.window, s.num_frames)
-        item = {"sequence": i, "start": a, "burn_in": 0 if a == 0 else self.burn_in}
-        for key in ("root", "joints", "verts", "lf", "bone_rot", "bone_trans", "body", "body_normals", "body_nearest"):
-            value = getattr(s, key)
-            if value is not None:
-                item[key] = torch.from_numpy(np.ascontiguousarray(value[a:b]))
-        return item
+        return {"sequence": i, "start": a, "burn_in": 0 if a == 0 else self.burn_in, **window_arrays(s, a, b)}

@@ -33,12 +33,8 @@ from torch.utils.data import Dataset
 
 from loosefit.errors import InputError
 from loosefit.models.config import WindowConfig
-from loosefit.models.dataset import GarmentSequences, WindowDataset
+from loosefit.models.dataset import GarmentSequences, WindowDataset, window_arrays
 from loosefit.train.losses import frame_mask
-
-#: The per-frame arrays of a window item.
-FRAME_KEYS = ("root", "joints", "verts", "lf", "bone_rot", "bone_trans", "body", "body_normals", "body_nearest")
-
 
 @dataclass(frozen=True)
 class MemoryWindowConfig(WindowConfig):
@@ -92,15 +88,9 @@ class StreamWindows(Dataset):
         s = self.data.sequences[i]
         b = min(a + self.window, s.num_frames)
         pad = self.length - (b - a)
-        item = {"sequence": i, "start": a, "burn_in": 0, "frames": b - a, "last": b == s.num_frames, "name": s.name}
-        for key in FRAME_KEYS:
-            value = getattr(s, key)
-            if value is not None:
-                part = value[a:b]
-                if pad:  # repeat the last frame: finite inputs, no loss (see window_mask)
-                    part = np.concatenate([part, np.repeat(part[-1:], pad, 0)])
-                item[key] = torch.from_numpy(np.ascontiguousarray(part))
-        return item
+        # the padding repeats the last frame: finite inputs, no loss (see window_mask)
+        return {"sequence": i, "start": a, "burn_in": 0, "frames": b - a, "last": b == s.num_frames, "name": s.name,
+                **window_arrays(s, a, b, pad)}
 
     def batch_sampler(self, batch_size: int, generator: torch.Generator | None, shuffle: bool) -> list[list[int]]:
         """Batches of item indices: the sequences (in an order drawn from ``generator`` when ``shuffle``)
