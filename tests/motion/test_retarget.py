@@ -300,3 +300,37 @@ def test_real_character_creator_clips(body, clip):
     # difference between the skeletons' feet (ankle height, foot length) in ballet's pointed feet.
     toes = [rig.joint_names.index(n) for n in ("LeftToeBase", "RightToeBase")]
     assert abs(np.percentile(posed[:, toes, 2].min(1), 5) - body.rest_joints()[toes, 2].min()) < 0.04
+
+
+
+@pytest.mark.parametrize("calibration", ["rest", "motion"])
+def test_steeper_feet_stay_on_the_floor(body, tmp_path, calibration):
+    """A source whose ankles stand 3 cm higher above its toes (its rest pose raised to stand on the floor)
+    walks with its feet planted. Bone directions are copied, so the target's feet tilt as steeply, and the
+    scaled root alone left them 2.4 cm under the floor with rest calibration (6 mm above with floor-contact
+    calibration), as real mocap skeletons do. Imported, the target's feet meet the floor as the source's
+    do: contact (5th percentile of the lowest foot joint) minus rest foot height equals the source's within
+    1 mm (the leg ratio scales it) with rest calibration, and is zero with floor-contact calibration."""
+    from loosefit.motion.procedural import generate
+    from loosefit.motion.retarget import contact_height
+
+    motion = generate("walk", 2.0, 0, body)
+    names = body.joint_names
+    rest = body.rest_joints().astype(np.float64).copy()
+    toes = [names.index("LeftToeBase"), names.index("RightToeBase")]
+    toes = [j for j in range(len(names)) if any(j == a or _is_below(body.parents, j, a) for a in toes)]
+    rest[toes, 2] -= 0.03
+    rest[:, 2] += 0.03
+    raised = Motion(motion.rotations, motion.translation + [0.0, 0.0, 0.03], motion.fps, body.rig, names, "walk")
+    write_bvh(tmp_path / "long.bvh", to_bvh(body, raised, rest=rest))
+    (tmp_path / "map.yaml").write_text(yaml.safe_dump(
+        {"name": "long", "joints": {n: n for n in names}, "calibration": calibration}))
+    feet = [names.index(n) for n in ("LeftFoot", "LeftToeBase", "RightFoot", "RightToeBase")]
+    src = read_bvh(tmp_path / "long.bvh")
+    above_s = contact_height(src.world()[0][:, feet, 2]) - src.rest_world()[0][feet, 2].min()
+    assert abs(above_s) < 0.01  # the source walks on its floor
+
+    imported = import_bvh(tmp_path / "long.bvh", body, joint_map=tmp_path / "map.yaml")
+    above_t = contact_height(joints(body, imported)[:, feet, 2]) - body.rest_joints()[feet, 2].min()
+    expected = above_s if calibration == "rest" else 0.0
+    assert abs(above_t - expected) < 1e-3 + 0.06 * abs(above_s), (above_t, expected)

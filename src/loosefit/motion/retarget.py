@@ -17,7 +17,8 @@ their parent.
 
 The root translation is the source root's, scaled by the ratio of leg lengths (target / source),
 which also makes the source's length unit (centimetres, metres, inches) irrelevant; heights are
-measured from the feet (see :func:`retarget`).
+measured from the feet, and the target's feet then meet the floor where the source's do (see
+:func:`retarget`).
 """
 
 from __future__ import annotations
@@ -253,7 +254,9 @@ def retarget(
     the rest relation between root and lowest foot joint (its height above them scales with the
     legs); with motion calibration neither the rest pose nor the file's floor is trusted: the 5th
     percentile of the source's lowest foot joint height is taken as floor contact and mapped onto
-    the target's lowest foot joint at rest (loosefit bodies stand with their soles on ``z = 0``).
+    the target's lowest foot joint at rest (loosefit bodies stand with their soles on ``z = 0``). Either
+    way the root is then raised or lowered so that the target's posed feet touch the floor as the
+    source's do (:func:`_match_contact`).
 
     Args:
         source: the source animation, axes converted (Z up).
@@ -286,7 +289,8 @@ def retarget(
     local = W.copy()
     parents = target.parents
     local[:, parents >= 0] = np.swapaxes(W[:, parents[parents >= 0]], -1, -2) @ W[:, parents >= 0]
-    return local, _root_positions(solver, source, ref_pos[0] if calibration == "rest" else None)
+    rest = ref_pos[0] if calibration == "rest" else None
+    return local, _match_contact(local, _root_positions(solver, source, rest), solver, source, rest)
 
 
 def check_feet_on_floor(local: np.ndarray, root: np.ndarray, target: TargetRig, path: Path | None = None,
@@ -309,8 +313,7 @@ def check_feet_on_floor(local: np.ndarray, root: np.ndarray, target: TargetRig, 
     with torch.no_grad():
         world = forward_kinematics(torch.from_numpy(local), torch.from_numpy(np.asarray(root, np.float64)),
                                    torch.from_numpy(target.rest), target.parents)
-    contact = float(np.percentile((world[:, feet, :3, 3].numpy() @ up).min(1), 5))
-    error = contact - float((target.rest[feet] @ up).min())
+    error = contact_height(world[:, feet, :3, 3].numpy() @ up) - float((target.rest[feet] @ up).min())
     if abs(error) > tolerance:
         where = "above" if error > 0 else "below"
         raise InputError(f"the imported body's feet are {abs(error):.2f} m {where} the floor where they touch it "
@@ -366,8 +369,49 @@ def _root_positions(solver: _Solver, source: SourceAnimation, rest: np.ndarray |
         above_s = float(np.max(rest[root_s, 2] - rest[feet_s, 2]))
         root[:, 2] = above_t + scale * (height - above_s)
     else:
-        contact = np.percentile(source.positions[:, feet_s, 2].min(1), 5)
+        contact = contact_height(source.positions[:, feet_s, 2])
         root[:, 2] = float(np.min(target.rest[feet_t] @ up_t)) + scale * (height - contact)
+    return root
+
+
+def contact_height(feet: np.ndarray) -> float:
+    """The height of floor contact from foot joint heights ``(T, F)``: the 5th percentile over the frames
+    of the lowest foot joint, so that steps and jumps do not count."""
+    return float(np.percentile(feet.min(1), 5))
+
+
+def _match_contact(local: np.ndarray, root: np.ndarray, solver: _Solver, source: SourceAnimation,
+                   rest: np.ndarray | None) -> np.ndarray:
+    """``root (T, 3)`` raised or lowered so that the target's feet meet the floor as the source's do.
+
+    The root height from :func:`_root_positions` scales the source's root height with the legs, but the
+    target's bones take the source's directions: a source foot that slopes more steeply from ankle to toes
+    tilts the target's foot as much, and legs of other proportions bend differently, so the target's feet
+    end up a few centimetres above or below where the source's are (2.4 cm under the floor for an ankle
+    3 cm higher above the toes). The shift makes the target's contact height (:func:`contact_height` of
+    its posed foot joints) what it would be if its root stood above its lowest foot joint as the source's
+    does: with rest calibration (the source's rest pose ``rest (Js, 3)``), the target's rest height above
+    its feet plus the source's excess over its own rest height, scaled; with floor-contact calibration
+    (``rest`` None), the target's rest foot height. A source of the target's own skeleton is unchanged.
+    """
+    target, roles = solver.target, solver.roles
+    up = np.asarray(roles.up, np.float64)
+    feet_t = [target.joint_names.index(n) for n in roles.feet if solver.src_index(n) >= 0]
+    with torch.no_grad():  # posed joints in the Z-up world
+        world = forward_kinematics(torch.from_numpy(local), torch.from_numpy(root), torch.from_numpy(target.rest),
+                                   target.parents)[:, feet_t, :3, 3].numpy()
+    if rest is None:
+        wanted = float(np.min(target.rest[feet_t] @ up))
+    else:
+        feet_s, root_s = solver.src[feet_t], solver.src_index(roles.root)
+        root_t = target.rest[target.joint_names.index(roles.root)]
+        above_t = float(np.max((root_t - target.rest[feet_t]) @ up))
+        above_s = float(np.max(rest[root_s, 2] - rest[feet_s, 2]))
+        over_s = source.positions[:, root_s, 2] - source.positions[:, feet_s, 2].min(1)
+        scale = solver.leg_target / solver.leg_source
+        wanted = contact_height((root[:, 2] - above_t - scale * (over_s - above_s))[:, None])
+    root = root.copy()
+    root[:, 2] -= contact_height(world[..., 2]) - wanted  # world heights are Z up, the rig's rest ``up``
     return root
 
 
