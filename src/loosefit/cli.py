@@ -98,6 +98,10 @@ def _garment_params(items: list[str]) -> dict:
     return params
 
 
+def _shape_text(shape: dict) -> str:
+    return ",".join(f"{k}={v:g}" for k, v in shape.items())
+
+
 def cmd_garment_make(args):
     from loosefit.garment import make_garment
 
@@ -123,9 +127,8 @@ def cmd_garment_import(args):
     p = garment.params
     if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
         f = p["fit"]
-        print(f"fitted as a garment made for another body ({f['why']}): made for "
-              + ",".join(f"{k}={v:g}" for k, v in f["shape"].items()) + f", draped onto this body; "
-              f"{f['inside_percent']:g}% of vertices more than 2 mm inside it")
+        print(f"fitted as a garment made for another body ({f['why']}): made for {_shape_text(f['shape'])}, draped "
+              f"onto this body; {f['inside_percent']:g}% of vertices more than 2 mm inside it")
     repaired = {k: v for k, v in p["repairs"].items() if v}
     print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces; {p['unit']}, {p['up']} up, "
           f"attachment {p['attachment']}, top at {p['top_z']:.3f} m (moved by {p['offset']} m); pushed out of the body "
@@ -186,6 +189,7 @@ def cmd_simulate(args):
         # These options shape one sequence; a plan says the same things itself, under these keys.
         in_plan = {"--set": "sim_params (a named set, e.g. sim_params: {default: {bending: 1.0e-4}})",
                    "--params": "sim_params", "--shape": "shapes (e.g. shapes: {tall: {height: 0.8}})",
+                   "--fit": "a garment file made on another shape (its sidecar's body_shape; drape happens anyway)",
                    "--joint-map": "the joint_map of a file motion (motions: {clip: {file: ..., joint_map: cc}})"}
         given = [option for option in in_plan if getattr(args, option[2:].replace("-", "_"))]
         if given:
@@ -202,8 +206,17 @@ def cmd_simulate(args):
     sets = args.set or []
     params = SimParams.load(args.params, sets) if args.params else SimParams().with_overrides(sets)
     writable(args.out, folder=False)  # before the simulation, not after it
-    result = simulate_file(args.garment, args.motion, args.out, params=params, shape=args.shape, joint_map=args.joint_map)
+    result = simulate_file(args.garment, args.motion, args.out, params=params, shape=args.shape,
+                           joint_map=args.joint_map, fit=True if args.fit else None)
     print(json.dumps(result.stats, indent=2, default=str))
+    fitted = result.stats.get("garment_fit")
+    if fitted is not None and "from_shape" in fitted:
+        print(f"{args.garment}: made on the body {_shape_text(fitted['from_shape'])}, draped onto "
+              f"{_shape_text(fitted['to_shape'])}: {fitted['inside_before_percent']:g}% of vertices more than 2 mm "
+              f"inside the body before, {fitted['inside_after_percent']:g}% after")
+    elif fitted is not None:
+        print(f"{args.garment}: fitted as a garment made for another body ({fitted['why']}): made for "
+              f"{_shape_text(fitted['shape'])}; {fitted['inside_percent']:g}% of vertices more than 2 mm inside this body")
     if result.status != "ok":
         raise LoosefitError(f"{args.out}: the simulation failed the quality gate: {result.reason}")
     print(f"{args.out}: simulated ok ({result.verts.shape[0]} frames, passed the quality gate)")
@@ -456,7 +469,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--motion", default=None, help="motion .npz / .bvh (one sequence)")
     sp.add_argument("--params", default=None, help="simulation parameters YAML")
     sp.add_argument("--set", action="append", help="simulation parameter override, e.g. bending=1e-4 (repeatable)")
-    sp.add_argument("--shape", default=None, help="Anny shape, e.g. height=0.8")
+    sp.add_argument("--shape", default=None, help="Anny shape, e.g. height=0.8; a loosefit garment made on another "
+                    "shape is draped onto this one first")
+    sp.add_argument("--fit", action="store_true",
+                    help="a garment mesh made for another body: find the Anny shape it fits and drape it onto --shape "
+                         "(done anyway when it has no plausible placement on it)")
     joint_map_option(sp)
     sp.add_argument("--workers", type=int_at_least(1), default=1, help="parallel Blender workers (Ray) for a plan")
     sp.add_argument("--address", default=None, help="an existing Ray cluster's address")

@@ -1,12 +1,15 @@
 """Fitting a garment made for another body: the shape found, the drape onto this body, the cut kept;
 refusals before any simulation; the bounded push out of the body."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from loosefit.errors import InputError
 from loosefit.garment import import_garment, make_garment
-from loosefit.garment.body_fit import Search, carry
+from loosefit.garment.body_fit import Search, carry, refit
+from loosefit.garment.garment import Garment, shape_record
 from loosefit.garment.fitting import push_out_bounded, outward
 from loosefit.garment.landmarks import measure_body
 from loosefit.garment.mesh_checks import unique_edges
@@ -138,3 +141,46 @@ def test_attachment_of_garments_for_another_body(heavy_tops, attachment):
     p = place(np.asarray(verts, np.float64) + [0.1, -0.2, 0.3], faces, measure_body(heavy), "g.obj", "z")
     assert p.attachment == attachment
     np.testing.assert_allclose(p.offset, [-0.1, 0.2, -0.3], atol=0.02)
+
+
+def test_a_garment_made_on_another_shape_is_draped_onto_this_one(tmp_path, body, tall_shirt):
+    """The shape a garment was made on travels in its sidecar; refit drapes it from there onto this body
+    (the shoulders come down with the body's, nothing inside it), records what it did, and leaves a garment
+    already on this shape alone."""
+    tall, shirt = tall_shirt
+    assert shirt.body_shape == shape_record(tall.shape) and shirt.body_shape["height"] == 0.8
+    shirt.save(tmp_path / "tall.obj")
+    loaded = Garment.load(tmp_path / "tall.obj")
+    assert loaded.body_shape == shirt.body_shape
+    g, info = refit(loaded, body, tmp_path / "tall.obj", morph_seconds=0.4, settle_seconds=0.3)
+    assert info["from_shape"]["height"] == 0.8 and info["to_shape"] == shape_record(body.shape) == g.body_shape
+    assert g.params["refit"] == info and info["drape"]["frames"] == 1 + 12 + 9
+    neck = lambda b: measure_body(b).joints["neck"][0][2]  # noqa: E731
+    assert g.verts[:, 2].max() - neck(body) == pytest.approx(shirt.verts[:, 2].max() - neck(tall), abs=0.03)
+    assert info["inside_after_percent"] <= 1.0 and (measure_body(body).sdf.query(g.verts) < -0.002).mean() <= 0.01
+    assert refit(g, body) == (g, None)
+
+
+def test_a_garment_without_its_body_is_checked(tmp_path, body):
+    """A sidecar without the body shape (an older version): a skirt made on a thin body cuts into this one
+    and is refused, naming the file and --fit; on its own body it is simulated as it is."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+
+    thin = AnnyBody(AnnyShape(weight=0.0, muscle=0.0))
+    skirt = dataclasses.replace(make_garment("skirt", thin, seed=0, edge_length=0.06), body_shape=None)
+    inside = 100 * (measure_body(body).sdf.query(skirt.verts) < -0.002).mean()
+    assert inside > 5.0, inside
+    with pytest.raises(InputError, match=r"inside this body .* --fit") as err:
+        refit(skirt, body, tmp_path / "thin.obj")
+    assert "thin.obj" in str(err.value)
+    assert refit(skirt, thin) == (skirt, None)
+
+
+def test_a_bad_body_shape_in_the_sidecar_names_it(tmp_path, tall_shirt):
+    tall_shirt[1].save(tmp_path / "g.obj")
+    side = tmp_path / "g.json"
+    side.write_text(side.read_text().replace('"height": 0.8', '"height": 1.8'))
+    with pytest.raises(InputError, match="unreadable garment sidecar.*height=1.8") as err:
+        Garment.load(tmp_path / "g.obj")
+    assert "g.json" in str(err.value)

@@ -181,3 +181,20 @@ def test_held_plan_motions(plan_path, tmp_path):
     settled = settled_frames(walk.num_frames, 2, 4)
     np.testing.assert_allclose(walk.translation[settled], original.translation[2:11:3], atol=1e-6)
 
+
+
+def test_simulate_file_drapes_a_garment_made_on_another_shape(plan_path, tmp_path):
+    """A skirt made on a tall body, simulated on the average one (``simulate --garment --shape``): draped
+    onto it first (stats say from which shape), then simulated through the gate like any other."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment import make_garment
+    from loosefit.sim import SimParams
+
+    make_garment("skirt", AnnyBody(AnnyShape(height=0.8)), seed=0, edge_length=0.06).save(tmp_path / "tall.obj")
+    result = simulate_file(tmp_path / "tall.obj", plan_path.parent / "walk.npz", tmp_path / "seq.npz",
+                           params=SimParams(preroll=0.2))
+    fitted = result.stats["garment_fit"]
+    assert result.status == "ok" and fitted["from_shape"]["height"] == 0.8 and fitted["to_shape"]["height"] == 0.5
+    assert fitted["inside_after_percent"] <= 1.0
+    assert MeshSequence.load(tmp_path / "seq.npz").verts.shape[0] == FRAMES

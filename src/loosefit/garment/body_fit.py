@@ -309,3 +309,53 @@ def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = No
         "drape": stats,
     }
     return verts, fit, placed, info
+
+
+#: Share (percent) of a garment's vertices more than :data:`INSIDE_DEPTH` inside a body above which a garment
+#: whose body is not recorded is refused on it rather than simulated (the simulation would start with the
+#: cloth through the body).
+REFIT_INSIDE_LIMIT = 1.0
+
+
+def refit(garment, body, path=None, params=None, morph_seconds: float = MORPH_SECONDS,
+          settle_seconds: float = SETTLE_SECONDS):
+    """A :class:`~loosefit.garment.garment.Garment` made on one Anny body, brought onto ``body`` of another shape.
+
+    The garment's recorded body shape (``garment.body_shape``) is where the drape starts (step 3 of the module
+    docstring: the body morphs from that shape to ``body``'s while Blender cloth follows; pins carried). A
+    garment made on this very shape, or on a body that is not Anny, is returned as it is. A garment with no
+    recorded shape (a sidecar of an older version) is checked instead: more than :data:`REFIT_INSIDE_LIMIT`
+    percent of it more than 2 mm inside ``body`` is refused, naming ``path``, since it was made for another body.
+
+    Args:
+        garment: the garment in the rest pose of its recorded body.
+        body: the body to simulate it on.
+        path: the garment's file, named in errors.
+        params: simulation parameters of the drape (defaults when ``None``).
+
+    Returns:
+        ``(garment on body's rest pose, info)``: ``info`` is ``None`` when nothing was done, else it has the
+        shape draped from and to, the penetration into ``body`` before and after (percent of vertices more
+        than 2 mm inside), and the drape's statistics; it is also stored as ``params["refit"]``.
+    """
+    from loosefit.body.anny_body import AnnyBody, AnnyShape
+    from loosefit.garment.garment import shape_record
+
+    target = shape_record(getattr(body, "shape", None))
+    if not isinstance(body, AnnyBody) or garment.body_shape == target:
+        return garment, None
+    sdf = measure_body(body).sdf
+    before = inside_percent(garment.verts, sdf)
+    if garment.body_shape is None:
+        if before > REFIT_INSIDE_LIMIT:
+            raise InputError(f"{before:.1f}% of the garment's vertices are more than {1e3 * INSIDE_DEPTH:g} mm inside "
+                             f"this body (over {REFIT_INSIDE_LIMIT:g}%) and its file does not say which body it was "
+                             "made on: import the mesh again with `loosefit garment import FILE --fit` and this "
+                             "body's --shape", path)
+        return garment, None
+    verts, stats = drape(garment.verts, garment.faces, garment.pinned, body, AnnyShape(**garment.body_shape),
+                         params=params, morph_seconds=morph_seconds, settle_seconds=settle_seconds)
+    info = {"from_shape": garment.body_shape, "to_shape": target, "inside_before_percent": round(before, 2),
+            "inside_after_percent": round(inside_percent(verts, sdf), 2), "drape": stats}
+    return dataclasses.replace(garment, verts=verts.astype(np.float32), body_shape=target,
+                               params={**garment.params, "refit": info}), info

@@ -1,11 +1,14 @@
 """The Garment type: a triangle mesh in the body's rest pose with a mask of pinned vertices.
 
 On disk a garment is a Wavefront OBJ (vertices and triangles) plus a JSON sidecar
-``<stem>.json`` beside it holding the kind, name, parameters and pinned vertex ids.
+``<stem>.json`` beside it holding the kind, name, parameters, pinned vertex ids and, when it was made on
+an Anny body, that body's shape (``body_shape``), so that simulating it on another shape drapes it there
+(:func:`loosefit.garment.body_fit.refit`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +22,14 @@ from loosefit.paths import atomic_path
 SIDECAR_FORMAT = 1
 
 
+def shape_record(shape) -> dict[str, float] | None:
+    """The JSON record of an :class:`~loosefit.body.anny_body.AnnyShape` (``None`` for anything else, such as
+    SMPL betas): its six values by key."""
+    from loosefit.body.anny_body import AnnyShape
+
+    return {k: float(v) for k, v in dataclasses.asdict(shape).items()} if isinstance(shape, AnnyShape) else None
+
+
 @dataclass
 class Garment:
     """A garment mesh in the rest pose of the body it was fitted to.
@@ -30,6 +41,9 @@ class Garment:
         kind: template kind (``"skirt"``, ``"dress"``, ``"long_shirt"``, ``"jumpsuit"``) or ``"imported"``.
         params: the parameters it was made with (JSON-serialisable).
         name: a label.
+        body_shape: the Anny shape values (:class:`~loosefit.body.anny_body.AnnyShape` keys) of the body it
+            was made on or fitted to; ``None`` when unknown (another body model, or a sidecar of an older
+            version).
     """
 
     verts: np.ndarray
@@ -38,6 +52,7 @@ class Garment:
     kind: str
     params: dict = field(default_factory=dict)
     name: str = ""
+    body_shape: dict | None = None
 
     def __post_init__(self):
         self.verts = np.ascontiguousarray(self.verts, dtype=np.float32)
@@ -78,6 +93,8 @@ class Garment:
             "params": self.params,
             "pinned": np.nonzero(self.pinned)[0].tolist(),
         }
+        if self.body_shape is not None:
+            meta["body_shape"] = self.body_shape
         with atomic_path(path) as tmp:
             tmp.write_text("\n".join(lines) + "\n")
         with atomic_path(self.sidecar_path(path)) as tmp:
@@ -99,13 +116,18 @@ class Garment:
             meta = json.loads(side.read_text())
             pinned_ids = np.asarray(meta["pinned"], dtype=np.int64)
             kind, name, params = str(meta["kind"]), str(meta["name"]), dict(meta["params"])
-        except (ValueError, KeyError, TypeError) as err:
-            raise InputError(f"unreadable garment sidecar: {err}", side) from None
+            body_shape = meta.get("body_shape")
+            if body_shape is not None:
+                from loosefit.body.anny_body import AnnyShape
+
+                body_shape = shape_record(AnnyShape(**body_shape))
+        except (ValueError, KeyError, TypeError, InputError) as err:
+            raise InputError(f"unreadable garment sidecar: {getattr(err, 'problem', err)}", side) from None
         if meta.get("num_verts", len(verts)) != len(verts):
             raise InputError(f"sidecar says {meta['num_verts']} vertices, the OBJ has {len(verts)}", side)
         if len(pinned_ids) and (pinned_ids.min() < 0 or pinned_ids.max() >= len(verts)):
             raise InputError("a pinned vertex id is out of range", side)
         pinned = np.zeros(len(verts), bool)
         pinned[pinned_ids] = True
-        return cls(verts=verts, faces=faces, pinned=pinned, kind=kind, params=params, name=name)
+        return cls(verts=verts, faces=faces, pinned=pinned, kind=kind, params=params, name=name, body_shape=body_shape)
 

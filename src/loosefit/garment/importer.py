@@ -55,7 +55,7 @@ import numpy as np
 from loosefit.body.base import BodyModel
 from loosefit.errors import InputError
 from loosefit.garment.fitting import PUSH_MARGIN, push_out_bounded
-from loosefit.garment.garment import Garment
+from loosefit.garment.garment import Garment, shape_record
 from loosefit.garment.landmarks import measure_body
 from loosefit.garment.mesh_checks import (boundary_loops, face_areas, face_components, mesh_report, unique_edges,
                                           vertex_components)
@@ -367,7 +367,8 @@ def import_garment(
 
         info["inside_percent"] = round(inside_percent(verts, lm.sdf), 2)
         params["fit"] = info
-    return Garment(verts=verts, faces=faces, pinned=pinned, kind="imported", params=params, name=path.stem)
+    return Garment(verts=verts, faces=faces, pinned=pinned, kind="imported", params=params, name=path.stem,
+                   body_shape=shape_record(getattr(body, "shape", None)))
 
 
 #: Depth inside the body that the placement tolerates in its points (it counts only deeper ones), m.

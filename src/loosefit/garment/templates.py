@@ -28,7 +28,7 @@ from scipy.spatial import ConvexHull
 from loosefit.body.base import BodyModel
 from loosefit.errors import InputError
 from loosefit.garment.fitting import inflate, orient_outward, push_out
-from loosefit.garment.garment import Garment
+from loosefit.garment.garment import Garment, shape_record
 from loosefit.garment.landmarks import BodyLandmarks, measure_body
 from loosefit.garment.level_cut import cut_mesh
 from loosefit.garment.mesh_checks import boundary_loops, face_components, mesh_report
@@ -445,4 +445,5 @@ def make_garment(kind: str, body: BodyModel, seed: int = 0, edge_length: float =
         raise RuntimeError(f"{kind} seed {seed}: template mesh is broken: {report}")
     pinned = _pinned(verts, kind, lm, z_w, h)
     p["edge_length"] = h
-    return Garment(verts=verts, faces=faces, pinned=pinned, kind=kind, params=p, name=f"{kind}-{seed}")
+    return Garment(verts=verts, faces=faces, pinned=pinned, kind=kind, params=p, name=f"{kind}-{seed}",
+                   body_shape=shape_record(getattr(body, "shape", None)))

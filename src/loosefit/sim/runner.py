@@ -59,6 +59,7 @@ def simulate_file(
     params: SimParams | None = None,
     shape: str | None = None,
     joint_map: str | None = None,
+    fit: bool | None = None,
 ) -> SimResult:
     """Simulate one garment file on one motion file and write a mesh-sequence ``.npz``.
 
@@ -71,20 +72,30 @@ def simulate_file(
         params: simulation parameters (defaults when ``None``).
         shape: body shape as ``"gender=0.8,height=0.3"`` (the average when ``None``).
         joint_map: joint map for BVH files (see :func:`loosefit.motion.bvh.import_bvh`).
+        fit: for a mesh without a sidecar, :func:`~loosefit.garment.import_garment`'s ``fit``: ``None`` fits it
+            as a garment made for another body when the direct placement is refused, ``True`` always.
+
+    A loosefit garment made on another Anny shape is draped onto this one first
+    (:func:`loosefit.garment.body_fit.refit`); the result's ``stats["garment_fit"]`` says what was done to the
+    garment (the refit, or the import's fit), and is absent when nothing was.
     """
     from loosefit.body import AnnyShape
     from loosefit.garment import Garment, import_garment
+    from loosefit.garment.body_fit import refit
     from loosefit.motion.io import load_motion
 
     backend_run_cloth((params or SimParams()).backend)  # the simulator is installed ([sim] extra)
     body = plan_body(tuple(AnnyShape.parse(shape).to_array().tolist()))
     garment_path = Path(garment_path)
     if Garment.sidecar_path(garment_path).is_file():
-        garment = Garment.load(garment_path)
+        garment, fitted = refit(Garment.load(garment_path), body, garment_path, params)
     else:
-        garment = import_garment(garment_path, body)
+        garment = import_garment(garment_path, body, fit=fit)
+        fitted = garment.params.get("fit")
     motion = load_motion(motion_path, body, joint_map=joint_map)
     result = simulate_sequence(garment, body, motion, params)
+    if fitted is not None:
+        result.stats["garment_fit"] = fitted
     save_result(out_path, result, garment.faces, body.faces, motion.fps)
     return result
 
@@ -108,7 +119,11 @@ def load_plan_garment(plan: Plan, name: str, shape_values: tuple[float, ...]):
     if isinstance(spec, TemplateGarment):
         return make_garment(spec.template, body, **spec.make_kwargs())
     path = plan.resolve(spec.file)
-    return Garment.load(path) if Garment.sidecar_path(path).is_file() else import_garment(path, body)
+    if Garment.sidecar_path(path).is_file():
+        from loosefit.garment.body_fit import refit
+
+        return refit(Garment.load(path), body, path)[0]
+    return import_garment(path, body)
 
 
 def load_plan_motion(plan: Plan, name: str):
