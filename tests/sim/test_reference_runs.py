@@ -1,4 +1,5 @@
-"""Reference runs of a plan's test sequences: simulated after the base runs, stored with them, resumable."""
+"""Reference runs of a plan's test sequences: simulated after their base runs and before the training
+sequences, stored with them, resumable."""
 
 import shutil
 
@@ -101,6 +102,17 @@ def test_resume_simulates_only_missing_runs_and_follows_the_plan(done, root, tmp
     assert calls == [True] and DatasetStore.open(copy).reference_runs(TEST)[1]["noise_m"] == 2e-5
     summary = run_plan(write_plan(root, None), copy, progress=False)
     assert calls == [True] and summary["references"]["jobs"] == 0 and "reference" not in runner.summary_line(summary, copy)
+
+
+def test_test_sequences_and_their_runs_come_before_the_training_sequences(root, tmp_path, monkeypatch):
+    """The plan lists walk (training) before jump (test); a run stopped part way must have the held-out
+    sequence with its floor, so the order is the test base, its runs, then the rest."""
+    calls = []
+    real = runner.simulate_job
+    monkeypatch.setattr(runner, "simulate_job",
+                        lambda payload: calls.append((payload["motion"].name, is_reference(payload))) or real(payload))
+    run_plan(write_plan(root, {"count": 2, "noise": 1.0e-5}), tmp_path / "order.zarr", progress=False)
+    assert calls == [("jump", False), ("jump", True), ("jump", True), ("walk", False)]
 
 
 def test_a_crashed_run_is_stored_failed_and_retried(done, root, tmp_path, monkeypatch):

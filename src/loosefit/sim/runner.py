@@ -7,7 +7,7 @@ plan again redoes only those. A job that raises (a crash, not a quality failure)
 failed with a reason starting with ``"crashed:"`` and retried by the next run; the other jobs go on.
 
 With the plan's ``references`` (:class:`loosefit.sim.plan.ReferencePlan`), the reference runs of every test
-sequence stored ok are simulated after the base runs: run ``k`` is the base's job with the garment's start
+sequence stored ok are simulated after the test sequences and before the other sequences: run ``k`` is the base's job with the garment's start
 moved by :func:`perturb_start` (seed ``k``) and the base's solver steps a frame, stored with the sequence
 (:meth:`loosefit.data.store.DatasetStore.write_reference`) as it finishes, ok or failed by the gate like
 sequences; a crashed one is retried by the next run, and so is one whose plan entry changed (its hash).
@@ -287,11 +287,16 @@ def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bo
             bar.write(f"{job.id}: {result['status']} {timing} {result['reason']}".rstrip())
         bar.update(1)
 
+    # The test sequences first, then their reference runs, then the rest: a long plan stopped part way has
+    # its held-out sequences with their floors (the plans list the held-out motions first too).
+    test = [k for k, job in enumerate(todo) if job.split == "test"] if plan.reference_jobs() else []
+    rest = sorted(set(range(len(todo))) - set(test))
     try:
-        _dispatch(todo, payloads, workers, address, record)
+        _dispatch([todo[k] for k in test], [payloads[k] for k in test], workers, address, record)
+        summary["references"] = _run_references(plan, store, workers, address, progress)
+        _dispatch([todo[k] for k in rest], [payloads[k] for k in rest], workers, address, record)
     finally:
         bar.close()
-    summary["references"] = _run_references(plan, store, workers, address, progress)
     summary["wall_s"] = time.perf_counter() - start
     return summary
 
