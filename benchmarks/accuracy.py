@@ -76,6 +76,7 @@ from loosefit.motion.curves import smooth_noise  # noqa: E402
 from loosefit.motion.motion import Motion  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
 from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
+from loosefit.train.validation import motion_kind  # noqa: E402
 from loosefit.training import train_model  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
@@ -160,12 +161,6 @@ def garment_validation(store: DatasetStore, garment: str, fraction: float) -> di
     return {"val_split": "none", "val_fraction": fraction}
 
 
-def motion_kind(motion: Motion) -> str:
-    """The family of a motion: the procedural generator's name (its motions are named ``<kind>:seed=<seed>``),
-    ``"file"`` for any other."""
-    return motion.name.split(":")[0] if ":seed=" in motion.name else "file"
-
-
 def errors_by_kind(store: DatasetStore, animator, splits: dict[str, list[str]], output: str = "verts") -> dict:
     """RMSE (mm, pooled over frames and vertices) per motion kind and split: ``{kind: {"<split>_rmse_mm": ...,
     "<split>_sequences": n}}`` for ``splits`` ``{"train" | "val" | "test": sequence names}``."""
@@ -175,7 +170,7 @@ def errors_by_kind(store: DatasetStore, animator, splits: dict[str, list[str]], 
             seq = store.sequence(name)
             motion = store.motion(seq.motion)
             err = rmse_mm(animator.animate(motion, output=output), np.asarray(seq.verts[:]))
-            entry = sums.setdefault(motion_kind(motion), {}).setdefault(split, [0.0, 0, 0])
+            entry = sums.setdefault(motion_kind(motion.name), {}).setdefault(split, [0.0, 0, 0])
             entry[0] += err**2 * motion.num_frames
             entry[1] += motion.num_frames
             entry[2] += 1

@@ -88,6 +88,19 @@ def test_bad_method_and_garment(tiny_store, tmp_path):
         train_model("jointnet", tiny_store, "gown", tmp_path / "y", overrides=SMALL_JOINTNET)
 
 
+def test_a_training_fraction_is_for_per_garment_methods(tiny_store, tmp_path):
+    """The CLI passes --train-fraction through (recorded in the run's validation note); SwinGar refuses it."""
+    from loosefit.cli import main
+
+    run = tmp_path / "jn"
+    sets = [x for o in SMALL_JOINTNET for x in ("--set", o)]
+    assert main(["train", "--method", "jointnet", "--data", str(tiny_store), "--garment", "skirt+average",
+                 "--out", str(run), *sets, "--set", "train.stages.stage2.epochs=0", "--train-fraction", "0.5"]) == 0
+    assert "fraction 0.5 of each kind" in json.loads((run / MODEL_META).read_text())["validation"]["note"]
+    with pytest.raises(InputError, match="a training fraction is for the per-garment methods"):
+        train_model("swingar", tiny_store, None, tmp_path / "sg", train_fraction=0.5)
+
+
 def test_resume_refuses_a_run_of_other_data(tiny_store, tmp_path):
     run = tmp_path / "jn"
     train_model("jointnet", tiny_store, "skirt+average", run, overrides=SMALL_JOINTNET)

@@ -258,7 +258,7 @@ def cmd_train(args):
         overrides.append(f"train.device={args.device}")
     result = launch(train_model, args.nproc, args.method, args.data, args.garment, args.out, config=args.config,
                     overrides=overrides, resume=args.resume, val_split=args.val_split,
-                    val_motions=args.val_motions, val_fraction=args.val_fraction)
+                    val_motions=args.val_motions, val_fraction=args.val_fraction, train_fraction=args.train_fraction)
     if not is_main():  # under torchrun every process runs this command: rank 0 reports
         return
     if result is None:
@@ -505,6 +505,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="validate on these training motions instead of training on them (never a test motion)")
     sp.add_argument("--val-fraction", type=positive_float, default=None,
                     help="validate on this share of the training motions, chosen by name (e.g. 0.2)")
+    sp.add_argument("--train-fraction", type=positive_float, default=None,
+                    help="train on this share (0-1] of the training motions of each kind, nested by name: a learning "
+                    "curve (per-garment methods)")
     sp.add_argument("--device", choices=["cpu", "cuda", "auto"], default=None,
                     help="where to train (default: the config's train.device); an error when CUDA is asked but absent")
     sp.add_argument("--nproc", type=int, default=1, help="training processes on this machine (DistributedDataParallel: "

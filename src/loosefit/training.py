@@ -33,7 +33,7 @@ from loosefit.train import distributed
 from loosefit.train.run import RunDir, save_checkpoint
 from loosefit.train.seeding import rng_state, seed_everything
 from loosefit.train.settings import TrainResult
-from loosefit.train.validation import choose_validation
+from loosefit.train.validation import choose_validation, train_on_fraction
 from loosefit.train.trainer import train
 
 MODEL_META = "model.json"
@@ -52,6 +52,7 @@ def train_model(
     sim_params: dict | None = None,
     val_motions: list[str] | str | None = None,
     val_fraction: float | None = None,
+    train_fraction: float | None = None,
 ) -> TrainResult | None:
     """Train ``method`` on the training sequences of ``garment`` in dataset ``data`` (every garment for a
     multi-garment method, which takes ``garment=None``), validating as :mod:`loosefit.train.validation`
@@ -70,6 +71,8 @@ def train_model(
             instead of training; or ``val_fraction``: that share of the training motions, chosen by name
             (:func:`loosefit.train.validation.carve_motions`). Never a test motion. Not for SwinGar.
         sim_params: train only on sequences simulated with these parameters (pivot networks).
+        train_fraction: train on that share of the training motions of each kind, in (0, 1] (a learning
+            curve; :func:`loosefit.train.validation.train_on_fraction`); per-garment methods only.
 
     Returns:
         The trainer's result, or None for a method without trainable parameters (its run folder then holds
@@ -84,6 +87,9 @@ def train_model(
     if isinstance(val_motions, str):
         val_motions = [m.strip() for m in val_motions.split(",") if m.strip()]
     carve = {"val_split": val_split, "val_motions": val_motions, "val_fraction": val_fraction}
+    if train_fraction is not None and (getattr(cls, "static", False) or getattr(cls, "multi_garment", False)):
+        raise InputError(f"{method} trains on every garment of the store: a training fraction is for the "
+                         "per-garment methods")
     if getattr(cls, "static", False):
         if garment is not None:
             raise InputError(f"{method} trains on every garment of the store: give no garment (got {garment!r})")
@@ -101,6 +107,8 @@ def train_model(
     # a method without trainable weights (body-lbs) has no checkpoint to select: no validation
     validation = choose_validation(store, _uses(store, garment, sim_params), what=f"garment {garment!r}",
                                    **(carve if trained else {"val_split": "none"}))
+    if train_fraction is not None:
+        validation = train_on_fraction(store, validation, train_fraction)
     train_data = GarmentSequences(store, garment, "train", sim_params=sim_params, bones=cls.needs_rig,
                                   names=validation.train)
     val_data = None

@@ -10,7 +10,8 @@ import pytest
 
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
-from loosefit.train.validation import carve_motions, choose_validation, held_out_motions, motion_rank
+from loosefit.train.validation import (carve_motions, choose_validation, held_out_motions, keep_fraction, motion_kind,
+                                       motion_rank, train_on_fraction)
 
 MOTIONS = [f"{kind}-{seed}" for kind in ("walk", "run", "spin", "jump", "kick", "sway") for seed in range(3)]
 
@@ -99,3 +100,28 @@ def test_the_test_split_validates_only_when_named_and_is_warned(tiny_store, capl
         chosen = choose_validation(store, _skirt(store), "test")
     assert chosen.source == "test" and chosen.val == ["skirt+average+sway+default"]
     assert "TEST split" in caplog.text and "flattered" in caplog.text
+
+
+def test_a_training_fraction_keeps_every_kind_and_nests():
+    """8 walks, 4 spins, 1 jump: a quarter keeps 2, 1 and 1 (at least one of each kind, rounded up); the
+    shares are nested; the choice depends on the names alone."""
+    kind_of = {**{f"walk-{i}": "walk" for i in range(8)}, **{f"spin-{i}": "spin" for i in range(4)}, "jump-0": "jump"}
+    quarter, half, whole = (keep_fraction(kind_of, f) for f in (0.25, 0.5, 1.0))
+    count = lambda chosen, kind: sum(kind_of[m] == kind for m in chosen)  # noqa: E731
+    assert [count(quarter, k) for k in ("walk", "spin", "jump")] == [2, 1, 1]
+    assert [count(half, k) for k in ("walk", "spin", "jump")] == [4, 2, 1]
+    assert set(quarter) < set(half) < set(whole) == set(kind_of)
+    assert keep_fraction(dict(reversed(list(kind_of.items()))), 0.25) == quarter
+
+
+def test_a_training_fraction_on_a_store(tiny_store):
+    """The tiny store trains on one walk and one spin: any fraction keeps both (every kind); validation is
+    untouched; a fraction outside (0, 1] names the store."""
+    store = DatasetStore.open(tiny_store)
+    chosen = choose_validation(store, _skirt(store), "none")
+    assert train_on_fraction(store, chosen, 0.1).train == chosen.train and train_on_fraction(store, chosen, 1.0) == chosen
+    assert "training on 2 of 2 training motions" in train_on_fraction(store, chosen, 0.1).note
+    with pytest.raises(InputError, match=r"training fraction must be in \(0, 1\], got 1.5") as err:
+        train_on_fraction(store, chosen, 1.5)
+    assert str(tiny_store) in str(err.value)
+    assert motion_kind("walk:seed=3") == "walk" and motion_kind("clip") == "file"

@@ -12,6 +12,10 @@ run that validated on the test motions would pick the epoch that flatters its ow
   never carved;
 - the ``test`` split validates only when it is named explicitly, with a warning.
 
+For a learning curve, :func:`train_on_fraction` then keeps a share of the training motions: the same
+ranking by name within each motion kind, so the shares are nested (25 % within 50 % within 100 %) and
+every kind keeps at least one motion.
+
 The garment rig of a prepared store was fitted on every training sequence, carved ones too: carving
 changes what the networks train on, not the rig they drive.
 """
@@ -167,3 +171,41 @@ def choose_validation(store, keep: Callable[[str], bool], val_split: Optional[st
     else:
         log.info(result.note)
     return result
+
+
+def motion_kind(name: str) -> str:
+    """The family of a motion from its name (:attr:`Motion.name`): the procedural generator's (``walk`` for
+    ``walk:seed=3``), ``"file"`` for any other motion."""
+    return name.split(":")[0] if ":seed=" in name else "file"
+
+
+def keep_fraction(kind_of: dict[str, str], fraction: float) -> list[str]:
+    """The motions kept by a training ``fraction`` in (0, 1]: of each kind's ``n`` motions (``kind_of``: motion
+    -> kind), the first ``ceil(fraction * n)`` (at least one) in :func:`motion_rank` order; sorted. Nested:
+    what a smaller fraction keeps, a larger one keeps too."""
+    by_kind: dict[str, list[str]] = {}
+    for motion, kind in kind_of.items():
+        by_kind.setdefault(kind, []).append(motion)
+    return sorted(m for motions in by_kind.values()
+                  for m in sorted(motions, key=motion_rank)[:max(1, math.ceil(fraction * len(motions)))])
+
+
+def train_on_fraction(store, validation: Validation, fraction: float) -> Validation:
+    """``validation`` with only a ``fraction`` in (0, 1] of its training motions training (a learning curve):
+    :func:`keep_fraction` of the training motions by :func:`motion_kind` of the stored motion. Every sequence
+    of a kept motion trains; the validation sequences are unchanged.
+
+    Raises:
+        InputError: a fraction outside (0, 1].
+    """
+    if not 0 < fraction <= 1 or not math.isfinite(fraction):
+        raise InputError(f"the training fraction must be in (0, 1], got {fraction}", store.path)
+    if fraction == 1:
+        return validation
+    motion_of = {n: store.sequence(n).motion for n in validation.train}
+    kept = set(keep_fraction({m: motion_kind(store.motion(m).name) for m in set(motion_of.values())}, fraction))
+    train = [n for n in validation.train if motion_of[n] in kept]
+    note = (f"{validation.note}; training on {len(kept)} of {len(set(motion_of.values()))} training motions "
+            f"(fraction {fraction:g} of each kind: {len(train)} sequences)")
+    log.info(note)
+    return Validation(validation.source, train, validation.val, validation.motions, note)
