@@ -10,6 +10,7 @@ Both give the same vertices.
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,8 @@ from loosefit.motion_range import range_warnings
 from loosefit.threads import torch_threads
 from loosefit.training import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
+
+log = logging.getLogger(__name__)
 
 
 def load_run(run_dir: str | Path, checkpoint: str = "best"):
@@ -213,20 +216,25 @@ def _bind_garment(model, config, garment, body):
     """A multi-garment model bound to ``garment`` worn on ``body`` (see :class:`Animator`)."""
     from loosefit.body import AnnyBody
     from loosefit.garment import Garment
+    from loosefit.garment.body_fit import refit
     from loosefit.garment.obj_io import read_obj
     from loosefit.models.multi_garment import garment_graph
     from loosefit.models.swingar import BoundSwinGar
 
     if garment is None:
         raise InputError("a multi-garment model animates the garment it is given: pass the garment (--garment)")
+    body = AnnyBody() if body is None else body
     if not isinstance(garment, Garment):
         path = Path(garment)
         if Garment.sidecar_path(path).is_file():
-            garment = Garment.load(path)
+            garment, fitted = refit(Garment.load(path), body, path)
+            if fitted is not None:
+                log.warning("%s: made on another Anny shape, draped onto this body first (%.1f%% of vertices more than "
+                            "2 mm inside it before, %.1f%% after)", path, fitted["inside_before_percent"],
+                            fitted["inside_after_percent"])
         else:
             verts, faces = read_obj(path)
             garment = Garment(verts, faces, np.zeros(len(verts), bool), "imported", name=path.stem)
-    body = AnnyBody() if body is None else body
     if not hasattr(body, "shape") or not hasattr(body.shape, "to_array"):
         raise InputError("a multi-garment model reads Anny bodies (their shape values)")
     # the descriptor the run was trained with (its method.yaml): spectral, Euclidean or none

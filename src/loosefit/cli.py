@@ -102,6 +102,13 @@ def _shape_text(shape: dict) -> str:
     return ",".join(f"{k}={v:g}" for k, v in shape.items())
 
 
+def _refit_line(path, fitted: dict) -> str:
+    """What :func:`loosefit.garment.body_fit.refit` did to the garment file ``path``, for people."""
+    return (f"{path}: made on the body {_shape_text(fitted['from_shape'])}, draped onto "
+            f"{_shape_text(fitted['to_shape'])}: {fitted['inside_before_percent']:g}% of vertices more than 2 mm "
+            f"inside the body before, {fitted['inside_after_percent']:g}% after")
+
+
 def cmd_garment_make(args):
     from loosefit.garment import make_garment
 
@@ -211,9 +218,7 @@ def cmd_simulate(args):
     print(json.dumps(result.stats, indent=2, default=str))
     fitted = result.stats.get("garment_fit")
     if fitted is not None and "from_shape" in fitted:
-        print(f"{args.garment}: made on the body {_shape_text(fitted['from_shape'])}, draped onto "
-              f"{_shape_text(fitted['to_shape'])}: {fitted['inside_before_percent']:g}% of vertices more than 2 mm "
-              f"inside the body before, {fitted['inside_after_percent']:g}% after")
+        print(_refit_line(args.garment, fitted))
     elif fitted is not None:
         print(f"{args.garment}: fitted as a garment made for another body ({fitted['why']}): made for "
               f"{_shape_text(fitted['shape'])}; {fitted['inside_percent']:g}% of vertices more than 2 mm inside this body")
@@ -279,11 +284,14 @@ def cmd_animate(args):
     motions = [load_motion(path, body, joint_map=args.joint_map) for path in args.motion]
     if is_static_run(args.run):
         from loosefit.garment import Garment
+        from loosefit.garment.body_fit import refit
 
         if not args.garment:
             raise InputError("this run animates any garment: give --garment (in the rest pose of --shape)", args.run)
         animator = AnyGarmentAnimator(args.run, checkpoint=args.checkpoint, threads=args.threads, device=args.device)
-        garment = Garment.load(args.garment)
+        garment, fitted = refit(Garment.load(args.garment), body, args.garment)
+        if fitted is not None:
+            print(_refit_line(args.garment, fitted))
         pair = animator.pair(garment.verts, garment.faces, body)
         results, faces = [animator.animate(pair, m) for m in motions], garment.faces
     else:
@@ -519,7 +527,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--motion", required=True, action="append", help="motion .npz / .bvh / AMASS .npz (repeatable)")
     joint_map_option(sp)
     sp.add_argument("--garment", default=None, help="fitgar and swingar runs: the garment .obj to animate (any vertex "
-                    "count), in the rest pose of --shape")
+                    "count), in the rest pose of --shape; a loosefit garment made on another shape is draped onto it")
     body_options(sp)
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")

@@ -374,6 +374,33 @@ def test_animate_an_unseen_garment(trained_run, store, body, tmp_path):
         Animator(trained_run)
 
 
+def test_a_garment_made_on_another_shape_is_draped_before_animation(trained_run, store, tmp_path, caplog):
+    """A skirt made on a heavier body, animated on the average one: the CLI drapes it onto this body first
+    (warned) and animates that, a waistband the size of this body's waist, not the heavier one's."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.animate import Animator
+    from loosefit.garment import Garment
+    from loosefit.garment.body_fit import refit
+    from loosefit.garment.landmarks import measure_body
+    from loosefit.io.mesh_sequence import MeshSequence
+
+    heavy = make_garment("skirt", AnnyBody(AnnyShape(weight=0.9)), seed=7, edge_length=0.05)
+    heavy.save(tmp_path / "heavy.obj")
+    DatasetStore.open(store).motion("walk").save(tmp_path / "walk.npz")
+    with caplog.at_level("WARNING", logger="loosefit.animate"):
+        assert main(["animate", str(trained_run), "--garment", str(tmp_path / "heavy.obj"), "--motion",
+                     str(tmp_path / "walk.npz"), "--out", str(tmp_path / "a.npz"), "--collision", "none"]) == 0
+    assert "made on another Anny shape, draped onto this body first" in caplog.text
+    # what was animated is the garment draped onto this body (refit), whose waistband came in with it
+    body = AnnyBody()
+    draped, _ = refit(Garment.load(tmp_path / "heavy.obj"), body)
+    sdf = measure_body(body).sdf
+    assert np.median(sdf.query(heavy.verts[heavy.pinned])) > np.median(sdf.query(draped.verts[draped.pinned])) + 0.005
+    expected = Animator(trained_run, garment=draped, body=body).animate(DatasetStore.open(store).motion("walk"))
+    np.testing.assert_allclose(MeshSequence.load(tmp_path / "a.npz").verts, expected, atol=1e-5)
+
+
 def test_collision_post_process_from_the_cli(trained_run, store, body, tmp_path):
     """``loosefit train --method collision`` fits the body SDF on the store's bodies and motions;
     ``loosefit animate --collision`` applies SwinGar Eq. 10 with it, with the exact distance, or pushes out."""
