@@ -79,3 +79,47 @@ def test_relative_skinning_features_on_the_body_ignore_root_translation(proxy_bo
         moved = posed.verts - (posed.joints[:, :1] - proxy_body.rest_root_position())
         assert np.abs(feats[-1] - moved).max() < 1e-4
     assert np.abs(feats[0] - feats[1]).max() < 1e-4
+
+
+def test_normal_projection_spreads_a_cone_that_the_closest_point_collapses():
+    """Points in the cone of normals at a vertex of an icosahedron (2 m out from a unit one) all have that
+    vertex as their closest point; along the interpolated normal field each gets a point of its own, from
+    which it lies exactly on the interpolated normal (x = P(b) + t N(b), t > 0)."""
+    import trimesh
+
+    from loosefit.geometry.features import closest_body_points, normal_projection_points
+    from loosefit.geometry.normals import vertex_normals
+
+    ico = trimesh.creation.icosahedron()
+    P, F = np.asarray(ico.vertices, np.float64), np.asarray(ico.faces, np.int64)
+    apex = P[0] / np.linalg.norm(P[0])
+    side = np.cross(apex, [0.0, 0.0, 1.0] if abs(apex[2]) < 0.9 else [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    up = np.cross(apex, side)
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    dirs = apex + 0.08 * (np.cos(angles)[:, None] * side + np.sin(angles)[:, None] * up)
+    x = 3.0 * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    face, bary = closest_body_points(x, P, F)
+    closest = np.einsum("vk,vkc->vc", bary, P[F[face]])
+    np.testing.assert_allclose(closest, np.tile(P[0], (len(x), 1)), atol=1e-9)
+    face, bary = normal_projection_points(x, P, F)
+    point = np.einsum("vk,vkc->vc", bary, P[F[face]])
+    normal = np.einsum("vk,vkc->vc", bary, vertex_normals(P, F).astype(np.float64)[F[face]])
+    t = np.einsum("vc,vc->v", x - point, normal) / np.einsum("vc,vc->v", normal, normal)
+    assert (t > 0).all()
+    np.testing.assert_allclose(point + t[:, None] * normal, x, atol=1e-6)
+    assert cdist(point, point)[np.triu_indices(len(x), 1)].min() > 1e-3
+
+
+def test_normal_projection_on_a_plane_is_the_orthogonal_projection():
+    """All normals equal: the projection along them is the foot of the perpendicular, the closest point."""
+    from loosefit.geometry.features import normal_projection_points
+
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 6)), -1).reshape(-1, 2)
+    P = np.c_[g, np.zeros(len(g))]
+    F = np.array([[i * 6 + j, i * 6 + j + 1, (i + 1) * 6 + j + 1] for i in range(5) for j in range(5)]
+                 + [[i * 6 + j, (i + 1) * 6 + j + 1, (i + 1) * 6 + j] for i in range(5) for j in range(5)])
+    F = F[:, [0, 2, 1]] if np.cross(P[F[0, 1]] - P[F[0, 0]], P[F[0, 2]] - P[F[0, 0]])[2] < 0 else F
+    x = np.random.default_rng(0).uniform([0.1, 0.1, 0.05], [0.9, 0.9, 0.5], (20, 3))
+    face, bary = normal_projection_points(x, P, F)
+    np.testing.assert_allclose(np.einsum("vk,vkc->vc", bary, P[F[face]]), np.c_[x[:, :2], np.zeros(len(x))], atol=1e-9)

@@ -77,7 +77,8 @@ def test_bad_input(case):
 @pytest.fixture(scope="module")
 def surface(case):
     body, garment, motion, _, _, posed = case
-    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3])
+    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3],
+                                 anchor="surface")
     return pair, pair.frames(motion)
 
 
@@ -132,3 +133,21 @@ def test_shared_anchor_fraction(case, surface):
     assert shared["largest"] == count.max() and shared["vertices"] == pair.num_verts
     on_surface = shared_anchor_fraction(surface[0])
     assert on_surface["fraction"] < 0.5 * shared["fraction"], (on_surface, shared)
+
+
+def test_normal_anchor_is_where_the_body_normal_points_at_the_vertex(case, surface):
+    """The default anchor: each garment vertex lies on the body's interpolated normal from its anchor (t > 0; the
+    corners' normals from the faces around them, as the inputs take them), at least as far as its closest point;
+    anchors are shared no more than the closest points are."""
+    body, garment, *_ = case
+    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3])
+    assert pair.anchor == "normal"
+    anchors = pair.rest_anchors()
+    corner_normals = vertex_normals(pair.ring_rest, pair.ring_faces).astype(np.float64)[pair.ring_tri]
+    normal = np.einsum("vk,vkc->vc", pair.bary, corner_normals)
+    t = np.einsum("vc,vc->v", garment.verts - anchors, normal) / np.einsum("vc,vc->v", normal, normal)
+    assert (t > 0).all()
+    np.testing.assert_allclose(anchors + t[:, None] * normal, garment.verts, atol=1e-5)
+    closest = np.linalg.norm(garment.verts - surface[0].rest_anchors(), axis=1)
+    assert (np.linalg.norm(garment.verts - anchors, axis=1) >= closest - 1e-7).all()
+    assert shared_anchor_fraction(pair)["fraction"] <= shared_anchor_fraction(surface[0])["fraction"]

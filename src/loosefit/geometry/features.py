@@ -6,6 +6,8 @@
 - :func:`vertex_joint_distances`: distance from every vertex to every joint, ``x_i`` in FitGar.
 - :func:`closest_body_points`: the closest point on the body surface (a triangle and barycentric
   coordinates), a one-to-one alternative to the closest vertex for FitGar's anchors.
+- :func:`normal_projection_points`: the point of the body surface whose interpolated normal passes through
+  the garment vertex (Phong projection), which separates what the closest point maps onto one convex vertex.
 - :func:`relative_skinning_features`: ``p_i = sum_s w_si G_s(theta) G_s(theta*)^-1 pbar_i``: the
   linearly blend-skinned rest position without the root's translation, so a body translated without
   rotation keeps the same features.
@@ -121,3 +123,67 @@ def closest_body_points(garment_verts: np.ndarray, body_verts: np.ndarray, body_
     # rounding leaves points on an edge a hair outside their triangle
     bary = np.clip(bary, 0.0, 1.0)
     return face.astype(np.int64), bary / bary.sum(1, keepdims=True)
+
+
+def normal_projection_points(garment_verts: np.ndarray, body_verts: np.ndarray, body_faces: np.ndarray,
+                             rings: int = 2, iterations: int = 12, tolerance: float = 1e-7
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """Each garment vertex's projection onto the body along the body's smooth normal field (Phong projection).
+
+    The closest point of the surface maps every point in the cone of normals at a convex vertex onto that one
+    vertex (a long skirt's hem onto a few shin vertices). With the area-weighted vertex normals ``n_k``
+    interpolated linearly over each triangle, ``N(b) = sum_k b_k n_k``, the projection is the surface point
+    ``P(b) = sum_k b_k p_k`` with ``x = P(b) + t N(b)``, ``t >= 0``: a smooth map, one point per direction. It
+    is solved by Newton's method in ``(b_1, b_2, t)`` on every triangle within ``rings`` rings (sharing a vertex,
+    repeated) of the closest point's, started at the triangle's centre; of the solutions inside their triangle
+    (to ``1e-6``) with ``t >= 0`` and residual under ``tolerance`` m, the nearest (smallest ``t |N|``) is kept.
+    A vertex without one keeps its closest point.
+
+    Args:
+        garment_verts: ``(Vg, 3)`` metres, outside the body. body_verts: ``(Vb, 3)``. body_faces: ``(F, 3)`` int.
+
+    Returns:
+        ``face (Vg,)`` int64 and ``bary (Vg, 3)`` float64 as :func:`closest_body_points`.
+    """
+    from loosefit.geometry.normals import vertex_normals
+
+    face, bary = closest_body_points(garment_verts, body_verts, body_faces)
+    x = np.asarray(garment_verts, np.float64)
+    P = np.asarray(body_verts, np.float64)
+    F = np.asarray(body_faces, np.int64)
+    N = vertex_normals(P, F).astype(np.float64)
+    incidence = sp.csr_matrix((np.ones(F.size), (np.repeat(np.arange(len(F)), 3), F.ravel())), shape=(len(F), len(P)))
+    near = sp.identity(len(F), format="csr")
+    for _ in range(rings):  # faces sharing a vertex with the set so far
+        near = ((near @ incidence) @ incidence.T).astype(bool).astype(np.float64).tocsr()
+    rows = near[face]
+    owner = np.repeat(np.arange(len(x)), np.diff(rows.indptr))
+    cand = rows.indices.astype(np.int64)
+    p0, e1, e2 = P[F[cand, 0]], P[F[cand, 1]] - P[F[cand, 0]], P[F[cand, 2]] - P[F[cand, 0]]
+    n0, d1, d2 = N[F[cand, 0]], N[F[cand, 1]] - N[F[cand, 0]], N[F[cand, 2]] - N[F[cand, 0]]
+    target = x[owner]
+    u = np.full(len(cand), 1.0 / 3.0)
+    v = np.full(len(cand), 1.0 / 3.0)
+    normal = n0 + u[:, None] * d1 + v[:, None] * d2
+    t = np.einsum("nc,nc->n", target - (p0 + u[:, None] * e1 + v[:, None] * e2), normal) / np.einsum(
+        "nc,nc->n", normal, normal)
+    for _ in range(iterations):
+        normal = n0 + u[:, None] * d1 + v[:, None] * d2
+        residual = p0 + u[:, None] * e1 + v[:, None] * e2 + t[:, None] * normal - target
+        J = np.stack([e1 + t[:, None] * d1, e2 + t[:, None] * d2, normal], axis=2)
+        ok = np.abs(np.linalg.det(J)) > 1e-18
+        step = np.zeros_like(residual)
+        step[ok] = np.linalg.solve(J[ok], residual[ok][..., None])[..., 0]
+        u, v, t = u - step[:, 0], v - step[:, 1], t - step[:, 2]
+    normal = n0 + u[:, None] * d1 + v[:, None] * d2
+    residual = np.linalg.norm(p0 + u[:, None] * e1 + v[:, None] * e2 + t[:, None] * normal - target, axis=1)
+    inside = (u >= -1e-6) & (v >= -1e-6) & (u + v <= 1 + 1e-6) & (t >= 0) & (residual < tolerance)
+    distance = np.where(inside, t * np.linalg.norm(normal, axis=1), np.inf)
+    order = np.lexsort((distance, owner))  # per owner, the nearest valid solution first
+    first = order[np.r_[0, np.flatnonzero(np.diff(owner[order])) + 1]]
+    found = np.isfinite(distance[first])
+    face, bary = face.copy(), bary.copy()
+    w = np.clip(np.stack([1 - u - v, u, v], 1), 0.0, 1.0)
+    face[owner[first[found]]] = cand[first[found]]
+    bary[owner[first[found]]] = w[first[found]] / w[first[found]].sum(1, keepdims=True)
+    return face, bary

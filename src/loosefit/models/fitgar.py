@@ -52,10 +52,11 @@ Departures from the paper, named:
 - the parser's ReLU follows every layer, its last included (Sec. 5.1: three layers "and ReLU"), so the
   encoding is never negative and FitGar Eq. 7's product can only gate a feature (scale it down, up or shut
   it), never flip its sign;
-- the anchors ``I M_b`` are each garment vertex's closest point on the body surface (a triangle and barycentric
-  coordinates, the normal and skinning weights interpolated), where the paper subdivides SMPL to 27,554 vertices
-  and takes the closest vertex; :mod:`loosefit.models.fitgar_inputs` measures both (the closest Anny vertex stays
-  selectable, ``anchor="vertex"``, for runs recorded before);
+- the anchors ``I M_b`` are each garment vertex's projection onto the body surface along its interpolated normals
+  (a triangle and barycentric coordinates, the normal and skinning weights interpolated), where the paper
+  subdivides SMPL to 27,554 vertices and takes the closest vertex; :mod:`loosefit.models.fitgar_inputs` measures
+  the choices (the closest surface point and the closest Anny vertex stay selectable, ``anchor="surface"`` and
+  ``"vertex"``, for runs recorded before);
 - ``beta`` is the body model's shape vector and ``theta`` 6D rotations (SMPL: 10 and 72 axis-angle values).
 """
 
@@ -71,7 +72,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals_torch
 from loosefit.models.fitgar_data import GarmentFrames, check_frame_choice, collate_frames
 from loosefit.models.cuda_graph import graphs_enabled
-from loosefit.models.fitgar_inputs import check_anchor_mode
+from loosefit.models.fitgar_inputs import ANCHOR_MODES, check_anchor_mode
 from loosefit.models.fitgar_stream import FitGarStream
 from loosefit.models.layers.decomposed_output import DIRECT_MODES, DecomposedOutput, DirectOutput
 from loosefit.models.layers.edge_pool import EdgeContractionPooling
@@ -372,11 +373,11 @@ class FitGar(nn.Module):
 
     def check_anchor(self, batch: dict) -> None:
         """Refuse frames whose garment-body pairs were anchored otherwise than this model's training frames."""
-        flag = batch.get("surface_anchor")
-        if self.anchor is None or flag is None or len(flag) == 0:
+        code = batch.get("anchor_code")
+        if self.anchor is None or code is None or len(code) == 0:
             return
-        given = "surface" if bool(flag[0] > 0.5) else "vertex"
-        if given != self.anchor or bool(((flag > 0.5) != (flag[0] > 0.5)).any()):
+        given = ANCHOR_MODES[int(round(float(code[0])))]
+        if given != self.anchor or bool((code != code[0]).any()):
             old = "" if "anchor" in self._sizes else " (a run recorded before anchors were: its sizes name none)"
             raise InputError(f"this FitGar was trained on {self.anchor!r} anchors{old}, the frames were built with "
                              f"{given!r} ones: build the garment-body pairs with GarmentBodyPair.build(..., "

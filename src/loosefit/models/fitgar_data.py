@@ -8,7 +8,7 @@ holds the frame's inputs (:mod:`loosefit.models.fitgar_inputs`) and its targets,
 - ``verts (V, 3)``: the simulated garment, metres;
 - ``smooth (V, 3)``: the same smoothed by the ``fitgar`` preset (FitGar Sec. 5.1: diffusion 0.12, 40
   iterations; pinned vertices kept), the coarse generator's target.
-- ``surface_anchor ()``: which anchors the pair was built with (:func:`surface_flag`).
+- ``anchor_code ()``: which anchors the pair was built with (:func:`anchor_code`).
 
 :func:`collate_frames` batches frames of any garments into one disjoint graph (nodes of every frame one
 after the other, edges and faces shifted): node arrays ``(N, ...)`` with ``batch (N,)`` naming each
@@ -25,13 +25,14 @@ from torch.utils.data import Dataset
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.smoothing import get_preset, smoothing_operator
-from loosefit.models.fitgar_inputs import DEFAULT_ANCHOR, GarmentBodyPair, PosedSkeleton, check_anchor_mode, pose_motion
+from loosefit.models.fitgar_inputs import (ANCHOR_MODES, DEFAULT_ANCHOR, GarmentBodyPair, PosedSkeleton,
+                                          check_anchor_mode, pose_motion)
 from loosefit.models.motion_features import to_canonical
 
 #: Per-node arrays of an item and of a batch.
 NODE_KEYS = ("anchor", "body_normal", "body_rel", "garment_rel", "verts", "smooth")
 #: Per-frame arrays.
-FRAME_KEYS = ("joints", "pose", "shape", "alpha", "surface_anchor")
+FRAME_KEYS = ("joints", "pose", "shape", "alpha", "anchor_code")
 #: Smallest standard deviation of an input normalised per feature (body shape values, fit factors).
 STD_FLOOR = 1e-2
 
@@ -138,7 +139,7 @@ class GarmentFrames(Dataset):
         item = {key: value[0] for key, value in pair.inputs(posed).items() if key not in ("rot", "origin")}
         verts = to_canonical(s["verts"][t:t + 1], posed.rot, posed.origin)[0]
         item.update(verts=verts, smooth=self.smoothers[s["garment"]](verts), shape=pair.shape, alpha=pair.alpha,
-                    edges=pair.edges, faces=pair.faces, surface_anchor=surface_flag(pair))
+                    edges=pair.edges, faces=pair.faces, anchor_code=anchor_code(pair))
         return item
 
     def feature_stats(self, samples: int = 256) -> dict[str, np.ndarray]:
@@ -194,10 +195,10 @@ def collate_frames(items: list[dict]) -> dict:
     return out
 
 
-def surface_flag(pair: GarmentBodyPair) -> np.ndarray:
-    """An item's ``surface_anchor ()``: 1 when its pair anchors on the body surface, 0 on body vertices (the model
-    refuses frames built with anchors other than those it was trained on)."""
-    return np.float32(pair.anchor == "surface")
+def anchor_code(pair: GarmentBodyPair) -> np.ndarray:
+    """An item's ``anchor_code ()``: the index of its pair's anchor in :data:`ANCHOR_MODES` (the model refuses
+    frames built with anchors other than those it was trained on)."""
+    return np.float32(ANCHOR_MODES.index(pair.anchor))
 
 
 def frame_items(pair: GarmentBodyPair, inputs: dict[str, np.ndarray]) -> list[dict]:
@@ -205,4 +206,4 @@ def frame_items(pair: GarmentBodyPair, inputs: dict[str, np.ndarray]) -> list[di
     T = len(inputs["anchor"])
     return [{**{k: inputs[k][t] for k in ("anchor", "body_normal", "body_rel", "garment_rel", "joints", "pose")},
              "shape": pair.shape, "alpha": pair.alpha, "edges": pair.edges, "faces": pair.faces,
-             "surface_anchor": surface_flag(pair)} for t in range(T)]
+             "anchor_code": anchor_code(pair)} for t in range(T)]

@@ -23,27 +23,30 @@ the cost follows the garment.
 
 Departure from the paper, named: the anchors are points of the body surface, not body vertices. FitGar
 subdivides SMPL once (6,890 to 27,554 vertices) so that every garment vertex has a body vertex of its own
-(Sec. 4.1, 4.3, 5.1). Here each garment vertex is anchored at its closest point on the rest body's surface
-(``anchor="surface"``, the default): a triangle and barycentric coordinates, with which the posed triangle's
-corners, their area-weighted normals (renormalised) and skinning weights are interpolated, so the anchor stays
-on the posed surface. Chosen by measurement (``benchmarks/capacity.py anchors``, seed-0 templates at 3 cm edges
-on the average Anny body; share of garment vertices whose anchor another one's is within 1 mm, largest group):
+(Sec. 4.1, 4.3, 5.1). Here each garment vertex is anchored at a point of the rest body's surface: a triangle and
+barycentric coordinates, with which the posed triangle's corners, their area-weighted normals (renormalised) and
+skinning weights are interpolated, so the anchor stays on the posed surface. The point is the garment vertex's
+projection along the body's interpolated normal field (``anchor="normal"``, the default;
+:func:`~loosefit.geometry.features.normal_projection_points`), or its closest point (``anchor="surface"``). Chosen
+by measurement (``benchmarks/capacity.py anchors``, seed-0 templates at 3 cm edges on the average Anny body; share
+of garment vertices whose anchor another one's is within 1 mm, largest group):
 
-=========== ======== ====================== ============================ ==================
-kind        vertices closest Anny vertex    closest vertex, subdivided   closest surface
-                     (13,718)               once (54,848; the paper's)   point (default)
-=========== ======== ====================== ============================ ==================
-skirt       781      45 %, 6                10 %, 3                      0.5 %, 2
-dress       2,615    76 %, 28               56 %, 22                     23 %, 19
-long shirt  1,807    25 %, 4                3.8 %, 3                     0.4 %, 2
-jumpsuit    2,455    58 %, 9                25 %, 9                      5.8 %, 9
-=========== ======== ====================== ============================ ==================
+=========== ======== ================= ========================== ================= =====================
+kind        vertices closest Anny      closest vertex, subdivided closest surface   projection along the
+                     vertex (13,718)   once (54,848; the paper's) point             normals (default)
+=========== ======== ================= ========================== ================= =====================
+skirt       781      45 %, 6           10 %, 3                    0.5 %, 2          0 %, 1
+dress       2,615    76 %, 28          56 %, 22                   23 %, 19          0.6 %, 6
+long shirt  1,807    25 %, 4           3.8 %, 3                   0.4 %, 2          0 %, 1
+jumpsuit    2,455    58 %, 9           25 %, 9                    5.8 %, 9          0.7 %, 3
+=========== ======== ================= ========================== ================= =====================
 
-What the surface leaves shared is low on the garment and far from the body (the dress: mean height 0.45 m, 28 cm from
-the body, against 0.76 m and 15 cm for the rest; the jumpsuit's trouser ends, 0.19 m and 13 cm), two thirds of it at a
-body vertex itself: every point in the cone of normals at a convex vertex has that vertex as its closest point.
-``anchor="vertex"`` (the closest body vertex, ``nearest``) is kept: runs recorded before anchors were (their sizes
-name none) were trained on it.
+What the closest point leaves shared is low on the garment and far from the body (the dress's hem: 28 cm from the
+body; the jumpsuit's trouser ends, 13 cm), two thirds of it at a body vertex itself: every point in the cone of
+normals at a convex vertex has that vertex as its closest point. The projection along the normals gives each
+direction a point of its own; what it leaves within 1 mm is where the normals of the legs converge under a long
+hem. ``anchor="vertex"`` (the closest body vertex, ``nearest``) and ``"surface"`` are kept: runs record their
+anchor, and a run recorded before anchors were (its sizes name none) was trained on body vertices.
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from loosefit.errors import InputError
-from loosefit.geometry.features import closest_body_points, nearest_body_vertex
+from loosefit.geometry.features import closest_body_points, nearest_body_vertex, normal_projection_points
 from loosefit.geometry.laplacian import edges as mesh_edges
 from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
 from loosefit.geometry.normals import vertex_normals
@@ -84,8 +87,8 @@ def pose_vector(motion: Motion) -> np.ndarray:
 #: Where a garment vertex is anchored on the body (FitGar Eq. 5's ``I M_b``): ``"surface"``, its closest point
 #: on the body surface (one-to-one at 3 cm garment edges, see the module docstring); ``"vertex"``, its closest
 #: body vertex (many-to-one on Anny), the behaviour of runs that record no anchor.
-ANCHOR_MODES = ("surface", "vertex")
-DEFAULT_ANCHOR = "surface"
+ANCHOR_MODES = ("surface", "vertex", "normal")
+DEFAULT_ANCHOR = "normal"
 #: Anchors closer than this (metres) in the rest pose count as shared (:func:`shared_anchor_fraction`).
 SHARED_ANCHOR_DISTANCE = 1e-3
 
@@ -104,7 +107,7 @@ class GarmentBodyPair:
     Attributes:
         garment_verts: ``(V, 3)`` float32 rest garment, metres. faces: ``(F, 3)`` int64. edges: ``(2, E)`` int64.
         nearest: ``(V,)`` int64: the closest rest body vertex of each garment vertex (``"vertex"`` anchors), or
-            the corner of its anchor's triangle with the largest barycentric coordinate (``"surface"``).
+            the corner of its anchor's triangle with the largest barycentric coordinate (the others).
         ring_rest: ``(U, 3)`` float32 rest positions of the body vertices in the faces around the anchors'
             corners; ring_weights: ``(U, J)`` float32 their skinning weights; ring_faces: ``(K, 3)`` int64 those
             faces in that numbering; ring_tri: ``(V, 3)`` int64 where each anchor's three corners are (one
@@ -113,7 +116,7 @@ class GarmentBodyPair:
         weights: ``(V, J)`` float32 skinning weights at the anchors (interpolated; borrowed by the garment).
         rest_joints: ``(J, 3)`` float32. parents: ``(J,)`` int64.
         shape: ``(S,)`` float32 body shape ``beta``. alpha: ``(F,)`` float32 fit attribute.
-        anchor: ``"surface"`` or ``"vertex"`` (:data:`ANCHOR_MODES`).
+        anchor: ``"normal"``, ``"surface"`` or ``"vertex"`` (:data:`ANCHOR_MODES`).
     """
 
     garment_verts: np.ndarray
@@ -152,7 +155,8 @@ class GarmentBodyPair:
             corners = np.repeat(nearest[:, None], 3, 1)
             bary = np.tile([1.0, 0.0, 0.0], (len(nearest), 1))
         else:
-            face, bary = closest_body_points(garment_verts, rest, body_faces)
+            project = closest_body_points if anchor == "surface" else normal_projection_points
+            face, bary = project(garment_verts, rest, body_faces)
             corners = body_faces[face]
             nearest = corners[np.arange(len(corners)), bary.argmax(1)]
         around = body_faces[np.isin(body_faces, corners).any(1)]
