@@ -136,11 +136,11 @@ def entropy_at_init(store: Path, designs, alpha: str = "2.0", seed: int = 0) -> 
 
 def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: int = 1, steps: int = 600,
              lr: float = 1e-3, stage: str = "supervised", seed: int = 0, every: int = 50, patch: dict | None = None,
-             threads: int = 1) -> dict:
+             threads: int = 1, schedule: str = "constant") -> dict:
     """SwinGar learning ``windows`` windows of ``frames`` frames of one training garment by heart.
 
-    The model (``swingar-cpu.yaml`` with ``overrides``) is trained with Adam at a constant ``lr`` on those
-    windows alone for ``steps`` steps (loss of ``stage``), and scored on the same frames: the RMSE of the output,
+    The model (``swingar-cpu.yaml`` with ``overrides``) is trained with Adam at ``lr`` (``schedule``: constant, or
+    ``"cosine"``: decayed to zero over the steps) on those windows alone for ``steps`` steps (loss of ``stage``), and scored on the same frames: the RMSE of the output,
     of the coarse stage alone (LBS of the blend shapes with the dynamic weights) and the gradient norm of each
     top-level module at the first step. ``patch``: module constants of :mod:`loosefit.models.swingar` set for the
     run (e.g. ``{"OUTPUT_INIT": 1.0}``), restored after.
@@ -163,6 +163,7 @@ def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: 
         torch.manual_seed(seed)
         model = sw.SwinGar.from_data(data, cfg.model)
         opt = torch.optim.Adam(model.parameters(), lr)
+        decay = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps) if schedule == "cosine" else None
         curve, grads, t0 = [], {}, time.time()
 
         def score(step, loss):
@@ -182,8 +183,11 @@ def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: 
                     g = [p.grad.norm() ** 2 for p in module.parameters() if p.grad is not None]
                     grads[name] = float(torch.stack(g).sum().sqrt()) if g else None
             opt.step()
+            if decay is not None:
+                decay.step()
         verts = sum(int(g["graph_tensors"]["rest"].shape[0]) for g in batch[:1])
         return {"garment": garment, "vertices": verts, "frames": frames * windows, "steps": steps, "lr": lr,
+                "schedule": schedule,
                 "stage": stage, "overrides": list(overrides), "patch": patch or {}, "curve": curve,
                 "final_rmse_mm": curve[-1]["rmse_mm"], "best_rmse_mm": min(c["rmse_mm"] for c in curve),
                 "grad_norms_step0": grads}
@@ -294,6 +298,7 @@ def main() -> None:
     sp.add_argument("--stage", default="supervised")
     sp.add_argument("--set", action="append", default=[])
     sp.add_argument("--patch", action="append", default=[], help="NAME=VALUE: a module constant of models/swingar.py")
+    sp.add_argument("--schedule", choices=("constant", "cosine"), default="constant", help="the learning rate over the steps")
     sp.add_argument("--name", default="swingar-memorise")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -305,7 +310,7 @@ def main() -> None:
     else:
         patch = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.patch)}
         save_results(args.name, memorise(Path(args.data), args.garment, args.set, args.frames, args.windows,
-                                         args.steps, args.lr, args.stage, patch=patch))
+                                         args.steps, args.lr, args.stage, patch=patch, schedule=args.schedule))
 
 
 if __name__ == "__main__":
