@@ -30,8 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_results  # noqa: E402
-from accuracy import (garment_validation, garments_with_test, held_out_sequences, parse_sets,  # noqa: E402
-                      sequence_body, train_run)
+from accuracy import garment_validation, garments_with_test, held_out_sequences, parse_sets, train_run  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402

@@ -7,10 +7,10 @@ plan again redoes only those. A job that raises (a crash, not a quality failure)
 failed with a reason starting with ``"crashed:"`` and retried by the next run; the other jobs go on.
 
 With the plan's ``references`` (:class:`loosefit.sim.plan.ReferencePlan`), the reference runs of every test
-sequence stored ok are simulated after the test sequences and before the other sequences: run ``k`` is the base's job with the garment's start
-moved by :func:`perturb_start` (seed ``k``) and the base's solver steps a frame, stored with the sequence
-(:meth:`loosefit.data.store.DatasetStore.write_reference`) as it finishes, ok or failed by the gate like
-sequences; a crashed one is retried by the next run, and so is one whose plan entry changed (its hash).
+sequence stored ok are simulated after the test sequences and before the others: run ``k`` is the base's job
+with the garment's start moved by :func:`perturb_start` (seed ``k``) and the base's solver steps a frame, stored
+with the sequence (:meth:`loosefit.data.store.DatasetStore.write_reference`) as it finishes, ok or failed by the
+gate like sequences; a crashed one is retried by the next run, and so is one whose plan entry changed (its hash).
 Runs beyond ``count`` are dropped. A sequence that failed the gate gets none (it is never evaluated).
 
 Workers: ``workers=1`` without ``address`` simulates in this process; otherwise every job is a Ray
