@@ -13,6 +13,11 @@ Three measurements, each a subcommand writing ``benchmarks/results/<name>.json``
   attention entropy on them; ``--design`` picks the attention design.
 - ``memorise``: :func:`memorise`: a handful of training frames learnt by heart (Adam on them alone), the
   RMSE on them over the steps, with the coarse stage's share; ``--set`` / ``--patch`` for the hypotheses.
+- ``scale``: :func:`cmd_scale`: the held-out error against the training garments (``--counts`` 1, 2, 4: x1, x2,
+  x4 of the training garments, taken one of each kind in turn) and the steps: each count trains the CPU preset
+  with the curve's budget (``--set`` after it), validating on the test split only to draw the held-out curve
+  per epoch (``val_rmse_mm`` of the test windows against the optimiser steps); the final score is the last
+  checkpoint's, animated from the rest garment on every test sequence, next to body-LBS.
 
 Store (see ``/work/stores/swingar-attention.yaml`` for the plan used)::
 
@@ -20,6 +25,7 @@ Store (see ``/work/stores/swingar-attention.yaml`` for the plan used)::
     .venv/bin/python benchmarks/swingar_attention.py entropy --data STORE.zarr
     .venv/bin/python benchmarks/swingar_attention.py curve --data STORE.zarr --runs RUNS
     .venv/bin/python benchmarks/swingar_attention.py memorise --data STORE.zarr --garment skirt-0+average
+    .venv/bin/python benchmarks/swingar_attention.py scale --data STORE.zarr --runs RUNS [--counts 1,2,4]
 """
 
 from __future__ import annotations
@@ -196,7 +202,7 @@ def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: 
             setattr(sw, k, v)
 
 
-def held_out_scores(store: Path, run: Path, body, baseline: dict | None = None) -> dict:
+def held_out_scores(store: Path, run: Path, body, baseline: dict | None = None, checkpoint: str = "best") -> dict:
     """RMSE (mm, every frame, animated from the rest garment) of a run on each test sequence, and the attention
     entropy of its layers on the held-out garments' first windows."""
     from loosefit.animate import Animator, load_run
@@ -211,10 +217,10 @@ def held_out_scores(store: Path, run: Path, body, baseline: dict | None = None) 
             continue
         garment, motion, truth = store_.garment(seq.garment), store_.motion(seq.motion), seq.verts[:]
         if seq.garment not in animators:
-            animators[seq.garment] = Animator(run, garment=garment, body=body)
+            animators[seq.garment] = Animator(run, garment=garment, body=body, checkpoint=checkpoint)
         pred = animators[seq.garment].animate(motion)
         rows[name] = float(np.sqrt(((pred - truth) ** 2).sum(-1).mean()) * 1e3)
-    _, model, cfg = load_run(run)
+    _, model, cfg = load_run(run, checkpoint)
     data = MultiGarmentData(store, "test", body=False, **cfg.model.graph_settings())
     ds = windows_of(data, cfg, 4, 10_000)
     firsts = {}
@@ -273,6 +279,51 @@ def cmd_curve(args) -> None:
     save_results(args.name, results)
 
 
+def scale_garments(store, counts: list[int]) -> dict[int, list[str]]:
+    """The training garments of each count: the store's training garments ordered one of each kind in turn
+    (kinds and names sorted), the first ``count``."""
+    from loosefit.data.store import DatasetStore
+
+    store_ = DatasetStore.open(store)
+    names = sorted({store_.sequence(n).garment for n in store_.sequence_names(split="train")})
+    by_kind: dict[str, list[str]] = {}
+    for name in names:
+        by_kind.setdefault(store_.garment(name).kind, []).append(name)
+    order: list[str] = []
+    queues = [list(v) for _, v in sorted(by_kind.items())]
+    while any(queues):
+        order += [q.pop(0) for q in queues if q]
+    if max(counts) > len(order):
+        raise SystemExit(f"--counts asks for {max(counts)} training garments, the store has {len(order)}")
+    return {k: order[:k] for k in counts}
+
+
+def cmd_scale(args) -> None:
+    from loosefit.body import AnnyBody
+    from loosefit.training import train_model
+
+    torch.set_num_threads(1)
+    body = AnnyBody()
+    counts = [int(c) for c in args.counts.split(",")]
+    lbs = body_lbs_scores(Path(args.data), body)
+    results = {"settings": [*CURVE_SETTINGS, *args.set], "body_lbs_mean_mm": float(np.mean(list(lbs.values()))),
+               "counts": {}}
+    for count, garments in scale_garments(Path(args.data), counts).items():
+        run = Path(args.runs) / f"scale-{count}"
+        if not (run / "run.json").exists():
+            train_model("swingar", args.data, ",".join(garments), run, CPU_CONFIG, [*CURVE_SETTINGS, *args.set],
+                        val_split="test")
+        with open(run / "metrics.csv", newline="") as f:
+            curve = [{"stage": r["stage"], "epoch": int(r["epoch"]), "step": int(r["step"]),
+                      "val_rmse_mm": float(r["val_rmse_mm"])} for r in csv.DictReader(f) if r.get("val_rmse_mm")]
+        scores = held_out_scores(Path(args.data), run, body, checkpoint="last")
+        results["counts"][str(count)] = {"garments": garments, "held_out_curve": curve,
+                                         "mean_rmse_mm": scores["mean_rmse_mm"], "rmse_mm": scores["rmse_mm"],
+                                         "ratio_to_body_lbs": scores["mean_rmse_mm"] / results["body_lbs_mean_mm"]}
+        print(count, garments, scores["mean_rmse_mm"], flush=True)
+        save_results(args.name, results)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -288,6 +339,12 @@ def main() -> None:
     sp.add_argument("--seeds", default="0,1")
     sp.add_argument("--set", action="append", default=[])
     sp.add_argument("--name", default="swingar-alpha-curve")
+    sp = sub.add_parser("scale")
+    sp.add_argument("--data", required=True)
+    sp.add_argument("--runs", required=True)
+    sp.add_argument("--counts", default="1,2,4")
+    sp.add_argument("--set", action="append", default=[])
+    sp.add_argument("--name", default="swingar-scale")
     sp = sub.add_parser("memorise")
     sp.add_argument("--data", required=True)
     sp.add_argument("--garment", required=True)
@@ -305,6 +362,8 @@ def main() -> None:
     if args.command == "entropy":
         save_results(args.name, {"store": args.data, "at_init": entropy_at_init(Path(args.data),
                                                                                  args.designs.split(","))})
+    elif args.command == "scale":
+        cmd_scale(args)
     elif args.command == "curve":
         cmd_curve(args)
     else:
