@@ -74,8 +74,15 @@ def _torch_corner_sum(vectors: torch.Tensor, faces: torch.Tensor, V: int) -> tor
 
 
 _NUMPY = _Ops(cross, lambda v: np.linalg.norm(v, axis=-1, keepdims=True), np.maximum, _numpy_corner_sum)
-_TORCH = _Ops(lambda u, v: torch.cross(u, v, dim=-1), lambda v: v.norm(dim=-1, keepdim=True), torch.clamp_min,
-              _torch_corner_sum)
+def _torch_cross(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """``u x v`` over the last axis from its components: twice as fast as ``torch.cross`` on the CPU, backward
+    included, for the ``(B, T, F, 3)`` face vectors of a training batch (measured: 4 x 90 x 2,242 faces)."""
+    u0, u1, u2 = u.unbind(-1)
+    v0, v1, v2 = v.unbind(-1)
+    return torch.stack([u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0], -1)
+
+
+_TORCH = _Ops(_torch_cross, lambda v: v.norm(dim=-1, keepdim=True), torch.clamp_min, _torch_corner_sum)
 
 
 def _face_cross(ops: _Ops, verts, faces):
