@@ -70,11 +70,11 @@ def design_overrides(design: str) -> list[str]:
     return [f"model.{k}={str(DESIGNS[design][k]).lower()}" for k in keys]
 
 
-def load_cfg(overrides):
+def load_cfg(overrides, config: Path = CPU_CONFIG):
     from loosefit.config import load_config
     from loosefit.models.swingar import Config
 
-    return load_config(Config, CPU_CONFIG, list(overrides))
+    return load_config(Config, config, list(overrides))
 
 
 def windows_of(data, cfg, window: int, stride: int):
@@ -142,10 +142,10 @@ def entropy_at_init(store: Path, designs, alpha: str = "2.0", seed: int = 0) -> 
 
 def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: int = 1, steps: int = 600,
              lr: float = 1e-3, stage: str = "supervised", seed: int = 0, every: int = 50, patch: dict | None = None,
-             threads: int = 1, schedule: str = "constant") -> dict:
+             threads: int = 1, schedule: str = "constant", config: Path = CPU_CONFIG) -> dict:
     """SwinGar learning ``windows`` windows of ``frames`` frames of one training garment by heart.
 
-    The model (``swingar-cpu.yaml`` with ``overrides``) is trained with Adam at ``lr`` (``schedule``: constant, or
+    The model (``config``, by default ``swingar-cpu.yaml``, with ``overrides``) is trained with Adam at ``lr`` (``schedule``: constant, or
     ``"cosine"``: decayed to zero over the steps) on those windows alone for ``steps`` steps (loss of ``stage``), and scored on the same frames: the RMSE of the output,
     of the coarse stage alone (LBS of the blend shapes with the dynamic weights) and the gradient norm of each
     top-level module at the first step. ``patch``: module constants of :mod:`loosefit.models.swingar` set for the
@@ -161,7 +161,7 @@ def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: 
         setattr(sw, k, v)
     try:
         torch.set_num_threads(threads)
-        cfg = load_cfg(overrides)
+        cfg = load_cfg(overrides, config)
         data = MultiGarmentData(store, "train", [garment], **cfg.model.graph_settings())
         ds = windows_of(data, cfg, frames, 17)
         picks = np.linspace(0, len(ds) - 1, windows).round().astype(int)
@@ -193,7 +193,7 @@ def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: 
                 decay.step()
         verts = sum(int(g["graph_tensors"]["rest"].shape[0]) for g in batch[:1])
         return {"garment": garment, "vertices": verts, "frames": frames * windows, "steps": steps, "lr": lr,
-                "schedule": schedule,
+                "schedule": schedule, "config": str(config),
                 "stage": stage, "overrides": list(overrides), "patch": patch or {}, "curve": curve,
                 "final_rmse_mm": curve[-1]["rmse_mm"], "best_rmse_mm": min(c["rmse_mm"] for c in curve),
                 "grad_norms_step0": grads}
@@ -356,6 +356,7 @@ def main() -> None:
     sp.add_argument("--set", action="append", default=[])
     sp.add_argument("--patch", action="append", default=[], help="NAME=VALUE: a module constant of models/swingar.py")
     sp.add_argument("--schedule", choices=("constant", "cosine"), default="constant", help="the learning rate over the steps")
+    sp.add_argument("--config", type=Path, default=CPU_CONFIG, help="the SwinGar config (default: the CPU preset)")
     sp.add_argument("--name", default="swingar-memorise")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -369,7 +370,8 @@ def main() -> None:
     else:
         patch = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.patch)}
         save_results(args.name, memorise(Path(args.data), args.garment, args.set, args.frames, args.windows,
-                                         args.steps, args.lr, args.stage, patch=patch, schedule=args.schedule))
+                                         args.steps, args.lr, args.stage, patch=patch, schedule=args.schedule,
+                                         config=args.config))
 
 
 if __name__ == "__main__":
