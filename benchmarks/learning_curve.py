@@ -59,16 +59,16 @@ def score_share(store: DatasetStore, garment: str, animator, lbs, names: list[st
         gt = np.asarray(seq.verts[:])
         pred = animator.animate(motion)
         count = gt.shape[0] * gt.shape[1]
-        row = {"rmse_mm": 1000.0 * rmse_m(pred, gt)}
-        base_sq.append(((row["rmse_mm"] / 1000.0) ** 2, count))
+        base = rmse_m(pred, gt)
+        base_sq.append((base**2, count))
         lbs_sq.append((rmse_m(lbs.animate(motion), gt) ** 2, count))
+        motions[seq.motion] = {"rmse_mm": 1000.0 * base}
         refs = store.references(name)
         if len(refs):
             score = References(gt, refs).score(pred)
-            row.update(rmse_vs_mean_mm=score.rmse_vs_mean_mm, floor_mm=score.floor_mm,
-                       vs_floor=score.rmse_vs_mean_mm / score.floor_mm)
+            motions[seq.motion].update(rmse_vs_mean_mm=score.rmse_vs_mean_mm, floor_mm=score.floor_mm,
+                                       vs_floor=score.rmse_vs_mean_mm / score.floor_mm)
             mean_sq.append(((score.rmse_vs_mean_mm / 1000.0) ** 2, count))
-        motions[seq.motion] = row
     out = {"rmse_mm": pooled_mm(base_sq), "lbs_rmse_mm": pooled_mm(lbs_sq), "motions": motions}
     out["over_lbs"] = out["rmse_mm"] / out["lbs_rmse_mm"]
     if len(mean_sq) == len(names):

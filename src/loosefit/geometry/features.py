@@ -155,18 +155,17 @@ def normal_projection_points(garment_verts: np.ndarray, body_verts: np.ndarray, 
     F = np.asarray(body_faces, np.int64)
     N = vertex_normals(P, F).astype(np.float64)
     incidence = sp.csr_matrix((np.ones(F.size), (np.repeat(np.arange(len(F)), 3), F.ravel())), shape=(len(F), len(P)))
-    near = sp.identity(len(F), format="csr")
-    face, bary = face.copy(), bary.copy()
+    sharing = ((incidence @ incidence.T) > 0).astype(np.float64).tocsr()  # faces sharing a vertex: one ring
+    near = sharing
     todo = np.arange(len(x))
     for ring in range(1, max(rings, 1) + 1):
-        near = ((near @ incidence) @ incidence.T).astype(bool).astype(np.float64).tocsr()  # one ring more
-        if ring < rings and ring > 1:
-            continue
-        found, cand, w = _project_along_normals(x[todo], face[todo], near, P, F, N, iterations, tolerance)
-        face[todo[found]], bary[todo[found]] = cand, w
-        todo = todo[~found]
+        if ring == 1 or ring == rings:  # one ring for every vertex, then ``rings`` for those without a solution
+            found, cand, w = _project_along_normals(x[todo], face[todo], near, P, F, N, iterations, tolerance)
+            face[todo[found]], bary[todo[found]] = cand, w
+            todo = todo[~found]
         if not len(todo):
             break
+        near = ((near @ sharing) > 0).astype(np.float64).tocsr()
     return face, bary
 
 

@@ -358,7 +358,7 @@ def _root_positions(solver: _Solver, source: SourceAnimation, rest: np.ndarray |
     target, roles = solver.target, solver.roles
     up_t = np.asarray(roles.up, np.float64)
     scale = solver.leg_target / solver.leg_source
-    feet_t = [target.joint_names.index(n) for n in roles.feet if solver.src_index(n) >= 0]
+    feet_t = _mapped_feet(solver)
     feet_s = solver.src[feet_t]
     root_s = solver.src_index(roles.root)
     height = source.positions[:, root_s, 2]
@@ -372,6 +372,12 @@ def _root_positions(solver: _Solver, source: SourceAnimation, rest: np.ndarray |
         contact = contact_height(source.positions[:, feet_s, 2])
         root[:, 2] = float(np.min(target.rest[feet_t] @ up_t)) + scale * (height - contact)
     return root
+
+
+def _mapped_feet(solver: _Solver) -> list[int]:
+    """The target's foot joints (:attr:`Roles.feet`) that have a source joint."""
+    names = solver.target.joint_names
+    return [names.index(n) for n in solver.roles.feet if solver.src_index(n) >= 0]
 
 
 def contact_height(feet: np.ndarray) -> float:
@@ -396,7 +402,7 @@ def _match_contact(local: np.ndarray, root: np.ndarray, solver: _Solver, source:
     """
     target, roles = solver.target, solver.roles
     up = np.asarray(roles.up, np.float64)
-    feet_t = [target.joint_names.index(n) for n in roles.feet if solver.src_index(n) >= 0]
+    feet_t = _mapped_feet(solver)
     with torch.no_grad():  # posed joints in the Z-up world
         world = forward_kinematics(torch.from_numpy(local), torch.from_numpy(root), torch.from_numpy(target.rest),
                                    target.parents)[:, feet_t, :3, 3].numpy()
