@@ -9,15 +9,17 @@ import pytest
 
 from tests.robustness.cases_pipeline import GARMENT, TINY_TRAIN
 from tests.robustness.catalog import all_cases
+from tests.robustness.forkserver import ForkServers
 from tests.robustness.harness import Shared, run_cases
 
 CASES = all_cases()
 
 
 @pytest.fixture(scope="session")
-def robustness_shared(tiny_store, tmp_path_factory) -> Shared:
+def robustness_shared(tiny_store, tmp_path_factory):
     """The tiny store, a virtualbones run trained on it in seconds, its training motion ``walk``, that
-    motion animated (a mesh sequence with the body) and a coarse skirt with its sidecar."""
+    motion animated (a mesh sequence with the body) and a coarse skirt with its sidecar; the session's pool of
+    fork servers that runs the commands."""
     from loosefit.cli import main
     from loosefit.training import train_model
 
@@ -29,8 +31,11 @@ def robustness_shared(tiny_store, tmp_path_factory) -> Shared:
                  ["garment", "make", "--kind", "skirt", "--seed", "0", "--edge-length", "0.05", "--param",
                   "length=0.45", "--param", "flare=25", "--out", str(garment)]):
         assert main(argv) == 0, argv
-    return Shared(root=root, store=tiny_store, run=run, motion=motion, seq=seq, garment=garment,
-                  plan=tiny_store.parent / "tiny.yaml", python=sys.executable)
+    shared = Shared(root=root, store=tiny_store, run=run, motion=motion, seq=seq, garment=garment,
+                    plan=tiny_store.parent / "tiny.yaml", python=sys.executable)
+    shared.forks = ForkServers(shared.python, shared.env())  # one pool for every module's cases
+    yield shared
+    shared.forks.close()
 
 
 @pytest.fixture(scope="module")

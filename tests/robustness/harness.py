@@ -19,6 +19,7 @@ measure any source tree (``PYTHONPATH``), and the inputs are written with NumPy,
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import re
@@ -30,6 +31,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
+
+from tests.robustness.forkserver import ForkServers
 
 OUTCOMES = ("clear_errors", "repaired", "tracebacks", "silent_wrong", "code_executed", "data_lost")
 CONTROL_OUTCOMES = ("ok", "controls_failed")
@@ -64,6 +67,7 @@ class Shared:
     plan: Path
     python: str = sys.executable
     src: str | None = None
+    forks: ForkServers | None = None  # while run_cases runs: commands are forks of a pre-imported process
 
     def tokens(self, tmp: Path) -> dict[str, str]:
         return {"tmp": str(tmp), "store": str(self.store), "run": str(self.run), "motion": str(self.motion),
@@ -221,11 +225,16 @@ def run_command(shared: Shared, argv: list[str], cwd: Path, timeout: float, name
     result = Result(name=name, command="loosefit " + " ".join(_quote(a) for a in argv))
     start = time.perf_counter()
     try:
-        proc = subprocess.run(cmd, cwd=cwd, env=shared.env(), capture_output=True, timeout=timeout,
-                              stdin=subprocess.DEVNULL)
-        result.returncode = proc.returncode
-        result.stdout = proc.stdout.decode("utf-8", "replace")
-        result.stderr = proc.stderr.decode("utf-8", "replace")
+        if shared.forks is not None:
+            result.returncode, result.stdout, result.stderr = shared.forks.run(argv, cwd, timeout)
+            if result.returncode is None:
+                result.stderr += f"\n(timed out after {timeout:g} s)"
+        else:
+            proc = subprocess.run(cmd, cwd=cwd, env=shared.env(), capture_output=True, timeout=timeout,
+                                  stdin=subprocess.DEVNULL)
+            result.returncode = proc.returncode
+            result.stdout = proc.stdout.decode("utf-8", "replace")
+            result.stderr = proc.stderr.decode("utf-8", "replace")
     except subprocess.TimeoutExpired as e:
         result.stdout = (e.stdout or b"").decode("utf-8", "replace")
         result.stderr = (e.stderr or b"").decode("utf-8", "replace") + f"\n(timed out after {timeout:g} s)"
@@ -331,9 +340,16 @@ def run_case(case: Case, root: Path, shared: Shared) -> list[Result]:
 
 
 def run_cases(cases: list[Case], root: Path, shared: Shared, workers: int = 2,
-              progress: Callable[[Result], None] | None = None) -> list[Result]:
-    """Run ``cases`` on a small thread pool (each case is a subprocess); results in the cases' order.
-    The costliest cases (:attr:`Case.cost`) start first, so that they overlap the cheap ones."""
+              progress: Callable[[Result], None] | None = None, fork: bool = hasattr(os, "fork")) -> list[Result]:
+    """Run ``cases`` on a small thread pool (each case is a process); results in the cases' order.
+    The costliest cases (:attr:`Case.cost`) start first, so that they overlap the cheap ones. With ``fork``
+    each single command is a fork of a process that imported the heavy libraries once
+    (:mod:`tests.robustness.forkserver`; ``shared.forks`` when the caller keeps a pool across calls, else
+    one for this call); without, a fresh interpreter."""
+    forks = ForkServers(shared.python, shared.env()) if fork and shared.forks is None else None
+    if forks is not None:
+        shared = dataclasses.replace(shared, forks=forks)
+
     def one(case: Case) -> list[Result]:
         results = run_case(case, root, shared)
         for result in results if progress is not None else ():
@@ -341,9 +357,13 @@ def run_cases(cases: list[Case], root: Path, shared: Shared, workers: int = 2,
         return results
 
     order = sorted(range(len(cases)), key=lambda i: -cases[i].cost)
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {i: pool.submit(one, cases[i]) for i in order}
-        return [r for i in range(len(cases)) for r in futures[i].result()]
+    try:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = {i: pool.submit(one, cases[i]) for i in order}
+            return [r for i in range(len(cases)) for r in futures[i].result()]
+    finally:
+        if forks is not None:
+            forks.close()
 
 
 def counts(results: list[Result]) -> dict[str, int]:

@@ -102,3 +102,47 @@ def test_catalogue_covers_every_verb_and_every_brief():
     assert set(sub.choices) <= families, set(sub.choices) - families
     for brief in ("store", "inputs", "viewer"):
         assert len(defect_names(brief)) >= 5
+
+
+SCRIPT = """import os, sys, time
+mode = sys.argv[1]
+if mode == "ok":
+    print("out", os.getcwd(), sys.argv[2:], sys.stdin.read() == "")
+    print("err", file=sys.stderr)
+elif mode == "exit":
+    sys.exit(2)
+elif mode == "raise":
+    raise ValueError("boom")
+elif mode == "killed":
+    os.kill(os.getpid(), 9)
+else:
+    time.sleep(60)
+"""
+
+
+def test_fork_server_behaves_as_a_fresh_process(tmp_path):
+    """Exit status, output, working folder, traceback and a signal as ``python -m`` gives them; a timeout kills."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.robustness.forkserver import ForkServer
+
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "probe.py").write_text(SCRIPT)
+    env = dict(os.environ, PYTHONPATH=str(tmp_path / "lib"))
+    server = ForkServer(sys.executable, env, preload=("json",))
+    try:
+        for argv in (["ok", "a b"], ["exit"], ["raise"], ["killed"]):
+            fresh = subprocess.run([sys.executable, "-m", "probe", *argv], cwd=tmp_path, env=env, capture_output=True,
+                                   text=True, stdin=subprocess.DEVNULL)
+            code, out, err = server.run(argv, tmp_path, 30, module="probe")
+            assert (code, out) == (fresh.returncode, fresh.stdout), argv
+            assert err.strip().splitlines()[-1:] == fresh.stderr.strip().splitlines()[-1:], (err, fresh.stderr)
+        assert out == "" and code == -9
+        assert server.run(["ok"], tmp_path, 30, module="probe")[1] == f"out {tmp_path} [] True\n"
+        assert server.run(["sleep"], tmp_path, 0.5, module="probe")[0] is None
+        assert server.run(["exit"], tmp_path, 30, module="probe")[0] == 2  # still serving after a timeout
+    finally:
+        server.close()
+    assert not server.outputs.exists()
