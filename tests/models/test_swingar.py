@@ -30,7 +30,7 @@ SMALL = dict(graph_hidden=[8, 16], graph_heads=[2, 2], shape_mlp=[16, 8], motion
 CONFIG = SwinGarConfig(**SMALL)
 HISTORY = CONFIG.motion_frames - 1 + CONFIG.corrective_frames - 1
 #: Adam steps and the loose bound (mm) of the one-window memorisation test (measured: see the test).
-MEMORISE_STEPS, MEMORISE_BOUND_MM = 150, 10.0
+MEMORISE_STEPS, MEMORISE_BOUND_MM = 60, 10.0
 
 
 def synthetic_frames(rest: np.ndarray, translation: np.ndarray, phase: float) -> np.ndarray:
@@ -246,7 +246,8 @@ def test_training_steps_lower_the_loss(model, batch):
 def test_learns_one_window_by_heart(data):
     """The gradient path end to end: Adam (lr 1e-2) on one window of 4 frames alone takes the output far below
     where it starts, and the coarse stage (skinning weights and blend shapes) learns too, not only the correction.
-    Measured after 150 steps: 90.0 -> 2.7 mm, the coarse mesh 90.0 -> 34.4 mm (bounds: 10 mm and a tenth; half)."""
+    Measured: 90.0 -> 4.9 mm after 30 steps, 2.1 mm after 60, the coarse mesh 90.0 -> 36.0 mm (bounds after 60: 10 mm
+    and a tenth; half)."""
     windows = MultiWindowDataset(data, window=4, stride=50, history=HISTORY)
     group = collate_by_graph([windows[0]])[0]
     torch.manual_seed(0)

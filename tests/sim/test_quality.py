@@ -68,6 +68,10 @@ def test_measure_and_gate(proxy_body, shell):
     assert stats["pinned_drift"] == pytest.approx(0.005, abs=1e-5)
     assert QualityGate().check(stats) == ("ok", "")
     assert "pinned vertices moved 0.005 m" in QualityGate(max_pinned_drift=0.004).check(stats)[1]
+    assert "solver steps" not in QualityGate(max_pinned_drift=0.004).check(stats)[1]  # drift is not a pass-through
+    # a strain just over its limit reads as over it, with the steps the run had (the dress's kick at 5 steps)
+    reason = QualityGate().check({**stats, "strain_p99": 0.5049, "quality": 5})[1]
+    assert reason.startswith("99th percentile edge strain 0.505 > 0.500") and "(sim_params quality, 5 here)" in reason
     # Another part of the body coming up to a pin (a thigh raised to the waistband) is not drift: the
     # pin keeps its distance to its anchor, vertex 7, while the nearest body vertex is now much closer.
     approached = frames.copy()
@@ -84,7 +88,7 @@ def test_measure_and_gate(proxy_body, shell):
     pinned = np.zeros(points.shape[1], bool)
     stats = measure(points, points[0], faces, pinned, frames, proxy_body.faces, frames[0], fps=30.0)
     status, reason = QualityGate().check(stats)
-    assert status == "failed" and "penetration" in reason
+    assert status == "failed" and "penetration" in reason and "more solver steps a frame" in reason
     broken = points.copy()
     broken[1, 0] = np.nan
     stats = measure(broken, points[0], faces, pinned, frames, proxy_body.faces, frames[0], fps=30.0)
