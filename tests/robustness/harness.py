@@ -67,7 +67,7 @@ class Shared:
     plan: Path
     python: str = sys.executable
     src: str | None = None
-    forks: ForkServers | None = None  # while run_cases runs: commands are forks of a pre-imported process
+    forks: ForkServers | None = None  # pre-imported processes whose forks run the commands (None: fresh ones)
 
     def tokens(self, tmp: Path) -> dict[str, str]:
         return {"tmp": str(tmp), "store": str(self.store), "run": str(self.run), "motion": str(self.motion),
