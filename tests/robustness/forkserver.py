@@ -4,10 +4,10 @@ Every robustness case is one command in a fresh process. Importing torch, PyG an
 on the test machines, more than most cases take to refuse their input, so a pool keeps server processes (one
 per command running at once). Each is a Python process, started like the plain command (the same interpreter,
 environment and ``PYTHONPATH``), that imports those libraries once and then forks a child per command. The
-child changes to the case's folder,
-points its standard streams at files, starts its own process group, and runs ``loosefit.cli`` as ``-m``
-would, so its exit status, output and tracebacks are those of a fresh process; only the imports are shared.
-The libraries imported start no threads, so the fork is safe. Nothing here imports loosefit.
+child changes to the case's folder, points its standard streams at files, starts its own process group, and
+runs ``loosefit.cli`` as ``-m`` would, so its exit status, output and tracebacks are those of a fresh process;
+only the imports are shared. The libraries imported start no threads, so the fork is safe. Nothing here
+imports loosefit.
 """
 
 from __future__ import annotations
