@@ -34,6 +34,17 @@ def machine() -> dict:
     }
 
 
+def plan_case(plan, garment: str, motion: str, frames: int | None = None):
+    """``(body, garment, motion)``: a plan's (a :class:`~loosefit.sim.plan.Plan`) garment and motion on the average
+    Anny body, as its simulation makes them; the motion's first ``frames`` only when given."""
+    from loosefit.body import AnnyShape
+    from loosefit.sim.runner import load_plan_garment, load_plan_motion, plan_body
+
+    shape = tuple(AnnyShape().to_array().tolist())
+    played = load_plan_motion(plan, motion)
+    return plan_body(shape), load_plan_garment(plan, garment, shape), played.slice(0, frames)
+
+
 def save_results(name: str, results: dict) -> Path:
     """Write ``benchmarks/results/<name>.json`` atomically and print it."""
     path = RESULTS / f"{name}.json"

@@ -80,16 +80,13 @@ def simulate(task: Task) -> dict:
     """Run ``task`` (in a worker process); returns the garment ``verts (T, V, 3)`` and the run's stats."""
     from accuracy import knee_height, perturb_joint
 
-    from loosefit.body import AnnyShape
+    from _common import plan_case
+
     from loosefit.sim import SimParams, simulate_sequence
     from loosefit.sim.plan import load_plan
-    from loosefit.sim.runner import load_plan_garment, load_plan_motion, perturb_start, plan_body
+    from loosefit.sim.runner import perturb_start
 
-    plan = load_plan(task.plan)
-    shape = tuple(AnnyShape().to_array().tolist())
-    body = plan_body(shape)
-    garment = load_plan_garment(plan, task.garment, shape)
-    motion = load_plan_motion(plan, task.motion).slice(0, task.frames)
+    body, garment, motion = plan_case(load_plan(task.plan), task.garment, task.motion, task.frames)
     params = SimParams.from_dict(task.params)
     if task.noise_seed is not None:
         garment = perturb_start(garment, task.noise_seed, task.sigma)

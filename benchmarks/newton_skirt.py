@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from loosefit.body import AnnyShape
+from _common import plan_case
+
 from loosefit.sim import simulate_sequence
 from loosefit.sim.plan import load_plan
-from loosefit.sim.runner import load_plan_garment, load_plan_motion, plan_body
 from loosefit.sim.sequence import save_result
 
 RESULTS = Path(__file__).parent / "results"
@@ -38,10 +38,7 @@ def main() -> None:
     a = ap.parse_args()
 
     plan = load_plan(a.plan)
-    shape = tuple(AnnyShape().to_array().tolist())
-    body = plan_body(shape)
-    garment = load_plan_garment(plan, a.garment, shape)
-    motion = load_plan_motion(plan, a.motion)
+    body, garment, motion = plan_case(plan, a.garment, a.motion)
     motion = motion.slice(0, int(a.seconds * motion.fps))
     params = plan.sim_params[next(iter(plan.sim_params))].with_overrides(["backend=newton", *a.set])
 

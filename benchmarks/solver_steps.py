@@ -18,11 +18,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from _common import save_results
+from _common import plan_case, save_results
 
-from loosefit.body import AnnyShape
 from loosefit.sim.plan import load_plan
-from loosefit.sim.runner import load_plan_garment, load_plan_motion, plan_body
 from loosefit.sim.sequence import simulate_sequence
 
 KEYS = ("quality", "strain_p99", "max_strain", "penetration", "penetration_max", "penetration_depth", "ms_per_frame",
@@ -41,12 +39,7 @@ def main() -> None:
     args = ap.parse_args()
 
     plan = load_plan(args.plan)
-    shape = tuple(AnnyShape().to_array().tolist())
-    body = plan_body(shape)
-    garment = load_plan_garment(plan, args.garment, shape)
-    motion = load_plan_motion(plan, args.motion)
-    if args.frames is not None:
-        motion = motion.slice(0, args.frames)
+    body, garment, motion = plan_case(plan, args.garment, args.motion, args.frames)
     base = plan.sim_params[args.params]
     runs = {}
     for steps in (int(s) for s in args.steps.split(",")):

@@ -53,7 +53,7 @@ def main() -> None:
            "load_average_after": round(os.getloadavg()[0], 2)}
     path = RESULTS / "test-suite-timing.json"
     old = json.loads(path.read_text()) if path.exists() else {}
-    runs = dict(old.get("results", old).get("runs", {}))
+    runs = dict(old["results"]["runs"]) if old else {}
     runs[args.label] = run
     save_results("test-suite-timing", {"runs": runs})
 

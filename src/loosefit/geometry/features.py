@@ -156,16 +156,15 @@ def normal_projection_points(garment_verts: np.ndarray, body_verts: np.ndarray, 
     N = vertex_normals(P, F).astype(np.float64)
     incidence = sp.csr_matrix((np.ones(F.size), (np.repeat(np.arange(len(F)), 3), F.ravel())), shape=(len(F), len(P)))
     sharing = ((incidence @ incidence.T) > 0).astype(np.float64).tocsr()  # faces sharing a vertex: one ring
-    near = sharing
-    todo = np.arange(len(x))
-    for ring in range(1, max(rings, 1) + 1):
-        if ring == 1 or ring == rings:  # one ring for every vertex, then ``rings`` for those without a solution
-            found, cand, w = _project_along_normals(x[todo], face[todo], near, P, F, N, iterations, tolerance)
-            face[todo[found]], bary[todo[found]] = cand, w
-            todo = todo[~found]
-        if not len(todo):
-            break
-        near = ((near @ sharing) > 0).astype(np.float64).tocsr()
+    found, cand, w = _project_along_normals(x, face, sharing, P, F, N, iterations, tolerance)
+    face[found], bary[found] = cand, w
+    todo = np.flatnonzero(~found)
+    if rings > 1 and len(todo):  # ``rings`` rings for the vertices without a solution in one
+        near = sharing
+        for _ in range(rings - 1):
+            near = ((near @ sharing) > 0).astype(np.float64).tocsr()
+        found, cand, w = _project_along_normals(x[todo], face[todo], near, P, F, N, iterations, tolerance)
+        face[todo[found]], bary[todo[found]] = cand, w
     return face, bary
 
 

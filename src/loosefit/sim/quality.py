@@ -249,9 +249,9 @@ class QualityGate:
             ("fold", self.max_fold, "crumpled: mean fold angle up by {:.1f} degrees > {:.1f}"),
             ("outside_body", self.max_outside_body, "{:.1%} of vertices above the head or below the floor > {:.1%}"),
         ]
-        failed = [key for key, limit, _ in limits if stats[key] > limit]
-        reasons = [text.format(stats[key], limit) for key, limit, text in limits if key in failed]
-        if {"penetration", "penetration_max", "strain_p99"} & set(failed):
+        failed = {key: text.format(stats[key], limit) for key, limit, text in limits if stats[key] > limit}
+        reasons = list(failed.values())
+        if {"penetration", "penetration_max", "strain_p99"} & failed.keys():
             # a fast limb (a kick's knee under a long dress) can cross the cloth between two solver steps
             steps = f", {stats['quality']} here" if "quality" in stats else ""
             reasons.append(f"if a body part came through the cloth, give it more solver steps a frame "
