@@ -800,3 +800,34 @@ def test_bound_model_animates_on_cuda_like_on_cpu(model, data):
         expected = bound(root, joints)["verts"]
         got = bound.to("cuda")(root.cuda(), joints.cuda())["verts"].cpu()
     assert (got - expected).abs().max() < 1e-4
+
+
+def test_rest_fourier_features_and_where_they_enter(data):
+    """``corrective_fourier: F`` appends ``sin, cos(2 pi 2^k x)`` of the rest coordinates (k < F, cycles per
+    metre) to the corrective node features, the same on every frame; F = 0 leaves the paper's inputs."""
+    from loosefit.models.swingar import rest_fourier
+
+    rest = torch.tensor([[0.0, 0.25, 0.125], [0.5, -0.125, 1.0]], dtype=torch.float64)
+    f = rest_fourier(rest, 3)
+    assert f.shape == (2, 18)
+    # vertex 1, y = -0.125 m: k = 0, 1, 2 give angles -pi/4, -pi/2, -pi
+    assert torch.allclose(f[1, [1, 4, 7]], torch.tensor([-np.sqrt(0.5), -1.0, 0.0], dtype=torch.float64), atol=1e-12)
+    assert torch.allclose(f[1, [10, 13, 16]], torch.tensor([np.sqrt(0.5), 0.0, -1.0], dtype=torch.float64), atol=1e-12)
+    assert torch.allclose(f[0, :9].square() + f[0, 9:].square(), torch.ones(9, dtype=torch.float64))
+    torch.manual_seed(0)
+    model = SwinGar.from_data(data, dataclasses.replace(CONFIG, corrective_fourier=3))
+    g = data.graphs[0].tensors()
+    s = data.sequences[0].sequences[0]
+    root, joints = torch.from_numpy(s.root[None, :4]), torch.from_numpy(s.joints[None, :4])
+    with torch.no_grad():
+        out = model(g, root, joints)
+        G, shape = model.garment_features(g)
+        m = model.motion_features(model.poses(torch.cat([root[:, :1].expand(-1, CONFIG.motion_frames - 1, -1), root], 1),
+                                              torch.cat([joints[:, :1].expand(-1, CONFIG.motion_frames - 1, -1, -1),
+                                                         joints], 1)), 4)
+        nodes = model.coarse(g, G, shape, m, root, joints)["nodes"]
+    J = data.num_joints
+    assert nodes.shape[-1] == 3 + J + 18 and torch.isfinite(out["verts"]).all()
+    assert torch.allclose(nodes[..., 3 + J:], rest_fourier(g["rest"], 3).expand(1, 4, -1, -1))
+    with pytest.raises(InputError):
+        dataclasses.replace(CONFIG, corrective_fourier=-1)

@@ -107,6 +107,16 @@ def rms_normalized(a: torch.Tensor) -> torch.Tensor:
     return a / a.square().mean(-1, keepdim=True).sqrt().clamp_min(1e-8)
 
 
+def rest_fourier(rest: torch.Tensor, frequencies: int) -> torch.Tensor:
+    """Fourier features ``(V, 6 F)`` of rest positions ``rest (V, 3)`` in metres: ``sin(2 pi 2^k x)`` then
+    ``cos(2 pi 2^k x)`` for ``k = 0 .. F-1`` (cycles per metre) and each coordinate, ordered ``[sin k=0 xyz,
+    ..., sin k=F-1 xyz, cos ...]``. A network learns the high frequencies of a function of smooth inputs last
+    (its spectral bias); these give each vertex an identity down to a period of ``2^-(F-1)`` m."""
+    scales = 2.0 * torch.pi * 2.0 ** torch.arange(frequencies, dtype=rest.dtype, device=rest.device)
+    angles = (rest[:, None, :] * scales[:, None]).flatten(-2)  # (V, 3 F)
+    return torch.cat([angles.sin(), angles.cos()], -1)
+
+
 def _graph(g: dict) -> tuple[torch.Tensor, torch.Tensor]:
     return g["table"], g["valid"]
 
@@ -156,7 +166,7 @@ class SwinGar(nn.Module):
         chans = [c.state_hidden, *c.blend_hidden]
         self.blend_layers = nn.ModuleList(GATLN(i, o, c.blend_heads, a, **att) for i, o in zip(chans[:-1], chans[1:]))
         self.blend_out = nn.Linear(c.blend_hidden[-1], 3)
-        self.corrective_lstm = LSTMGATLN(3 + J, c.corrective_hidden, c.corrective_heads, a,
+        self.corrective_lstm = LSTMGATLN(3 + J + 6 * c.corrective_fourier, c.corrective_hidden, c.corrective_heads, a,
                                          per_gate=c.gate_attention == "per_gate", **att)
         chans = [c.corrective_hidden, *c.corrective_layers]
         self.corrective_layers = nn.ModuleList(GATLN(i, o, 1, a, **att) for i, o in zip(chans[:-1], chans[1:]))
@@ -267,7 +277,8 @@ class SwinGar(nn.Module):
                joints: torch.Tensor) -> dict:
         """The first stage for frames with motion features ``m (B, T, motion_hidden)``: ``weights`` (skinning,
         ``(B, T, V, J)``), ``blend`` (``(B, T, V, 3)``), ``coarse`` (``M_c (B, T, V, 3)``) and ``nodes`` (the corrective
-        node features ``(B, T, V, 3 + J)``: position and distance to every joint)."""
+        node features ``(B, T, V, 3 + J + 6 F)``: position, distance to every joint and, with
+        ``corrective_fourier`` ``F`` > 0, :func:`rest_fourier`)."""
         table, valid = _graph(g)
         S = self.state_encoder(G * m[:, :, None], table, valid)  # (B, T, V, state)
         logits = self.weight_out(self.weight_state(S) * shape)
@@ -283,7 +294,10 @@ class SwinGar(nn.Module):
         M = torch.einsum("btvj,btjxy->btvxy", weights, A[..., :3, :])  # (B, T, V, 3, 4)
         Mc = (M[..., :3] @ rest[..., None])[..., 0] + M[..., 3]
         dist = (Mc[..., :, None, :] - joint_pos[..., None, :, :]).norm(dim=-1)  # (B, T, V, J)
-        return {"weights": weights, "blend": blend, "coarse": Mc, "nodes": torch.cat([Mc, dist], -1)}
+        nodes = [Mc, dist]
+        if self.config.corrective_fourier:
+            nodes.append(rest_fourier(g["rest"], self.config.corrective_fourier).expand(*Mc.shape[:-1], -1))
+        return {"weights": weights, "blend": blend, "coarse": Mc, "nodes": torch.cat(nodes, -1)}
 
     def corrective(self, g: dict, gates: torch.Tensor, body: torch.Tensor) -> torch.Tensor:
         """Corrections ``(B, T, V, 3)`` from the LSTM-GAT-LN's input-to-state maps of the corrective node features,

@@ -57,6 +57,9 @@ class SwinGarConfig:
             averaging them.
         gate_attention: ``per_gate``, a GAT-LN per LSTM-GAT-LN gate (SwinGar Eq. 6; needs ``concat_heads``), or
             ``shared``, one per map serving the four gates.
+        corrective_fourier: frequencies ``F`` of the rest-position Fourier features added to the corrective's node
+            features (ours; 0, the paper's inputs): ``sin, cos(2 pi 2^k x_i)`` for ``k < F`` cycles per metre and
+            each rest coordinate, ``6 F`` values per vertex that tell apart vertices the smooth inputs do not.
 
     ``attention_norm: graph``, ``attention_centred: false``, ``concat_heads: false``, ``gate_attention: shared``
     is the attention of runs trained before these keys existed: their ``method.yaml`` needs those four lines to
@@ -92,13 +95,14 @@ class SwinGarConfig:
     attention_centred: bool = True
     concat_heads: bool = True
     gate_attention: str = "per_gate"
+    corrective_fourier: int = 0
 
     def __post_init__(self):
         sizes = [*self.graph_hidden, *self.graph_heads, *self.shape_mlp, self.motion_hidden, self.motion_frames,
                  *self.body_mlp, self.state_hidden, self.state_heads, *self.blend_hidden, self.blend_heads,
                  self.corrective_hidden, self.corrective_heads, *self.corrective_layers, self.corrective_frames,
                  self.descriptor_samples]
-        if min(sizes) < 1:
+        if min(sizes) < 1 or self.corrective_fourier < 0:
             raise InputError(f"SwinGar sizes must be >= 1, got {sizes}")
         if len(self.graph_hidden) != len(self.graph_heads) or not self.graph_hidden:
             raise InputError(f"graph_hidden {self.graph_hidden} and graph_heads {self.graph_heads} must be equally long")
