@@ -49,7 +49,13 @@ rest after the drape: the reference draped a second time moves another 22.5 mm (
 is 13.5 mm from that twice-draped reference, so most of the dresses' figure is their long skirts still falling
 in from the templates' flare. The shape found is a body the garment fits, not always the one it was cut on:
 its height, weight and gender are 0.11 from the true ones on average (0.03-0.25; the search band at 10 cm
-gave 0.16). The three refusals come in under a second. A fit takes 30-56 s, most of it the shape search.
+gave 0.16). The three refusals come in under a second. A fit takes 30-56 s on the loaded machine, most of it
+the shape search.
+
+With the dresses first draped at rest on their own bodies (``--at-rest 3``, ``garment-fit-dress-at-rest.json``, as a
+garment tool's file would hold them) the round trip is 13.0 mm (tall-slim, found at exactly its height and weight)
+and 10.6 mm (heavy, but found on a slim body: a hanging skirt says less about the hips than a flared one); the
+short body's dress came out of the import repaired (its mesh changed), so it has no vertex-to-vertex figure.
 
 Run: nice -n 5 .venv/bin/python benchmarks/garment_fit.py [--kinds skirt,dress] [--bodies tall-slim,heavy,short]
          [--seeds 0] [--edge-length 0.03] [--render dress-0/tall-slim] [--name garment-fit]
@@ -121,15 +127,33 @@ def edge_strain(verts, reference, faces) -> float:
     return float(np.abs(length(verts) / length(reference) - 1.0).mean())
 
 
-def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, unit: str, render: Path | None):
+def source_garment(kind: str, seed: int, shape_values: dict, edge_length: float, at_rest: float = 0.0):
+    """``(source body, garment)``: the template made on the Anny body of ``shape_values``; with ``at_rest`` > 0,
+    then draped on it under gravity for that many seconds (a garment tool's file holds the garment at rest on
+    its avatar; the templates are made flared in the air)."""
+    import dataclasses
+
     from loosefit.body import AnnyBody, AnnyShape
+    from loosefit.garment import make_garment
+    from loosefit.garment.body_fit import drape
+    from loosefit.garment.importer import top_pins
+
+    source = AnnyBody(AnnyShape(**shape_values))
+    made = make_garment(kind, source, seed=seed, edge_length=edge_length)
+    if at_rest > 0:
+        pins = top_pins(made.verts, np.zeros(made.num_verts, np.int64))
+        rested, _ = drape(made.verts, made.faces, pins, source, source.shape, settle_seconds=at_rest)
+        made = dataclasses.replace(made, verts=rested.astype(made.verts.dtype))
+    return source, made
+
+
+def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, unit: str, render: Path | None,
+             at_rest: float = 0.0):
     from loosefit.errors import InputError
     from loosefit.garment import import_garment, make_garment
     from loosefit.garment.placement import to_z_up
 
-    source_shape = AnnyShape(**shape_values)
-    source = AnnyBody(source_shape)
-    made = make_garment(kind, source, seed=seed, edge_length=edge_length)
+    source, made = source_garment(kind, seed, shape_values, edge_length, at_rest)
     scale = {"cm": 100.0, "mm": 1000.0}[unit]
     file_verts = as_file(made.verts, source.rest_joints()[0], scale)
     path = write_obj(workdir / f"{kind}-{seed}-{name}.obj", file_verts, made.faces)
@@ -189,12 +213,10 @@ def settled_reference(fitted: np.ndarray, placed: np.ndarray, faces: np.ndarray,
 
 
 def refusals(kind, seed, name, shape_values, body, edge_length, workdir: Path) -> dict:
-    from loosefit.body import AnnyBody, AnnyShape
     from loosefit.errors import InputError
-    from loosefit.garment import import_garment, make_garment
+    from loosefit.garment import import_garment
 
-    source = AnnyBody(AnnyShape(**shape_values))
-    made = make_garment(kind, source, seed=seed, edge_length=edge_length)
+    source, made = source_garment(kind, seed, shape_values, edge_length)
     base = as_file(made.verts, source.rest_joints()[0], 1.0)  # metres
     # 100 times too small in the smallest unit (m) and too large in the largest (mm): a garment 100 times too
     # small in centimetres reads as the right size in metres.
@@ -225,6 +247,8 @@ def main() -> None:
     ap.add_argument("--render", default="dress-0/tall-slim", help="the case rendered to PNG")
     ap.add_argument("--name", default="garment-fit")
     ap.add_argument("--workdir", default="/tmp/garment-fit")
+    ap.add_argument("--at-rest", type=float, default=0.0,
+                    help="seconds each garment is first draped on its own body before it is written (0: as made)")
     args = ap.parse_args()
 
     from loosefit.body import AnnyBody
@@ -235,6 +259,7 @@ def main() -> None:
     path = RESULTS / f"{args.name}.json"
     results = json.loads(path.read_text())["results"] if path.is_file() else {}
     results.setdefault("cases", {})
+    results["at_rest_s"] = args.at_rest
     cases = [(k, int(s), b) for s in args.seeds.split(",") for k in args.kinds.split(",") for b in args.bodies.split(",")]
     if "refusals" not in results:
         k, s, b = cases[0]
@@ -243,36 +268,20 @@ def main() -> None:
     for i, (kind, seed, name) in enumerate(cases):
         key = f"{kind}-{seed}/{name}"
         row = results["cases"].get(key)
-        if row is not None and row.get("landed") and row.get("kept_mm") is not None and "round_trip_mm" not in row:
-            redo_reference(row, kind, seed, name, body, args.edge_length, workdir)
-            finish(args.name, results)
         if row is not None:
             continue
         render = RESULTS / f"{args.name}-{kind}-{seed}-{name}.png" if key == args.render else None
         print(f"== {key}", flush=True)
         results["cases"][key] = run_case(kind, seed, name, BODIES[name], body, args.edge_length, workdir,
-                                         "cm" if i % 2 == 0 else "mm", render)
+                                         "cm" if i % 2 == 0 else "mm", render, args.at_rest)
         finish(args.name, results)
 
 
-def redo_reference(row: dict, kind, seed, name, body, edge_length, workdir: Path) -> None:
-    """Measure ``kept_mm`` and ``round_trip_mm`` again for a case fitted before the round trip was measured
-    (its fitted garment read back from ``workdir``)."""
-    from loosefit.body import AnnyBody, AnnyShape
-    from loosefit.garment import Garment, make_garment
-    from loosefit.garment.placement import to_z_up
-
-    source = AnnyBody(AnnyShape(**BODIES[name]))
-    made = make_garment(kind, source, seed=seed, edge_length=edge_length)
-    g = Garment.load(workdir / f"{kind}-{seed}-{name}-fitted.obj")
-    placed = to_z_up(as_file(made.verts, source.rest_joints()[0], 1.0), g.params["up"]) + np.asarray(g.params["offset"])
-    row.update(settled_reference(g.verts, placed, made.faces, body, row["shape"]))
-    row["passed"] = passed(row)
-
-
 def passed(row: dict) -> bool:
-    """Both floors met: penetration after the drape, and the shape kept over the round trip."""
-    return bool(row["inside_percent"] <= MAX_INSIDE_PERCENT and (row.get("round_trip_mm") or 0.0) <= MAX_KEPT_MM)
+    """Both floors met: penetration after the drape, and the shape kept over the round trip (not measured, when
+    the import repaired the mesh and no vertex corresponds: not met)."""
+    trip = row.get("round_trip_mm")
+    return bool(row["inside_percent"] <= MAX_INSIDE_PERCENT and trip is not None and trip <= MAX_KEPT_MM)
 
 
 def finish(name: str, results: dict) -> None:
