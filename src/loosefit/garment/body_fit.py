@@ -14,11 +14,12 @@ bring it onto the body without changing its cut:
    Anny (height 0.45, weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away
    in a key (over its top 10 cm). The band reaches past a strap dress's or a shirt's shoulders to the bust,
    a skirt's waistband to the hips: on the 12 garments of ``benchmarks/garment_fit.py`` the height, weight and
-   gender found are 0.11 from the true ones on average with 25 cm, 0.16 with 10 cm (a long shirt for a tall
-   slim body: found at weight 0.27 against 0.8 with 10 cm); 45 cm reaches a dress's flared skirt and finds
-   its body at weight 1.0 where it was cut at 0.3. The mean gap alone would prefer the largest body the garment does not cut into (2 mm of gap
-   where the garment was made with 14 mm of ease), hence its small weight. The prior breaks ties towards the
-   target (the height of a body under a skirt's waistband is not seen), so that the drape is short. Search:
+   gender found are 0.11 from the true ones on average with 25 cm, 0.16 with 10 cm (a long shirt cut for a
+   tall slim body of weight 0.3: found at 0.27, at 0.8 with 10 cm); 45 cm reaches a dress's flared skirt and
+   finds its body at weight 1.0 where it was cut at 0.3. The mean gap alone would prefer the largest body the
+   garment does not cut into (2 mm of gap where the garment was made with 14 mm of ease), hence its small
+   weight. The prior breaks ties towards the target (the height of a body under a skirt's waistband is not
+   seen), so that the drape is short. Search:
    a coarse grid (:data:`COARSE`, 9 shapes, plus the target) scored with the full height window, then a
    coordinate search on every key with steps :data:`STEPS`, each shape's height window narrowed to 5 cm
    around where the best shape's attachment landmark (waist, armpits or neck) puts the top; at most
