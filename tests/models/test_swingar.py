@@ -43,6 +43,17 @@ def synthetic_frames(rest: np.ndarray, translation: np.ndarray, phase: float) ->
     return out.astype(np.float32)
 
 
+def coarse_nodes(model, g: dict, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+    """The corrective node features of the coarse stage for a motion from its start, the first pose repeated
+    before it as ``forward`` does."""
+    first = model.config.motion_frames - 1
+    history = (torch.cat([root[:, :1].expand(-1, first, -1), root], 1),
+               torch.cat([joints[:, :1].expand(-1, first, -1, -1), joints], 1))
+    G, shape = model.garment_features(g)
+    m = model.motion_features(model.poses(*history), root.shape[1])
+    return model.coarse(g, G, shape, m, root, joints)["nodes"]
+
+
 @pytest.fixture(scope="module")
 def store(tmp_path_factory, body):
     path = tmp_path_factory.mktemp("swingar") / "multi.zarr"
@@ -562,12 +573,7 @@ def test_coarse_stage_skins_the_unposed_blend_shapes_and_feeds_the_corrective(mo
         posed = torch.einsum("btvj,btjxy->btvxy", out["weights"], A[..., :3, :])
         expected = (posed[..., :3] @ rest)[..., 0] + posed[..., 3]
         assert torch.allclose(out["coarse"], expected, atol=1e-5)
-        G, shape = model.garment_features(g)
-        first = CONFIG.motion_frames - 1  # the first pose repeated before the motion, as forward does
-        history = (torch.cat([root[:, :1].expand(-1, first, -1), root], 1),
-                   torch.cat([joints[:, :1].expand(-1, first, -1, -1), joints], 1))
-        m = model.motion_features(model.poses(*history), 5)
-        nodes = model.coarse(g, G, shape, m, root, joints)["nodes"]
+        nodes = coarse_nodes(model, g, root, joints)
         dist = (out["coarse"][..., :, None, :] - joint_pos[..., None, :, :]).norm(dim=-1)
         assert torch.allclose(nodes, torch.cat([out["coarse"], dist], -1), atol=1e-5)
         lift = torch.stack([-g["rest_joints"][0, 0].expand(1, 5), -g["rest_joints"][0, 1].expand(1, 5),
@@ -821,11 +827,7 @@ def test_rest_fourier_features_and_where_they_enter(data):
     root, joints = torch.from_numpy(s.root[None, :4]), torch.from_numpy(s.joints[None, :4])
     with torch.no_grad():
         out = model(g, root, joints)
-        G, shape = model.garment_features(g)
-        m = model.motion_features(model.poses(torch.cat([root[:, :1].expand(-1, CONFIG.motion_frames - 1, -1), root], 1),
-                                              torch.cat([joints[:, :1].expand(-1, CONFIG.motion_frames - 1, -1, -1),
-                                                         joints], 1)), 4)
-        nodes = model.coarse(g, G, shape, m, root, joints)["nodes"]
+        nodes = coarse_nodes(model, g, root, joints)
     J = data.num_joints
     assert nodes.shape[-1] == 3 + J + 18 and torch.isfinite(out["verts"]).all()
     assert torch.allclose(nodes[..., 3 + J:], rest_fourier(g["rest"], 3).expand(1, 4, -1, -1))

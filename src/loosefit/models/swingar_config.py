@@ -102,8 +102,10 @@ class SwinGarConfig:
                  *self.body_mlp, self.state_hidden, self.state_heads, *self.blend_hidden, self.blend_heads,
                  self.corrective_hidden, self.corrective_heads, *self.corrective_layers, self.corrective_frames,
                  self.descriptor_samples]
-        if min(sizes) < 1 or self.corrective_fourier < 0:
+        if min(sizes) < 1:
             raise InputError(f"SwinGar sizes must be >= 1, got {sizes}")
+        if self.corrective_fourier < 0:
+            raise InputError(f"model.corrective_fourier must be >= 0 (0: none), got {self.corrective_fourier}")
         if len(self.graph_hidden) != len(self.graph_heads) or not self.graph_hidden:
             raise InputError(f"graph_hidden {self.graph_hidden} and graph_heads {self.graph_heads} must be equally long")
         if not (self.graph_hidden[-1] == self.motion_hidden == self.blend_hidden[-1]):
