@@ -177,7 +177,7 @@ def fitgar_curve(pack: dict, config: Path, overrides: list[str], seconds: float,
                 if now >= stage_end:
                     break
     return {"train_frames": len(train), "test_frames": len(test), "parameters": sum(p.numel() for p in model.parameters()),
-            "curve": curve}
+            "curve": curve, "model": model}
 
 
 def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float, device, evals: int) -> dict:
@@ -237,7 +237,7 @@ def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float
                 if now >= stage_end:
                     break
     return {"train_windows": len(items), "test_sequences": len(payload["test"]),
-            "parameters": sum(p.numel() for p in model.parameters()), "curve": curve}
+            "parameters": sum(p.numel() for p in model.parameters()), "curve": curve, "model": model}
 
 
 def main() -> None:
@@ -258,6 +258,7 @@ def main() -> None:
     p.add_argument("--seconds", type=float, default=60.0, help="training wall-clock per config")
     p.add_argument("--evals", type=int, default=8, help="evaluations per stage")
     p.add_argument("--set", action="append", default=[])
+    p.add_argument("--save", help="folder for each config's trained weights (CONFIG.pt: the model's state dict)")
     p.add_argument("--out", required=True)
     a = ap.parse_args()
     if a.command == "pack":
@@ -286,7 +287,16 @@ def main() -> None:
     for name in a.configs.split(","):
         config = Path(name) if Path(name).is_file() else ROOT / "configs" / "models" / name
         print(f"== {pack['method']} {config.name}", flush=True)
-        result["runs"][config.name] = curve_of(pack, config, a.set, a.seconds, device, a.evals)
+        if device.type == "cuda":
+            torch.cuda.reset_peak_memory_stats()
+        run = curve_of(pack, config, a.set, a.seconds, device, a.evals)
+        model = run.pop("model")
+        if device.type == "cuda":
+            run["peak_memory_mib"] = torch.cuda.max_memory_allocated() / 2**20
+        if a.save:  # the weights, to be scored here by the library's own animation (a run folder's checkpoint)
+            Path(a.save).mkdir(parents=True, exist_ok=True)
+            torch.save({k: v.cpu() for k, v in model.state_dict().items()}, Path(a.save) / f"{config.stem}.pt")
+        result["runs"][config.name] = run
         Path(a.out).parent.mkdir(parents=True, exist_ok=True)
         Path(a.out).write_text(json.dumps(result, indent=1))  # after every config: a cut-off run keeps what it did
 

@@ -5,6 +5,9 @@
 #   DEVICE=cpu PY=.venv/bin/python OUT=/tmp/gpu-out bash scripts/gpu_run.sh   # here: the same steps, tiny sizes
 # Every step runs under its own timeout within one overall deadline (BUDGET seconds), logs to $OUT/run.log and
 # leaves its JSON in $OUT; a failing step does not stop the next.
+# LONG_SECONDS=N trains the variants of LONG_VARIANTS from the packs at once (one process each, sharing the GPU:
+# equal wall clock, not equal steps), N seconds each, with the CUDA tests beside them; curves in
+# $OUT/long-NAME.json, weights in $OUT/weights/NAME/ (to be scored on the CPU machine by the library's animation).
 set -u
 export PYTHONUNBUFFERED=1
 DEVICE=${DEVICE:-cuda}
@@ -44,16 +47,40 @@ step() {
   echo "=== [$name] rc=$rc in $((SECONDS - t0))s" | tee -a "$LOG"
 }
 STORE=$G/data/train.zarr
+CUDA_TESTS=($PY -m pytest -q -p no:cacheprovider -o addopts= tests/models/test_swingar.py tests/models/test_jointnet.py
+  tests/models/layers $(ls tests/models/test_cuda*.py 2>/dev/null) -k "cuda or gat_ln or lstm or gru")
 if [ "$DEVICE" = cuda ]; then
   SIZE=paper; STEPS=${STEPS:-300}; PACK_SECONDS=${PACK_SECONDS:-45}
-  step cuda-tests 150 $PY -m pytest -q -p no:cacheprovider -o addopts= tests/models/test_swingar.py \
-    tests/models/test_jointnet.py tests/models/layers $(ls tests/models/test_cuda*.py 2>/dev/null) \
-    -k "cuda or gat_ln or lstm or gru"
+  [ -z "${LONG_SECONDS:-}" ] && step cuda-tests 150 "${CUDA_TESTS[@]}"
   step graph-speed 150 $PY benchmarks/graph_speed.py --device cuda --swingar-vertices 11200 --fitgar-vertices 4000 \
     --threads 1 --frames 20 --batch 10 --repeats 3 --fitgar-frames 20 --name gs-cuda
   cp benchmarks/results/gs-cuda.json "$OUT/" 2>/dev/null
 else
   SIZE=tiny; STEPS=${STEPS:-24}; PACK_SECONDS=${PACK_SECONDS:-5}
+fi
+# long runs at once: NAME:PACK:CONFIG[:KEY=VALUE,...] each
+LONG_VARIANTS=${LONG_VARIANTS:-"swingar-a2-s0:swingar:swingar.yaml swingar-a2-s1:swingar:swingar.yaml:train.seed=1
+  swingar-gat-s0:swingar:swingar.yaml:model.alpha=null swingar-a0-s0:swingar:swingar.yaml:model.alpha=0
+  swingar-f6-s0:swingar:swingar.yaml:model.corrective_fourier=6 fitgar-paper:fitgar:fitgar.yaml
+  fitgar-cpu:fitgar:fitgar-cpu.yaml"}
+if [ -n "${LONG_SECONDS:-}" ]; then
+  echo "=== [long] start at +$((SECONDS - START))s: ${LONG_SECONDS}s each" | tee -a "$LOG"
+  t0=$SECONDS
+  pids=()
+  for v in $LONG_VARIANTS; do
+    IFS=: read -r name pack config sets <<< "$v"
+    args=(); IFS=, read -ra kv <<< "${sets:-}"; for x in "${kv[@]}"; do args+=(--set "$x"); done
+    [ -f "$G/$pack-pack.pt" ] || { echo "=== [long] $name: no $G/$pack-pack.pt" | tee -a "$LOG"; continue; }
+    OMP_NUM_THREADS=2 timeout -k 5 $((LONG_SECONDS + 150)) $PY benchmarks/graph_pack.py train --pack "$G/$pack-pack.pt" \
+      --configs "$config" --seconds "$LONG_SECONDS" --evals 4 "${args[@]}" --save "$OUT/weights/$name" \
+      --out "$OUT/long-$name.json" > "$OUT/long-$name.log" 2>&1 &
+    pids+=($!)
+  done
+  [ "$DEVICE" = cuda ] && step cuda-tests 150 "${CUDA_TESTS[@]}"
+  for pid in "${pids[@]}"; do wait "$pid"; echo "=== [long] pid $pid rc=$?" | tee -a "$LOG"; done
+  for f in "$OUT"/long-*.log; do echo "--- $f"; tail -3 "$f"; done | tee -a "$LOG"
+  echo "=== [long] done in $((SECONDS - t0))s" | tee -a "$LOG"
+  NO_PACKS=1
 fi
 # the paper's widths against the CPU preset's, the same seconds each, from the packs (benchmarks/graph_pack.py)
 [ -z "${NO_PACKS:-}" ] && [ -f "$G/fitgar-pack.pt" ] && step fitgar-pack $((4 * PACK_SECONDS + 40)) $PY benchmarks/graph_pack.py train \
