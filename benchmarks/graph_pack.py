@@ -14,7 +14,10 @@ and training errors against steps and seconds), so the two can be read against e
         --out .gpu/swingar-pack.pt
     # there (or here, with --seconds small, to check the path)
     python3 benchmarks/graph_pack.py train --pack .gpu/fitgar-pack.pt --configs fitgar.yaml,fitgar-cpu.yaml \
-        --seconds 60 --out $OUT/fitgar-curve.json
+        --seconds 60 --save $OUT/weights --out $OUT/fitgar-curve.json
+    # here again: SwinGar weights from --save, animated by the library on the store's test sequences beside body-LBS
+    .venv/bin/python benchmarks/graph_pack.py score --weights W/swingar.pt --config swingar.yaml \
+        --template A_SWINGAR_RUN_ON_SG --data SG.zarr --run /tmp/scored --out score.json
 
 Both stages of each model train in turn, each for half the budget (FitGar: coarse then detail with the coarse
 frozen, the paper's order; SwinGar: its ``supervised`` then ``all`` stage), Adam at the config's rate.
@@ -240,6 +243,35 @@ def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float
             "parameters": sum(p.numel() for p in model.parameters()), "curve": curve, "model": model}
 
 
+def score_swingar(weights: Path, config: Path, overrides: list[str], template: Path, data: Path, run: Path) -> dict:
+    """SwinGar weights trained from a pack, scored here as every SwinGar run is (``accuracy_graph.py``): a run
+    folder made from ``template`` (a SwinGar run on the same store: its ``model.json`` and checkpoint layout) with
+    ``config`` and the weights, each test sequence animated from the garment's rest mesh, beside body-LBS."""
+    import shutil
+
+    from accuracy_graph import swingar_errors
+
+    from loosefit.config import load_config, save_config
+    from loosefit.data.store import DatasetStore
+    from loosefit.models.swingar import Config
+    from loosefit.train.run import RunDir, load_checkpoint, save_checkpoint
+    from loosefit.training import METHOD_CONFIG
+
+    if run.exists():
+        shutil.rmtree(run)
+    shutil.copytree(template, run, ignore=shutil.ignore_patterns("best.pt", "metrics.csv", "run.json"))
+    save_config(run / METHOD_CONFIG, load_config(Config, config, overrides))
+    state = load_checkpoint(RunDir(run).last_checkpoint)
+    state["model"] = torch.load(weights, weights_only=True)
+    save_checkpoint(RunDir(run).last_checkpoint, state)
+    store = DatasetStore.open(data)
+    rows = swingar_errors(run, store, store.sequence_names(split="test"))
+    mean = lambda key: float(np.mean([r[key] for r in rows]))  # noqa: E731
+    return {"weights": str(weights), "config": config.name, "overrides": overrides, "rows": rows,
+            "rmse_mm": mean("rmse_mm"), "body_lbs_rmse_mm": mean("body_lbs_rmse_mm"),
+            "over_body_lbs": mean("rmse_mm") / mean("body_lbs_rmse_mm")}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -260,7 +292,22 @@ def main() -> None:
     p.add_argument("--set", action="append", default=[])
     p.add_argument("--save", help="folder for each config's trained weights (CONFIG.pt: the model's state dict)")
     p.add_argument("--out", required=True)
+    p = sub.add_parser("score", help="SwinGar weights from train --save, scored on the store by the library's animation")
+    p.add_argument("--weights", type=Path, required=True)
+    p.add_argument("--config", required=True, help="the config the weights were trained with (name or path)")
+    p.add_argument("--set", action="append", default=[])
+    p.add_argument("--template", type=Path, required=True, help="a SwinGar run folder on the same store")
+    p.add_argument("--data", type=Path, required=True)
+    p.add_argument("--run", type=Path, required=True, help="the run folder to write")
+    p.add_argument("--out", required=True)
     a = ap.parse_args()
+    if a.command == "score":
+        config = Path(a.config) if Path(a.config).is_file() else ROOT / "configs" / "models" / a.config
+        result = score_swingar(a.weights, config, a.set, a.template, a.data, a.run)
+        Path(a.out).write_text(json.dumps(result, indent=1))
+        print(f"SwinGar {result['rmse_mm']:.1f} mm, body-LBS {result['body_lbs_rmse_mm']:.1f} mm: "
+              f"{result['over_body_lbs']:.3f}x")
+        return
     if a.command == "pack":
         if a.method == "fitgar":
             payload = pack_fitgar(Path(a.data), a.frame_stride, a.test_stride)
