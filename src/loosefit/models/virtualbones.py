@@ -367,11 +367,14 @@ class VirtualBones(GarmentModel):
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:
         """``rmse_mm`` and ``mean_vertex_error_mm`` of the output against the simulated mesh (in stage
         "low" the output is the low-frequency mesh alone: the high-frequency module is not trained
-        yet), and ``lf_rmse_mm`` of the low-frequency mesh against the low-frequency target."""
+        yet); ``lf_rmse_mm`` of the low-frequency mesh against the simulated mesh (what the high-frequency
+        offsets must improve on) and ``lf_target_rmse_mm`` against the low-frequency target (the smoothed
+        simulation the low stage learns)."""
         with torch.no_grad():
             out = self(batch["root"], batch["joints"], self.carry.initial(batch))
             self.carry.keep(batch, out["state"])
             pred = out["lf"] if stage == "low" else out["verts"]
             mask = self.mask(batch)
             return {**masked_errors_mm(pred, batch["verts"], mask),
-                    "lf_rmse_mm": masked_errors_mm(out["lf"], batch["lf"], mask)["rmse_mm"]}
+                    "lf_rmse_mm": masked_errors_mm(out["lf"], batch["verts"], mask)["rmse_mm"],
+                    "lf_target_rmse_mm": masked_errors_mm(out["lf"], batch["lf"], mask)["rmse_mm"]}
