@@ -246,10 +246,12 @@ def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float
 def score_swingar(weights: Path, config: Path, overrides: list[str], template: Path, data: Path, run: Path) -> dict:
     """SwinGar weights trained from a pack, scored here as every SwinGar run is (``accuracy_graph.py``): a run
     folder made from ``template`` (a SwinGar run on the same store: its ``model.json`` and checkpoint layout) with
-    ``config`` and the weights, each test sequence animated from the garment's rest mesh, beside body-LBS."""
+    ``config`` and the weights, each test sequence animated from the garment's rest mesh, beside body-LBS; and the
+    layers' attention entropy on the held-out garments (``attention_entropy``: per layer, its ratio to uniform)."""
     import shutil
 
     from accuracy_graph import swingar_errors
+    from swingar_attention import held_out_entropy
 
     from loosefit.config import load_config, save_config
     from loosefit.data.store import DatasetStore
@@ -269,7 +271,8 @@ def score_swingar(weights: Path, config: Path, overrides: list[str], template: P
     mean = lambda key: float(np.mean([r[key] for r in rows]))  # noqa: E731
     return {"weights": str(weights), "config": config.name, "overrides": overrides, "rows": rows,
             "rmse_mm": mean("rmse_mm"), "body_lbs_rmse_mm": mean("body_lbs_rmse_mm"),
-            "over_body_lbs": mean("rmse_mm") / mean("body_lbs_rmse_mm")}
+            "over_body_lbs": mean("rmse_mm") / mean("body_lbs_rmse_mm"),
+            "attention_entropy": held_out_entropy(data, run, "last")}
 
 
 def main() -> None:

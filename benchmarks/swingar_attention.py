@@ -205,9 +205,8 @@ def memorise(store: Path, garment: str, overrides=(), frames: int = 4, windows: 
 def held_out_scores(store: Path, run: Path, body, baseline: dict | None = None, checkpoint: str = "best") -> dict:
     """RMSE (mm, every frame, animated from the rest garment) of a run on each test sequence, and the attention
     entropy of its layers on the held-out garments' first windows."""
-    from loosefit.animate import Animator, load_run
+    from loosefit.animate import Animator
     from loosefit.data.store import DatasetStore
-    from loosefit.models.multi_garment import MultiGarmentData
 
     store_ = DatasetStore.open(store)
     rows, animators = {}, {}
@@ -220,15 +219,22 @@ def held_out_scores(store: Path, run: Path, body, baseline: dict | None = None, 
             animators[seq.garment] = Animator(run, garment=garment, body=body, checkpoint=checkpoint)
         pred = animators[seq.garment].animate(motion)
         rows[name] = float(np.sqrt(((pred - truth) ** 2).sum(-1).mean()) * 1e3)
+    return {"rmse_mm": rows, "mean_rmse_mm": float(np.mean(list(rows.values()))),
+            "entropy": held_out_entropy(store, run, checkpoint)}
+
+
+def held_out_entropy(store: Path, run: Path, checkpoint: str = "best") -> dict:
+    """:func:`entropy_table` of a run's layers on the first 4-frame window of each held-out garment."""
+    from loosefit.animate import load_run
+    from loosefit.models.multi_garment import MultiGarmentData
+
     _, model, cfg = load_run(run, checkpoint)
     data = MultiGarmentData(store, "test", body=False, **cfg.model.graph_settings())
     ds = windows_of(data, cfg, 4, 10_000)
     firsts = {}
     for k, (gi, _, _) in enumerate(ds.index):
         firsts.setdefault(gi, k)
-    groups = [_collate([ds[k]])[0] for k in firsts.values()]
-    return {"rmse_mm": rows, "mean_rmse_mm": float(np.mean(list(rows.values()))),
-            "entropy": entropy_table(model, groups)}
+    return entropy_table(model, [_collate([ds[k]])[0] for k in firsts.values()])
 
 
 def body_lbs_scores(store: Path, body) -> dict:
