@@ -79,11 +79,6 @@ def test_overfits_one_sequence_low_then_high(tiny_train, tmp_path):
 def test_gradients_reach_every_parameter_of_the_stage(tiny_train, stage, rank):
     model = _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "global_rank": rank}))
     batch = _batch(WindowDataset(tiny_train, window=20, stride=20, burn_in=5))
-    if stage == "high":
-        with torch.no_grad():  # the offsets start at exactly zero: the prediction starts as the LF mesh ...
-            out = model(batch["root"], batch["joints"])
-            assert torch.equal(out["verts"], out["lf"])
-            model.head[-1].weight.normal_(0.0, 0.1)  # ... and from the first step on, every parameter learns
     loss, terms = model.training_loss(batch, stage)
     loss.backward()
     active = {id(p) for p in model.stage_parameters(stage)}
