@@ -1,5 +1,7 @@
-"""Look at the multi-garment methods: frames of a test sequence, the simulation beside SwinGar and body-LBS
-(from the garment's rest mesh alone) and FitGar's coarse and detail meshes, on the sequence's body.
+"""Look at the predictions: frames of a test sequence, the simulation beside SwinGar and body-LBS (from the
+garment's rest mesh alone), FitGar's coarse and detail meshes, and per-garment runs (VirtualBones, JointNet:
+``--run LABEL=RUN``), on the sequence's body. ``--mean-reference`` adds the mean of the sequence's base and
+reference runs (what a deterministic model can reach, :mod:`loosefit.metrics.reference`).
 
 Each row of the PNG is one frame; each column one mesh, drawn with the posed body, from the same camera.
 The per-vertex error to the simulation (mm) colours the predictions, on one scale for the whole image.
@@ -8,7 +10,8 @@ With ``--collision SDF_RUN`` (and ``--margin``) SwinGar's meshes are also shown 
 correction (SwinGar Eq. 10, :func:`~loosefit.models.collision.handle_motion_collisions`).
 
 Run: .venv/bin/python benchmarks/graph_renders.py --data DATA.zarr --sequence NAME [--swingar RUN]
-         [--collision SDF_RUN [--margin 0.01|auto]] [--fitgar RUN] [--frames 45,120] [--name graph-render-NAME]
+         [--collision SDF_RUN [--margin 0.01|auto]] [--fitgar RUN] [--run VirtualBones=RUN ...] [--mean-reference]
+         [--frames 45,120] [--name graph-render-NAME]
 (writes benchmarks/results/<name>.png)
 """
 
@@ -28,6 +31,7 @@ from loosefit.animate_any import AnyGarmentAnimator  # noqa: E402
 from loosefit.body import AnnyBody, AnnyShape  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.errors import InputError  # noqa: E402
+from loosefit.metrics.reference import References  # noqa: E402
 from loosefit.models.collision import SDF_FILE, collision_margin, handle_motion_collisions, load_body_sdf  # noqa: E402
 from loosefit.sim.attach import body_lbs  # noqa: E402
 from loosefit.viz.render import render_frames, save_png  # noqa: E402
@@ -37,13 +41,19 @@ ERROR_RANGE_MM = (0.0, 100.0)
 
 
 def predictions(store: DatasetStore, name: str, swingar: Path | None, fitgar: Path | None,
-                collision: Path | None = None, margin: float = 0.0) -> tuple[dict, object, object, np.ndarray]:
+                collision: Path | None = None, margin: float = 0.0, runs: dict[str, Path] | None = None,
+                mean_reference: bool = False) -> tuple[dict, object, object, np.ndarray]:
     """``({label: (T, V, 3)}, body, motion, faces (F, 3))``: the simulation first, then each method's meshes."""
     seq = store.sequence(name)
     motion = store.motion(seq.motion)
     body = AnnyBody(AnnyShape.from_array(store.body(seq.body)), rig=motion.rig)
     garment = store.garment(seq.garment)
     meshes = {"simulation": np.asarray(seq.verts[:], np.float32)}
+    if mean_reference:
+        refs = References(meshes["simulation"], store.references(name))
+        meshes[f"mean of {refs.count + 1} runs"] = refs.mean.astype(np.float32)
+    for label, run in (runs or {}).items():
+        meshes[label] = Animator(run).animate(motion)
     if swingar is not None:
         meshes["SwinGar"] = Animator(swingar, garment=garment, body=body).animate(motion)
         if collision is not None:
@@ -67,6 +77,9 @@ def main() -> None:
     p.add_argument("--collision", type=Path, default=None, help="a body SDF run: SwinGar corrected by it too")
     p.add_argument("--margin", default="0", help="the correction's margin, metres, or 'auto' (the SDF run's calibrated one)")
     p.add_argument("--fitgar", type=Path, default=None, help="a FitGar run")
+    p.add_argument("--run", action="append", default=[], metavar="LABEL=RUN",
+                   help="a per-garment run (VirtualBones, JointNet) trained on the sequence's garment")
+    p.add_argument("--mean-reference", action="store_true", help="also the mean of the base and reference runs")
     p.add_argument("--frames", default="45,120")
     p.add_argument("--size", default="360,480", help="W,H pixels of one panel")
     p.add_argument("--name", default=None)
@@ -78,7 +91,11 @@ def main() -> None:
         margin = collision_margin(args.collision, args.margin) if args.collision is not None else 0.0
     except InputError as e:
         p.error(str(e))
-    meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar, args.collision, margin)
+    if any("=" not in text for text in args.run):
+        p.error("--run takes LABEL=RUN, e.g. VirtualBones=runs/skirt/virtualbones")
+    runs = dict(text.split("=", 1) for text in args.run)
+    meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar, args.collision, margin,
+                                              {k: Path(v) for k, v in runs.items()}, args.mean_reference)
     frames = [int(f) for f in args.frames.split(",")]
     posed = body.pose(motion).verts
     gt = meshes["simulation"]
