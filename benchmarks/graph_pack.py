@@ -275,6 +275,11 @@ def score_swingar(weights: Path, config: Path, overrides: list[str], template: P
             "attention_entropy": held_out_entropy(data, run, "last")}
 
 
+def config_path(name: str) -> Path:
+    """A config file given as a path, or by its name in ``configs/models/``."""
+    return Path(name) if Path(name).is_file() else ROOT / "configs" / "models" / name
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -305,8 +310,7 @@ def main() -> None:
     p.add_argument("--out", required=True)
     a = ap.parse_args()
     if a.command == "score":
-        config = Path(a.config) if Path(a.config).is_file() else ROOT / "configs" / "models" / a.config
-        result = score_swingar(a.weights, config, a.set, a.template, a.data, a.run)
+        result = score_swingar(a.weights, config_path(a.config), a.set, a.template, a.data, a.run)
         Path(a.out).write_text(json.dumps(result, indent=1))
         print(f"SwinGar {result['rmse_mm']:.1f} mm, body-LBS {result['body_lbs_rmse_mm']:.1f} mm: "
               f"{result['over_body_lbs']:.3f}x")
@@ -335,7 +339,7 @@ def main() -> None:
               "pack": str(a.pack), "pack_mb": Path(a.pack).stat().st_size / 2**20, "stubbed": stubbed,
               "seconds_per_config": a.seconds, "overrides": a.set, "runs": {}}
     for name in a.configs.split(","):
-        config = Path(name) if Path(name).is_file() else ROOT / "configs" / "models" / name
+        config = config_path(name)
         print(f"== {pack['method']} {config.name}", flush=True)
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats()

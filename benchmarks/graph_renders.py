@@ -93,9 +93,9 @@ def main() -> None:
         p.error(str(e))
     if any("=" not in text for text in args.run):
         p.error("--run takes LABEL=RUN, e.g. VirtualBones=runs/skirt/virtualbones")
-    runs = dict(text.split("=", 1) for text in args.run)
+    runs = {label: Path(run) for label, run in (text.split("=", 1) for text in args.run)}
     meshes, body, motion, faces = predictions(store, args.sequence, args.swingar, args.fitgar, args.collision, margin,
-                                              {k: Path(v) for k, v in runs.items()}, args.mean_reference)
+                                              runs, args.mean_reference)
     frames = [int(f) for f in args.frames.split(",")]
     posed = body.pose(motion).verts
     gt = meshes["simulation"]

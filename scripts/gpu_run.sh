@@ -6,8 +6,8 @@
 # Every step runs under its own timeout within one overall deadline (BUDGET seconds), logs to $OUT/run.log and
 # leaves its JSON in $OUT; a failing step does not stop the next.
 # LONG_SECONDS=N trains the variants of LONG_VARIANTS from the packs at once (one process each, sharing the GPU:
-# equal wall clock, not equal steps; at most four SwinGar at the paper's widths fit 80 GB), N seconds each, then the CUDA tests; curves in
-# $OUT/long-NAME.json, weights in $OUT/weights/NAME/ (to be scored on the CPU machine by the library's animation).
+# equal wall clock, not equal steps), N seconds each, then the CUDA tests; curves in $OUT/long-NAME.json, weights
+# in $OUT/weights/NAME/ (to be scored on the CPU machine by the library's animation).
 set -u
 export PYTHONUNBUFFERED=1
 DEVICE=${DEVICE:-cuda}

@@ -375,6 +375,7 @@ class VirtualBones(GarmentModel):
             self.carry.keep(batch, out["state"])
             pred = out["lf"] if stage == "low" else out["verts"]
             mask = self.mask(batch)
-            return {**masked_errors_mm(pred, batch["verts"], mask),
-                    "lf_rmse_mm": masked_errors_mm(out["lf"], batch["verts"], mask)["rmse_mm"],
+            errors = masked_errors_mm(pred, batch["verts"], mask)
+            lf = errors if stage == "low" else masked_errors_mm(out["lf"], batch["verts"], mask)
+            return {**errors, "lf_rmse_mm": lf["rmse_mm"],
                     "lf_target_rmse_mm": masked_errors_mm(out["lf"], batch["lf"], mask)["rmse_mm"]}
