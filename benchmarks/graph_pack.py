@@ -20,13 +20,16 @@ and training errors against steps and seconds), so the two can be read against e
         --template A_SWINGAR_RUN_ON_SG --data SG.zarr --run /tmp/scored --out score.json
 
 Both stages of each model train in turn, each for half the budget (FitGar: coarse then detail with the coarse
-frozen, the paper's order; SwinGar: its ``supervised`` then ``all`` stage), Adam at the config's rate.
+frozen, the paper's order; SwinGar: its ``supervised`` then ``all`` stage), Adam from the config's rate. The budget
+is wall clock (``--seconds``) or optimiser steps (``--steps``, with ``--seconds`` as a cap: processes sharing one GPU
+then compare at equal steps); ``--schedule cosine`` lowers the rate to 0 over each stage.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -133,7 +136,52 @@ def pack_swingar(data: Path, config: Path, overrides: list[str]) -> dict:
     return {"method": "swingar", **halve(payload)}
 
 
-def fitgar_curve(pack: dict, config: Path, overrides: list[str], seconds: float, device, evals: int) -> dict:
+class Budget:
+    """How long each stage trains, its learning rate at each step, and when it is evaluated.
+
+    Each of ``stages`` stages gets an equal share: of ``steps`` optimiser steps when given (``seconds`` is then a
+    wall-clock cap on the whole run, so that processes sharing a GPU compare at equal steps), else of ``seconds``.
+    ``schedule``: ``constant`` (the config's rate throughout) or ``cosine`` (from the config's rate to 0 over each
+    stage: the papers' schedule, and the end of the curve is not the noise of a constant rate's last step)."""
+
+    def __init__(self, stages: int, seconds: float, steps: int | None, schedule: str, evals: int):
+        self.stages, self.seconds, self.steps, self.schedule, self.evals = stages, seconds, steps, schedule, evals
+        self.start = time.perf_counter()
+
+    def begin(self, stage: int) -> None:
+        if stage == 0:  # the clock starts with the first step, not with the model's set-up
+            self.start = time.perf_counter()
+        self.stage, self.stage_start, self.stage_steps, self.evaluated = stage, time.perf_counter(), 0, -1
+
+    def progress(self) -> float:
+        """Share of the current stage done, in [0, 1]."""
+        if self.steps:
+            return self.stage_steps / max(self.steps // self.stages, 1)
+        return (time.perf_counter() - self.stage_start) / (self.seconds / self.stages)
+
+    def done(self) -> bool:
+        return self.progress() >= 1.0 or time.perf_counter() - self.start >= self.seconds * (
+            1.0 if self.steps else (self.stage + 1) / self.stages)
+
+    def lr(self, base: float) -> float:
+        if self.schedule == "cosine":
+            return base * 0.5 * (1.0 + math.cos(math.pi * min(self.progress(), 1.0)))
+        return base
+
+    def stepped(self) -> bool:
+        """Count one step; True when it is time to evaluate (``evals`` times a stage, and at its end)."""
+        self.stage_steps += 1
+        mark = int(self.progress() * self.evals)
+        if mark > self.evaluated or self.done():
+            self.evaluated = mark
+            return True
+        return False
+
+    def seconds_in(self) -> float:
+        return time.perf_counter() - self.start
+
+
+def fitgar_curve(pack: dict, config: Path, overrides: list[str], budget: Budget, device) -> dict:
     from capacity import errors_mm
 
     from loosefit.config import load_config
@@ -150,7 +198,7 @@ def fitgar_curve(pack: dict, config: Path, overrides: list[str], seconds: float,
     picked = train.items[:: max(len(train) // len(test), 1)]  # as many training frames as held-out ones
     seen = [on(collate_frames(picked[i:i + 8])) for i in range(0, len(picked), 8)]
     held = [on(collate_frames(test.items[i:i + 8])) for i in range(0, len(test), 8)]
-    curve, start, steps = [], time.perf_counter(), 0
+    curve, steps = [], 0
     for n, stage in enumerate(("coarse", "detail")):
         params = list(model.stage_parameters(stage))
         for p in model.parameters():
@@ -158,10 +206,12 @@ def fitgar_curve(pack: dict, config: Path, overrides: list[str], seconds: float,
         for p in params:
             p.requires_grad_(True)
         opt = torch.optim.Adam(params, lr=cfg.train.lr)
-        stage_end, next_eval = start + seconds * (n + 1) / 2, time.perf_counter()
-        while time.perf_counter() < stage_end:
+        budget.begin(n)
+        while not budget.done():
             order = rng.permutation(len(train))
             for a in range(0, len(order), size):
+                for group in opt.param_groups:
+                    group["lr"] = budget.lr(cfg.train.lr)
                 loss, _ = model.training_loss(on(collate_frames([train.items[k] for k in order[a:a + size]])), stage)
                 opt.zero_grad()
                 loss.backward()
@@ -169,21 +219,19 @@ def fitgar_curve(pack: dict, config: Path, overrides: list[str], seconds: float,
                     torch.nn.utils.clip_grad_norm_(params, cfg.train.grad_clip)
                 opt.step()
                 steps += 1
-                now = time.perf_counter()
-                if now >= next_eval or now >= stage_end:
-                    row = {"stage": stage, "step": steps, "seconds": now - start, "loss": float(loss.detach()),
+                if budget.stepped():
+                    row = {"stage": stage, "step": steps, "seconds": budget.seconds_in(), "loss": float(loss.detach()),
                            **{f"train_{k}": v for k, v in errors_mm(model, seen).items()},
                            **{f"test_{k}": v for k, v in errors_mm(model, held).items()}}
                     curve.append(row)
                     print({k: round(v, 2) if isinstance(v, float) else v for k, v in row.items()}, flush=True)
-                    next_eval = time.perf_counter() + seconds / evals
-                if now >= stage_end:
+                if budget.done():
                     break
     return {"train_frames": len(train), "test_frames": len(test), "parameters": sum(p.numel() for p in model.parameters()),
             "curve": curve, "model": model}
 
 
-def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float, device, evals: int) -> dict:
+def swingar_curve(pack: dict, config: Path, overrides: list[str], budget: Budget, device) -> dict:
     from swingar_gpu import model_from_payload, window_errors
 
     from loosefit.config import load_config
@@ -216,28 +264,28 @@ def swingar_curve(pack: dict, config: Path, overrides: list[str], seconds: float
     seen = collate_by_graph(items[:: max(len(items) // 16, 1)])
     opt = torch.optim.Adam(model.parameters(), cfg.train.lr)
     rng = np.random.default_rng(0)
-    curve, start, steps = [], time.perf_counter(), 0
+    curve, steps = [], 0
     for n, stage in enumerate(cfg.train.stages):
-        stage_end, next_eval = start + seconds * (n + 1) / len(cfg.train.stages), time.perf_counter()
-        while time.perf_counter() < stage_end:
+        budget.begin(n)
+        while not budget.done():
             order = rng.permutation(len(items))
             for a in range(0, len(order), cfg.train.batch_size):
+                for group in opt.param_groups:
+                    group["lr"] = budget.lr(cfg.train.lr)
                 loss, _ = model.training_loss(collate_by_graph([items[k] for k in order[a:a + cfg.train.batch_size]]), stage)
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
                 steps += 1
-                now = time.perf_counter()
-                if now >= next_eval or now >= stage_end:
+                if budget.stepped():
                     model.eval()
-                    row = {"stage": stage, "step": steps, "seconds": now - start, "loss": float(loss.detach()),
+                    row = {"stage": stage, "step": steps, "seconds": budget.seconds_in(), "loss": float(loss.detach()),
                            **{f"train_{k}": v for k, v in window_errors(model, seen).items()},
                            **{f"test_{k}": v for k, v in window_errors(model, held).items()}}
                     model.train()
                     curve.append(row)
                     print({k: round(v, 2) if isinstance(v, float) else v for k, v in row.items()}, flush=True)
-                    next_eval = time.perf_counter() + seconds / evals
-                if now >= stage_end:
+                if budget.done():
                     break
     return {"train_windows": len(items), "test_sequences": len(payload["test"]),
             "parameters": sum(p.numel() for p in model.parameters()), "curve": curve, "model": model}
@@ -296,6 +344,8 @@ def main() -> None:
     p.add_argument("--pack", required=True)
     p.add_argument("--configs", required=True, help="comma-separated config files (names in configs/models/ or paths)")
     p.add_argument("--seconds", type=float, default=60.0, help="training wall-clock per config")
+    p.add_argument("--steps", type=int, help="optimiser steps per config (then --seconds is only a cap)")
+    p.add_argument("--schedule", choices=("constant", "cosine"), default="constant", help="learning rate over each stage")
     p.add_argument("--evals", type=int, default=8, help="evaluations per stage")
     p.add_argument("--set", action="append", default=[])
     p.add_argument("--save", help="folder for each config's trained weights (CONFIG.pt: the model's state dict)")
@@ -332,18 +382,23 @@ def main() -> None:
     from swingar_gpu import stub_missing
 
     stubbed = stub_missing()
+    from loosefit.config import load_config
+    from loosefit.models.swingar import Config as SwinGarConfig
+
     pack = torch.load(a.pack, weights_only=False)
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     curve_of = fitgar_curve if pack["method"] == "fitgar" else swingar_curve
     result = {"method": pack["method"], "device": torch.cuda.get_device_name() if device.type == "cuda" else "cpu",
               "pack": str(a.pack), "pack_mb": Path(a.pack).stat().st_size / 2**20, "stubbed": stubbed,
-              "seconds_per_config": a.seconds, "overrides": a.set, "runs": {}}
+              "seconds_per_config": a.seconds, "steps_per_config": a.steps,
+              "schedule": a.schedule, "overrides": a.set, "runs": {}}
     for name in a.configs.split(","):
         config = config_path(name)
         print(f"== {pack['method']} {config.name}", flush=True)
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats()
-        run = curve_of(pack, config, a.set, a.seconds, device, a.evals)
+        stages = 2 if pack["method"] == "fitgar" else len(load_config(SwinGarConfig, config, a.set).train.stages)
+        run = curve_of(pack, config, a.set, Budget(stages, a.seconds, a.steps, a.schedule, a.evals), device)
         model = run.pop("model")
         if device.type == "cuda":
             run["peak_memory_mib"] = torch.cuda.max_memory_allocated() / 2**20

@@ -5,8 +5,9 @@
 #   DEVICE=cpu PY=.venv/bin/python OUT=/tmp/gpu-out bash scripts/gpu_run.sh   # here: the same steps, tiny sizes
 # Every step runs under its own timeout within one overall deadline (BUDGET seconds), logs to $OUT/run.log and
 # leaves its JSON in $OUT; a failing step does not stop the next.
-# LONG_SECONDS=N trains the variants of LONG_VARIANTS from the packs at once (one process each, sharing the GPU:
-# equal wall clock, not equal steps), N seconds each, then the CUDA tests; curves in $OUT/long-NAME.json, weights
+# LONG_SECONDS=N trains the variants of LONG_VARIANTS from the packs at once (one process each, sharing the GPU),
+# N seconds each, or a variant's STEPS optimiser steps with N seconds as a cap (equal steps), the learning rate
+# over each stage by LONG_SCHEDULE (constant or cosine), then the CUDA tests; curves in $OUT/long-NAME.json, weights
 # in $OUT/weights/NAME/ (to be scored on the CPU machine by the library's animation).
 set -u
 export PYTHONUNBUFFERED=1
@@ -58,7 +59,7 @@ if [ "$DEVICE" = cuda ]; then
 else
   SIZE=tiny; STEPS=${STEPS:-24}; PACK_SECONDS=${PACK_SECONDS:-5}
 fi
-# long runs at once: NAME:PACK:CONFIG[:KEY=VALUE,...] each
+# long runs at once: NAME:PACK:CONFIG[:KEY=VALUE,...[:STEPS]] each
 # (SwinGar at the paper's widths takes about 18 GiB each on this pack: three at once beside two FitGar fit 80 GB)
 LONG_VARIANTS=${LONG_VARIANTS:-"swingar-a2-s0:swingar:swingar.yaml swingar-a2-s1:swingar:swingar.yaml:train.seed=1
   swingar-gat-s0:swingar:swingar.yaml:model.alpha=null fitgar-paper:fitgar:fitgar.yaml fitgar-cpu:fitgar:fitgar-cpu.yaml"}
@@ -67,11 +68,14 @@ if [ -n "${LONG_SECONDS:-}" ]; then
   t0=$SECONDS
   pids=()
   for v in $LONG_VARIANTS; do
-    IFS=: read -r name pack config sets <<< "$v"
+    IFS=: read -r name pack config sets steps <<< "$v"
     args=(); IFS=, read -ra kv <<< "${sets:-}"; for x in "${kv[@]}"; do args+=(--set "$x"); done
+    [ -n "${steps:-}" ] && args+=(--steps "$steps")
+    # SwinGar's weights are scored on the CPU machine; FitGar's curves are its scores (its weights would not fit $OUT)
+    [ "$pack" = swingar ] && args+=(--save "$OUT/weights/$name")
     [ -f "$G/$pack-pack.pt" ] || { echo "=== [long] $name: no $G/$pack-pack.pt" | tee -a "$LOG"; continue; }
     OMP_NUM_THREADS=2 timeout -k 5 $((LONG_SECONDS + 150)) $PY benchmarks/graph_pack.py train --pack "$G/$pack-pack.pt" \
-      --configs "$config" --seconds "$LONG_SECONDS" --evals 4 "${args[@]}" --save "$OUT/weights/$name" \
+      --configs "$config" --seconds "$LONG_SECONDS" --evals 4 --schedule "${LONG_SCHEDULE:-constant}" "${args[@]}" \
       --out "$OUT/long-$name.json" > "$OUT/long-$name.log" 2>&1 &
     pids+=($!)
   done
@@ -91,8 +95,9 @@ fi
   --steps $STEPS --out "$OUT/gpu-smoke.json"
 [ "$DEVICE" = cuda ] && [ -n "${EXTRA:-}" ] && step extra 400 bash -c "$EXTRA"
 echo "=== done in $((SECONDS - START))s; $OUT: $(ls "$OUT" | tr '\n' ' ')" | tee -a "$LOG"
-# the device tool returns at most eight files from $OUT: more travel as one archive, beside the log
+# the device tool returns at most eight files from $OUT, each at most 16 MiB: more travel as one archive in parts
+# (cat all.tgz.part-* | tar xz), beside the log
 if [ "$(find "$OUT" -type f | wc -l)" -gt 8 ]; then
   tar czf "/tmp/loosefit-gpu-out.tgz" -C "$OUT" . && cp "$LOG" /tmp/loosefit-gpu-run.log && rm -rf "${OUT:?}"/* &&
-    mv /tmp/loosefit-gpu-out.tgz "$OUT/all.tgz" && mv /tmp/loosefit-gpu-run.log "$OUT/run.log"
+    split -b 15m /tmp/loosefit-gpu-out.tgz "$OUT/all.tgz.part-" && mv /tmp/loosefit-gpu-run.log "$OUT/run.log"
 fi
