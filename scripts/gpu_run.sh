@@ -60,7 +60,8 @@ else
   SIZE=tiny; STEPS=${STEPS:-24}; PACK_SECONDS=${PACK_SECONDS:-5}
 fi
 # long runs at once: NAME:PACK:CONFIG[:KEY=VALUE,...[:STEPS]] each
-# (SwinGar at the paper's widths takes about 18 GiB each on this pack: three at once beside two FitGar fit 80 GB)
+# (SwinGar at the paper's widths takes 16-20 GiB each on this pack: three at once beside two FitGar fit an 80 GB H100,
+# six beside two FitGar a 141 GB H200 with PYTORCH_CUDA_ALLOC_CONF=expandable_segments:True)
 LONG_VARIANTS=${LONG_VARIANTS:-"swingar-a2-s0:swingar:swingar.yaml swingar-a2-s1:swingar:swingar.yaml:train.seed=1
   swingar-gat-s0:swingar:swingar.yaml:model.alpha=null fitgar-paper:fitgar:fitgar.yaml fitgar-cpu:fitgar:fitgar-cpu.yaml"}
 if [ -n "${LONG_SECONDS:-}" ]; then
