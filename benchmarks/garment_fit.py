@@ -58,10 +58,15 @@ and 10.6 mm (heavy, but found on a slim body: a hanging skirt says less about th
 short body's dress came out of the import repaired (its mesh changed), so it has no vertex-to-vertex figure.
 Neither a three times slower morph (12.9 and 10.6 mm) nor a tenth of the friction on the body (12.0 and 10.0)
 changes this much, and the pinned top comes back to within 0.5 mm: what is left is which folds the long skirt
-settles into (10 micrometres of start noise alone move the dress 5 mm).
+settles into (10 micrometres of start noise alone move the dress 5 mm). Ten times the air drag in the fit's
+drapes and their references (``--sim air_drag=3``, ``garment-fit-dress-drag3.json``: an over-damped settle,
+the skirt falling at about 0.5 m/s and no longer swinging) brings the heavy body's dress under the floor (8.6 mm,
+and its ``kept_mm`` from 4.2 to 2.7) but not the tall-slim one's (13.3 mm; ``kept_mm`` 16.5 to 7.1): that
+dress, cut for a taller body, reaches the feet on the default one (``garment-fit-dress-drag3-dress-0-tall-slim.png``),
+and what its skirt does there is not undone on the way back. The default drag stays: one case of two.
 
 Run: nice -n 5 .venv/bin/python benchmarks/garment_fit.py [--kinds skirt,dress] [--bodies tall-slim,heavy,short]
-         [--seeds 0] [--edge-length 0.03] [--render dress-0/tall-slim] [--name garment-fit]
+         [--seeds 0] [--edge-length 0.03] [--render dress-0/tall-slim] [--name garment-fit] [--sim air_drag=3]
 (writes benchmarks/results/<name>.json after every case and resumes from it; the render to
 benchmarks/results/<name>-<kind>-<seed>-<body>.png)
 """
@@ -151,7 +156,7 @@ def source_garment(kind: str, seed: int, shape_values: dict, edge_length: float,
 
 
 def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, unit: str, render: Path | None,
-             at_rest: float = 0.0):
+             at_rest: float = 0.0, params=None):
     from loosefit.errors import InputError
     from loosefit.garment import import_garment, make_garment
     from loosefit.garment.placement import to_z_up
@@ -168,7 +173,7 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
         row["direct"] = {"refused": True, "error": err.problem[:300]}
     start = time.perf_counter()
     try:
-        g = import_garment(path, body, fit=True)
+        g = import_garment(path, body, fit=True, fit_params=params)
     except InputError as err:
         row.update(landed=False, error=str(err)[:600], seconds=round(time.perf_counter() - start, 1))
         return row
@@ -180,7 +185,7 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
     if g.num_verts == made.num_verts and np.array_equal(g.faces, made.faces):
         placed = to_z_up(file_verts / scale, g.params["up"]) + np.asarray(g.params["offset"])
         row["vs_file_mm"] = round(1e3 * kabsch_mean_distance(g.verts.astype(np.float64), placed), 2)
-        row.update(settled_reference(g.verts, placed, made.faces, body, fit["shape"]))
+        row.update(settled_reference(g.verts, placed, made.faces, body, fit["shape"], params))
         row["strain_percent"] = round(100.0 * edge_strain(g.verts.astype(np.float64), made.verts.astype(np.float64), made.faces), 2)
     else:
         row["kept_mm"] = row["round_trip_mm"] = None  # repair changed the mesh: no vertex correspondence
@@ -198,7 +203,7 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
     return row
 
 
-def settled_reference(fitted: np.ndarray, placed: np.ndarray, faces: np.ndarray, body, shape: dict) -> dict:
+def settled_reference(fitted: np.ndarray, placed: np.ndarray, faces: np.ndarray, body, shape: dict, params=None) -> dict:
     """``kept_mm`` and ``round_trip_mm`` (see the module docstring), and the seconds their two drapes took."""
     from loosefit.body import AnnyShape
     from loosefit.garment.body_fit import drape
@@ -208,8 +213,8 @@ def settled_reference(fitted: np.ndarray, placed: np.ndarray, faces: np.ndarray,
     start = time.perf_counter()
     fitted = np.asarray(fitted, np.float64)
     none = np.zeros(len(placed), np.int64)
-    settled, _ = drape(placed, faces, top_pins(placed, none), body, found, target=found)
-    back, _ = drape(fitted, faces, top_pins(fitted, none), body, body.shape, target=found)
+    settled, _ = drape(placed, faces, top_pins(placed, none), body, found, target=found, params=params)
+    back, _ = drape(fitted, faces, top_pins(fitted, none), body, body.shape, target=found, params=params)
     return {"kept_mm": round(1e3 * kabsch_mean_distance(fitted, settled), 2),
             "round_trip_mm": round(1e3 * kabsch_mean_distance(back, settled), 2),
             "reference_seconds": round(time.perf_counter() - start, 1)}
@@ -252,7 +257,15 @@ def main() -> None:
     ap.add_argument("--workdir", default="/tmp/garment-fit")
     ap.add_argument("--at-rest", type=float, default=0.0,
                     help="seconds each garment is first draped on its own body before it is written (0: as made)")
+    ap.add_argument("--sim", action="append", default=[], metavar="KEY=VALUE",
+                    help="simulation setting of the fit's drapes and of their references (SimParams; the garment's "
+                         "own drape at rest keeps the defaults)")
     args = ap.parse_args()
+
+    from loosefit.sim.params import SimParams
+
+    defaults = SimParams()
+    params = SimParams(**{k: type(getattr(defaults, k))(v) for k, v in (kv.split("=", 1) for kv in args.sim)}) if args.sim else None
 
     from loosefit.body import AnnyBody
 
@@ -263,6 +276,7 @@ def main() -> None:
     results = json.loads(path.read_text())["results"] if path.is_file() else {}
     results.setdefault("cases", {})
     results["at_rest_s"] = args.at_rest
+    results["sim"] = args.sim
     cases = [(k, int(s), b) for s in args.seeds.split(",") for k in args.kinds.split(",") for b in args.bodies.split(",")]
     if "refusals" not in results:
         k, s, b = cases[0]
@@ -276,7 +290,7 @@ def main() -> None:
         render = RESULTS / f"{args.name}-{kind}-{seed}-{name}.png" if key == args.render else None
         print(f"== {key}", flush=True)
         results["cases"][key] = run_case(kind, seed, name, BODIES[name], body, args.edge_length, workdir,
-                                         "cm" if i % 2 == 0 else "mm", render, args.at_rest)
+                                         "cm" if i % 2 == 0 else "mm", render, args.at_rest, params)
         finish(args.name, results)
 
 
