@@ -60,7 +60,7 @@ Neither a three times slower morph (12.9 and 10.6 mm) nor a tenth of the frictio
 changes this much, and the pinned top comes back to within 0.5 mm: what is left is which folds the long skirt
 settles into (10 micrometres of start noise alone move the dress 5 mm). Ten times the air drag in the fit's
 drapes and their references (``--sim air_drag=3``, ``garment-fit-dress-drag3.json``: an over-damped settle,
-the skirt falling at about 0.5 m/s and no longer swinging) brings the heavy body's dress under the floor (8.6 mm,
+a terminal speed of about 0.5 m/s for the fabric's weight, so the skirt sinks instead of swinging) brings the heavy body's dress under the floor (8.6 mm,
 and its ``kept_mm`` from 4.2 to 2.7) but not the tall-slim one's (13.3 mm; ``kept_mm`` 16.5 to 7.1): that
 dress, cut for a taller body, reaches the feet on the default one (``garment-fit-dress-drag3-dress-0-tall-slim.png``),
 and what its skirt does there is not undone on the way back. The default drag stays: one case of two.
