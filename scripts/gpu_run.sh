@@ -7,7 +7,7 @@
 # leaves its JSON in $OUT; a failing step does not stop the next.
 # LONG_SECONDS=N trains the variants of LONG_VARIANTS from the packs at once (one process each, sharing the GPU),
 # N seconds each, or a variant's STEPS optimiser steps with N seconds as a cap (equal steps), the learning rate
-# over each stage by LONG_SCHEDULE (constant or cosine), then the CUDA tests; curves in $OUT/long-NAME.json, weights
+# over each stage by LONG_SCHEDULE (cosine, the default, or constant), then the CUDA tests; curves in $OUT/long-NAME.json, weights
 # in $OUT/weights/NAME/ (to be scored on the CPU machine by the library's animation).
 set -u
 export PYTHONUNBUFFERED=1
@@ -62,8 +62,10 @@ fi
 # long runs at once: NAME:PACK:CONFIG[:KEY=VALUE,...[:STEPS]] each
 # (SwinGar at the paper's widths takes 16-20 GiB each on this pack: three at once beside two FitGar fit an 80 GB H100,
 # six beside two FitGar a 141 GB H200 with PYTORCH_CUDA_ALLOC_CONF=expandable_segments:True)
-LONG_VARIANTS=${LONG_VARIANTS:-"swingar-a2-s0:swingar:swingar.yaml swingar-a2-s1:swingar:swingar.yaml:train.seed=1
-  swingar-gat-s0:swingar:swingar.yaml:model.alpha=null fitgar-paper:fitgar:fitgar.yaml fitgar-cpu:fitgar:fitgar-cpu.yaml"}
+# (FitGar on the quasi-static pack, graph_pack.py pack of configs/datasets/fitgar-static.yaml, at the rate that fits it)
+LONG_VARIANTS=${LONG_VARIANTS:-"swingar-a2-s0:swingar:swingar.yaml::250 swingar-a2-s1:swingar:swingar.yaml:train.seed=1:250
+  swingar-gat-s0:swingar:swingar.yaml:model.alpha=null:250 fitgar-paper:fitgar-static:fitgar.yaml:train.lr=1e-3
+  fitgar-cpu:fitgar-static:fitgar-cpu.yaml"}
 if [ -n "${LONG_SECONDS:-}" ]; then
   echo "=== [long] start at +$((SECONDS - START))s: ${LONG_SECONDS}s each" | tee -a "$LOG"
   t0=$SECONDS
@@ -76,7 +78,7 @@ if [ -n "${LONG_SECONDS:-}" ]; then
     [ "$pack" = swingar ] && args+=(--save "$OUT/weights/$name")
     [ -f "$G/$pack-pack.pt" ] || { echo "=== [long] $name: no $G/$pack-pack.pt" | tee -a "$LOG"; continue; }
     OMP_NUM_THREADS=2 timeout -k 5 $((LONG_SECONDS + 150)) $PY benchmarks/graph_pack.py train --pack "$G/$pack-pack.pt" \
-      --configs "$config" --seconds "$LONG_SECONDS" --evals 4 --schedule "${LONG_SCHEDULE:-constant}" "${args[@]}" \
+      --configs "$config" --seconds "$LONG_SECONDS" --evals 4 --schedule "${LONG_SCHEDULE:-cosine}" "${args[@]}" \
       --out "$OUT/long-$name.json" > "$OUT/long-$name.log" 2>&1 &
     pids+=($!)
   done
