@@ -262,10 +262,10 @@ def main() -> None:
                          "own drape at rest keeps the defaults)")
     args = ap.parse_args()
 
+    from loosefit.config import apply_overrides
     from loosefit.sim.params import SimParams
 
-    defaults = SimParams()
-    params = SimParams(**{k: type(getattr(defaults, k))(v) for k, v in (kv.split("=", 1) for kv in args.sim)}) if args.sim else None
+    params = apply_overrides(SimParams(), args.sim) if args.sim else None
 
     from loosefit.body import AnnyBody
 

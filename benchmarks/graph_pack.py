@@ -139,19 +139,22 @@ def pack_swingar(data: Path, config: Path, overrides: list[str]) -> dict:
 class Budget:
     """How long each stage trains, its learning rate at each step, and when it is evaluated.
 
-    Each of ``stages`` stages gets an equal share: of ``steps`` optimiser steps when given (``seconds`` is then a
-    wall-clock cap on the whole run, so that processes sharing a GPU compare at equal steps), else of ``seconds``.
+    Each of the run's stages (their count given to :meth:`begin`) gets an equal share: of ``steps`` optimiser steps
+    when given (``seconds`` is then a wall-clock cap on the whole run, so that processes sharing a GPU compare at
+    equal steps), else of ``seconds``.
     ``schedule``: ``constant`` (the config's rate throughout) or ``cosine`` (from the config's rate to 0 over each
     stage: the papers' schedule, and the end of the curve is not the noise of a constant rate's last step)."""
 
-    def __init__(self, stages: int, seconds: float, steps: int | None, schedule: str, evals: int):
-        self.stages, self.seconds, self.steps, self.schedule, self.evals = stages, seconds, steps, schedule, evals
-        self.start = time.perf_counter()
+    def __init__(self, seconds: float, steps: int | None, schedule: str, evals: int):
+        self.seconds, self.steps, self.schedule, self.evals = seconds, steps, schedule, evals
+        self.start, self.total_steps = time.perf_counter(), 0
 
-    def begin(self, stage: int) -> None:
-        if stage == 0:  # the clock starts with the first step, not with the model's set-up
+    def begin(self, stage: int, stages: int) -> None:
+        """Stage ``stage`` of ``stages`` starts (the clock starts with the first one, not with the model's set-up)."""
+        if stage == 0:
             self.start = time.perf_counter()
-        self.stage, self.stage_start, self.stage_steps, self.evaluated = stage, time.perf_counter(), 0, -1
+        self.stage, self.stages = stage, stages
+        self.stage_start, self.stage_steps, self.evaluated = time.perf_counter(), 0, -1
 
     def progress(self) -> float:
         """Share of the current stage done, in [0, 1]."""
@@ -163,14 +166,16 @@ class Budget:
         return self.progress() >= 1.0 or time.perf_counter() - self.start >= self.seconds * (
             1.0 if self.steps else (self.stage + 1) / self.stages)
 
-    def lr(self, base: float) -> float:
-        if self.schedule == "cosine":
-            return base * 0.5 * (1.0 + math.cos(math.pi * min(self.progress(), 1.0)))
-        return base
+    def set_rate(self, optimiser: torch.optim.Optimizer, base: float) -> None:
+        """The schedule's rate for the next step, from the config's ``base``."""
+        rate = base * 0.5 * (1.0 + math.cos(math.pi * min(self.progress(), 1.0))) if self.schedule == "cosine" else base
+        for group in optimiser.param_groups:
+            group["lr"] = rate
 
     def stepped(self) -> bool:
         """Count one step; True when it is time to evaluate (``evals`` times a stage, and at its end)."""
         self.stage_steps += 1
+        self.total_steps += 1
         mark = int(self.progress() * self.evals)
         if mark > self.evaluated or self.done():
             self.evaluated = mark
@@ -198,29 +203,27 @@ def fitgar_curve(pack: dict, config: Path, overrides: list[str], budget: Budget,
     picked = train.items[:: max(len(train) // len(test), 1)]  # as many training frames as held-out ones
     seen = [on(collate_frames(picked[i:i + 8])) for i in range(0, len(picked), 8)]
     held = [on(collate_frames(test.items[i:i + 8])) for i in range(0, len(test), 8)]
-    curve, steps = [], 0
-    for n, stage in enumerate(("coarse", "detail")):
+    curve, stages = [], ("coarse", "detail")
+    for n, stage in enumerate(stages):
         params = list(model.stage_parameters(stage))
         for p in model.parameters():
             p.requires_grad_(False)
         for p in params:
             p.requires_grad_(True)
         opt = torch.optim.Adam(params, lr=cfg.train.lr)
-        budget.begin(n)
+        budget.begin(n, len(stages))
         while not budget.done():
             order = rng.permutation(len(train))
             for a in range(0, len(order), size):
-                for group in opt.param_groups:
-                    group["lr"] = budget.lr(cfg.train.lr)
+                budget.set_rate(opt, cfg.train.lr)
                 loss, _ = model.training_loss(on(collate_frames([train.items[k] for k in order[a:a + size]])), stage)
                 opt.zero_grad()
                 loss.backward()
                 if cfg.train.grad_clip:
                     torch.nn.utils.clip_grad_norm_(params, cfg.train.grad_clip)
                 opt.step()
-                steps += 1
                 if budget.stepped():
-                    row = {"stage": stage, "step": steps, "seconds": budget.seconds_in(), "loss": float(loss.detach()),
+                    row = {"stage": stage, "step": budget.total_steps, "seconds": budget.seconds_in(), "loss": float(loss.detach()),
                            **{f"train_{k}": v for k, v in errors_mm(model, seen).items()},
                            **{f"test_{k}": v for k, v in errors_mm(model, held).items()}}
                     curve.append(row)
@@ -264,22 +267,20 @@ def swingar_curve(pack: dict, config: Path, overrides: list[str], budget: Budget
     seen = collate_by_graph(items[:: max(len(items) // 16, 1)])
     opt = torch.optim.Adam(model.parameters(), cfg.train.lr)
     rng = np.random.default_rng(0)
-    curve, steps = [], 0
+    curve = []
     for n, stage in enumerate(cfg.train.stages):
-        budget.begin(n)
+        budget.begin(n, len(cfg.train.stages))
         while not budget.done():
             order = rng.permutation(len(items))
             for a in range(0, len(order), cfg.train.batch_size):
-                for group in opt.param_groups:
-                    group["lr"] = budget.lr(cfg.train.lr)
+                budget.set_rate(opt, cfg.train.lr)
                 loss, _ = model.training_loss(collate_by_graph([items[k] for k in order[a:a + cfg.train.batch_size]]), stage)
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
-                steps += 1
                 if budget.stepped():
                     model.eval()
-                    row = {"stage": stage, "step": steps, "seconds": budget.seconds_in(), "loss": float(loss.detach()),
+                    row = {"stage": stage, "step": budget.total_steps, "seconds": budget.seconds_in(), "loss": float(loss.detach()),
                            **{f"train_{k}": v for k, v in window_errors(model, seen).items()},
                            **{f"test_{k}": v for k, v in window_errors(model, held).items()}}
                     model.train()
@@ -382,9 +383,6 @@ def main() -> None:
     from swingar_gpu import stub_missing
 
     stubbed = stub_missing()
-    from loosefit.config import load_config
-    from loosefit.models.swingar import Config as SwinGarConfig
-
     pack = torch.load(a.pack, weights_only=False)
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     curve_of = fitgar_curve if pack["method"] == "fitgar" else swingar_curve
@@ -397,8 +395,7 @@ def main() -> None:
         print(f"== {pack['method']} {config.name}", flush=True)
         if device.type == "cuda":
             torch.cuda.reset_peak_memory_stats()
-        stages = 2 if pack["method"] == "fitgar" else len(load_config(SwinGarConfig, config, a.set).train.stages)
-        run = curve_of(pack, config, a.set, Budget(stages, a.seconds, a.steps, a.schedule, a.evals), device)
+        run = curve_of(pack, config, a.set, Budget(a.seconds, a.steps, a.schedule, a.evals), device)
         model = run.pop("model")
         if device.type == "cuda":
             run["peak_memory_mib"] = torch.cuda.max_memory_allocated() / 2**20
