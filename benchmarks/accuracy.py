@@ -364,7 +364,9 @@ def ensemble_benchmark(data: Path, runs: Path, overrides: list[str], bones: int)
     ensemble, report = fit_ensemble(models, train_sets, train_data, config)
     held_data = [GarmentSequences(store, garment, "test", sim_params=p, bones=False, body=False) for p in held_sets]
     result = evaluate_parameter_sets(ensemble, held_sets, held_data)
-    print(f"== ensemble on {len(held_sets)} held-out sets: RBF {result['rbf_rmse_mm']:.2f} mm, "
+    fixed = f" (bandwidth x{ensemble.bandwidth:g}; the fixed kernel {result['rbf_sigma1_rmse_mm']:.2f} mm)" \
+        if "rbf_sigma1_rmse_mm" in result else ""
+    print(f"== ensemble on {len(held_sets)} held-out sets: RBF {result['rbf_rmse_mm']:.2f} mm{fixed}, "
           f"linear {result['linear_rmse_mm']:.2f} mm", flush=True)
     targets = []
     for row in result["sets"]:

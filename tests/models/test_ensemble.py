@@ -14,6 +14,7 @@ from loosefit.models.ensemble import (
     ParamSpace,
     RBFEnsemble,
     best_convex_weights,
+    cross_validated_bandwidth,
     error_grams,
     evaluate_parameter_sets,
     fit_ensemble,
@@ -203,3 +204,81 @@ def test_fit_evaluate_save_and_load(networks, tiny_train, tiny_test, tmp_path):
     broken.write_bytes(path.read_bytes()[:1000])
     with pytest.raises(InputError, match="broken.pt"):
         RBFEnsemble.load(broken, {"virtualbones": VirtualBones})
+
+
+def _line_of_sets(count: int) -> tuple[list[dict], np.ndarray]:
+    """``count`` parameter sets along bending (log-spaced) and density, and their normalised parameters."""
+    params = [{**PARAMS[0], "bending": 10.0 ** (-6 + 2 * s / (count - 1)), "density": 0.1 + 0.05 * s} for s in range(count)]
+    return params, ParamSpace.fit(params, ("bending",)).transform(params)
+
+
+def test_bandwidth_cross_validation_against_closed_form_and_brute_force():
+    # every set is the same garment plus its own independent noise n_s (chaos), and each pivot reproduces its own
+    # set exactly (G_k = M + n_k): on a new set the error per sample is 1 + sum_k w_k^2 in units of the noise's
+    # variance. Trained leave-one-out, g learns even weights, so every fold's error is the closed form's 1 + 1/5
+    # (five pivots once the fold's own is left out) at every width
+    S, D = 6, 20000
+    params, theta = _line_of_sets(S)
+    noise = np.random.default_rng(0).standard_normal((S, D))
+    grams = np.stack([(noise - noise[s]) @ (noise - noise[s]).T for s in range(S)])
+    counts = np.full(S, D)
+    space = ParamSpace.fit(params, ("bending",))
+    config = EnsembleConfig(pivots=S, steps=300, lr=2e-2, bandwidths=(4.0, 1.0, 16.0))
+    ensemble = RBFEnsemble([torch.nn.Linear(1, 1) for _ in range(S)], params, space, config)
+    chosen, errors = cross_validated_bandwidth(ensemble, grams, counts, theta, own=list(range(S)))
+    assert set(errors) == {1.0, 4.0, 16.0} and errors[chosen] == min(errors.values())
+    for b in errors:
+        assert errors[b] == pytest.approx(1 + 1 / (S - 1), rel=0.03)
+    # brute force: each fold's g trained on the other sets by RBFEnsemble.fit, the fold's set weighted without its pivot
+    total = 0.0
+    for i in range(S):
+        rest = [s for s in range(S) if s != i]
+        fold = RBFEnsemble([torch.nn.Linear(1, 1) for _ in range(S)], params, space, config)
+        fold.fit(grams[rest], counts[rest], theta[rest], rest)
+        fold.bandwidth = 16.0
+        with torch.no_grad():
+            w = fold.weights(torch.tensor(theta[i:i + 1], dtype=torch.float32), torch.tensor([i]))[0].double().numpy()
+        assert w[i] == 0
+        total += w @ grams[i] @ w / D / S
+    assert errors[16.0] == pytest.approx(total, rel=1e-6)
+    # the ensemble passed in keeps its own g
+    assert ensemble.bandwidth == 1.0
+
+
+def test_bandwidth_cross_validation_keeps_a_sharp_kernel_when_the_parameters_matter():
+    # the garment moves linearly along the line of sets (Y_s = s u, pivot k gives k u, no noise): an interior set is
+    # the even mix of its two neighbours (error 0), while even weights over all pivots miss it by far
+    S, D = 7, 50
+    params, theta = _line_of_sets(S)
+    u = np.random.default_rng(1).standard_normal(D)
+    grams = np.stack([np.outer(np.arange(S) - s, np.arange(S) - s) * (u @ u) for s in range(S)])
+    counts = np.full(S, D)
+    config = EnsembleConfig(pivots=S, steps=400, lr=2e-2, bandwidths=(1.0, 64.0))
+    ensemble = RBFEnsemble([torch.nn.Linear(1, 1) for _ in range(S)], params, ParamSpace.fit(params, ("bending",)), config)
+    chosen, errors = cross_validated_bandwidth(ensemble, grams, counts, theta, own=list(range(S)))
+    assert chosen == 1.0 and errors[1.0] < errors[64.0] / 3
+    # nearly even weights over the six other pivots: the closed form of each fold's error, averaged
+    even = np.mean([(np.mean([k - s for k in range(S) if k != s])) ** 2 * (u @ u) / D for s in range(S)])
+    assert errors[64.0] == pytest.approx(even, rel=0.1)
+
+
+def test_bandwidth_is_chosen_by_fit_ensemble_saved_and_validated(networks, tiny_train, tmp_path):
+    with pytest.raises(InputError, match="bandwidths"):
+        EnsembleConfig(bandwidths=(1.0, 0.0))
+    config = EnsembleConfig(pivots=3, steps=30, bandwidths=(1.0, 8.0))
+    ensemble, report = fit_ensemble(networks, PARAMS, [tiny_train] * 4, config)
+    assert report["bandwidth"] in (1.0, 8.0) and set(report["bandwidth_cv_rmse_mm"]) == {"1", "8"}
+    assert ensemble.bandwidth == report["bandwidth"]
+    held_out = [{**PARAMS[0], "bending": 2e-6, "density": 0.15}]
+    ensemble.bandwidth = 1.0
+    fixed = evaluate_parameter_sets(ensemble, held_out, [tiny_train])
+    ensemble.bandwidth = 8.0
+    wide = evaluate_parameter_sets(ensemble, held_out, [tiny_train])
+    assert "rbf_sigma1_rmse_mm" not in fixed and ensemble.bandwidth == 8.0
+    assert wide["rbf_sigma1_rmse_mm"] == pytest.approx(fixed["rbf_rmse_mm"], rel=1e-9)
+    assert wide["sets"][0]["rbf_sigma1_rmse_mm"] == pytest.approx(fixed["sets"][0]["rbf_rmse_mm"], rel=1e-9)
+    path = tmp_path / "ensemble.pt"
+    ensemble.save(path)
+    loaded = RBFEnsemble.load(path, {"virtualbones": VirtualBones})
+    assert loaded.bandwidth == 8.0
+    assert torch.equal(loaded.weights_for(PARAMS[2]), ensemble.weights_for(PARAMS[2]))
