@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from loosefit.models.layers.gru_bptt import gru_bptt
 from loosefit.models.layers.init import undrawn
 
 
@@ -45,5 +46,8 @@ class GRUHead(nn.Module):
 
     def forward(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """``x (B, T, in)``, ``h (layers, B, hidden)`` or None -> ``(y (B, T, out), h after frame T-1)``."""
-        seq, h = self.gru(x, h)
+        if torch.is_grad_enabled() and x.device.type == "cpu":
+            seq, h = gru_bptt(self.gru, x, h)  # the same outputs; a backward pass twice as fast on the CPU
+        else:
+            seq, h = self.gru(x, h)
         return self.out(seq), h
