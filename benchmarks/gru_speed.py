@@ -1,5 +1,6 @@
 """Training speed of a GRU on the CPU: torch's autograd against the hand-written back-propagation through time
-(:mod:`loosefit.models.layers.gru_bptt`), at the sizes VirtualBones and JointNet train with.
+(:mod:`loosefit.models.layers.gru_bptt`), at the sizes VirtualBones and JointNet train with (JointNet: torch's
+kernel joint by joint, its former training path, against all joints at once by hand).
 
 For each case: forward and backward of a loss on every output, the median of ``--repeats`` runs after two
 warm-up runs, both ways, one torch thread, and the largest difference of the outputs and of every gradient
@@ -27,10 +28,12 @@ from loosefit.models.layers.gru_bptt import gru_bptt
 
 #: (name, inputs, hidden units, batch, frames): VirtualBones' low-frequency GRU (CPU preset and paper: 600 units;
 #: inputs 11 + 6 x 30 joints) over the demo's 90-frame windows and the benchmark's 64-frame ones; its high-frequency
-#: GRU (80 bones x 12 inputs); a JointNet joint at the CPU preset (256 units) and at the demo's (128).
+#: GRU (80 bones x 12 inputs).
 CASES = [("virtualbones low, demo windows", 191, 600, 4, 90), ("virtualbones low, 64-frame windows", 191, 600, 8, 64),
-         ("virtualbones high", 960, 600, 4, 90), ("jointnet joint, CPU preset", 64, 256, 8, 60),
-         ("jointnet joint, demo", 128, 128, 4, 90)]
+         ("virtualbones high", 960, 600, 4, 90)]
+#: (name, joints, inputs, units, batch, frames): JointNet's per-joint GRUs (24 joints of the cmu_mb rig; inputs
+#: 11 + 6 x (2 + 3 children)) at the CPU preset (256 units, 50-frame windows) and the demo's (128 units).
+JOINT_CASES = [("jointnet, CPU preset", 24, 41, 256, 8, 50), ("jointnet, demo", 24, 41, 128, 4, 90)]
 
 
 def median_ms(fn, repeats: int) -> float:
@@ -63,6 +66,30 @@ def gru_case(inputs: int, hidden: int, batch: int, frames: int, repeats: int) ->
     return {"torch_ms": median_ms(lambda: step(lambda g, a: g(a)), repeats),
             "hand_written_ms": median_ms(lambda: step(gru_bptt), repeats),
             "forward_only_ms": forward,
+            "max_output_difference": float((torch_out - hand_out).abs().max()),
+            "max_relative_gradient_difference": max(float((a - b).abs().max() / b.abs().max().clamp_min(1e-30))
+                                                    for a, b in zip(hand_grads, torch_grads))}
+
+
+def jointnet_case(joints: int, inputs: int, hidden: int, batch: int, frames: int, repeats: int) -> dict:
+    """JointNet's GRUs: torch's kernel joint by joint (the former training path) against all joints by hand."""
+    from loosefit.models.jointnet import JointGRU
+
+    torch.manual_seed(0)
+    gru = JointGRU(joints, inputs, hidden)
+    x = torch.randn(batch, frames, joints, inputs, requires_grad=True)
+
+    def step(order):
+        gru.zero_grad()
+        x.grad = None
+        out, last = getattr(gru, order)(x)
+        (out.square().mean() + last.square().mean()).backward()
+        return out.detach(), [x.grad.clone()] + [p.grad.clone() for p in gru.parameters()]
+
+    torch_out, torch_grads = step("joint_by_joint")
+    hand_out, hand_grads = step("all_joints_by_hand")
+    return {"torch_ms": median_ms(lambda: step("joint_by_joint"), repeats),
+            "hand_written_ms": median_ms(lambda: step("all_joints_by_hand"), repeats),
             "max_output_difference": float((torch_out - hand_out).abs().max()),
             "max_relative_gradient_difference": max(float((a - b).abs().max() / b.abs().max().clamp_min(1e-30))
                                                     for a, b in zip(hand_grads, torch_grads))}
@@ -135,6 +162,13 @@ def main() -> None:
         results["cases"][name] = row
         print(f"{name}: torch {row['torch_ms']:.0f} ms, hand-written {row['hand_written_ms']:.0f} ms "
               f"(forward alone {row['forward_only_ms']:.0f}); largest gradient difference "
+              f"{row['max_relative_gradient_difference']:.1e} relative", flush=True)
+    for name, joints, inputs, hidden, batch, frames in JOINT_CASES:
+        row = {"joints": joints, "inputs": inputs, "hidden": hidden, "batch": batch, "frames": frames,
+               **jointnet_case(joints, inputs, hidden, batch, frames, args.repeats)}
+        results["cases"][name] = row
+        print(f"{name}: torch joint by joint {row['torch_ms']:.0f} ms, all joints by hand "
+              f"{row['hand_written_ms']:.0f} ms; largest gradient difference "
               f"{row['max_relative_gradient_difference']:.1e} relative", flush=True)
     if args.store:
         row = results["virtualbones_low_step"] = virtualbones_step(args.store, args.garment, args.repeats)

@@ -35,7 +35,7 @@ def _batch(data, frames: int = 16) -> dict:
     return default_collate([WindowDataset(data, frames, frames, 4)[0]])
 
 
-@pytest.mark.parametrize("order", ["joint_by_joint", "all_joints_per_frame"])
+@pytest.mark.parametrize("order", ["joint_by_joint", "all_joints_per_frame", "all_joints_by_hand"])
 def test_grouped_gru_equals_one_torch_gru_per_joint(order):
     torch.manual_seed(0)
     gru = JointGRU(3, 5, 7)
@@ -55,7 +55,9 @@ def test_grouped_gru_equals_one_torch_gru_per_joint(order):
         (expected.square().sum() + expected_last.sum()).backward()
         assert torch.allclose(gru.weight_hh.grad[g], ref.weight_hh_l0.grad, atol=1e-5)
         assert torch.allclose(gru.bias_ih.grad[g, 0], ref.bias_ih_l0.grad, atol=1e-5)
-    # forward: one frame frame by frame, several joint by joint
+        assert torch.allclose(gru.weight_ih.grad[g], ref.weight_ih_l0.grad, atol=1e-5)
+    # forward: training on the CPU by hand; without autograd one frame frame by frame, several joint by joint
+    assert torch.equal(gru(x, h0)[0], gru.all_joints_by_hand(x, h0)[0])
     with torch.no_grad():
         assert torch.equal(gru(x, h0)[0], gru.joint_by_joint(x, h0)[0])
         assert torch.equal(gru(x[:, :1], h0)[0], gru.all_joints_per_frame(x[:, :1], h0)[0])

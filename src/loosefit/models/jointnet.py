@@ -57,6 +57,7 @@ from loosefit.models.base import GarmentModel
 from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
+from loosefit.models.layers.gru_bptt import gru_layers
 from loosefit.models.layers.mlp import MLP
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
@@ -192,9 +193,11 @@ class JointGRU(nn.Module):
 
     ``forward(x (N, T, G, C), h (N, G, H) or None) -> (outputs (N, T, G, H), last state (N, G, H))``.
 
-    Two evaluation orders give the same numbers. One frame (streaming) is one grouped product per
-    weight matrix for all joints (:meth:`all_joints_per_frame`). Many frames (training, batched
-    animation) run each joint's GRU through torch's own GRU kernel in turn (:meth:`joint_by_joint`):
+    Three evaluation orders give the same numbers. One frame (streaming) is one grouped product per
+    weight matrix for all joints (:meth:`all_joints_per_frame`). Training on the CPU runs all joints frame by
+    frame too, with the hand-written backward pass of :mod:`~loosefit.models.layers.gru_bptt`
+    (:meth:`all_joints_by_hand`). Many frames without autograd (batched animation) run each joint's GRU through
+    torch's own GRU kernel in turn (:meth:`joint_by_joint`):
     the joint's weights then stay in cache over the frames instead of all joints' weights being read
     again every frame. Measured on one CPU thread (22 joints, 256 units, 8 windows of 60 frames): forward
     and backward 1.84 s frame by frame, 0.59 s joint by joint. On CUDA every call runs frame by frame:
@@ -214,9 +217,21 @@ class JointGRU(nn.Module):
         self.bias_hh = nn.Parameter(torch.empty(groups, 1, 3 * hidden).uniform_(-bound, bound))
 
     def forward(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        if torch.is_grad_enabled() and x.device.type == "cpu" and x.shape[1] > 1:
+            return self.all_joints_by_hand(x, h)
         if x.shape[1] == 1 or x.is_cuda:
             return self.all_joints_per_frame(x, h)
         return self.joint_by_joint(x, h)
+
+    def all_joints_by_hand(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`forward` for training on the CPU: all joints frame by frame in one batched product, differentiated
+        by :mod:`~loosefit.models.layers.gru_bptt` (whose weight gradients are formed once per window, not per
+        frame: ``benchmarks/gru_speed.py``)."""
+        N, T, G, _ = x.shape
+        h = x.new_zeros(G, N, self.hidden) if h is None else h.transpose(0, 1)  # (G, N, H)
+        out, last = gru_layers(x.permute(2, 0, 1, 3), h, self.weight_ih, self.weight_hh, self.bias_ih[:, 0],
+                               self.bias_hh[:, 0])
+        return out.permute(1, 2, 0, 3), last.transpose(0, 1)
 
     def joint_by_joint(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` evaluated one joint at a time with torch's GRU kernel (the ``nn.GRU`` call)."""

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from loosefit.models.layers.gru import GRUHead
-from loosefit.models.layers.gru_bptt import gru_bptt, gru_layer
+from loosefit.models.layers.gru_bptt import gru_bptt, gru_layers
 
 
 def _grads(fn, gru, x, h0):
@@ -43,7 +43,7 @@ def test_gradient_of_the_last_state_alone_and_frozen_inputs():
     x = torch.randn(2, 6, 4, dtype=torch.float64)
     w_ih, w_hh, b_ih, b_hh = gru.weight_ih_l0, gru.weight_hh_l0, gru.bias_ih_l0, gru.bias_hh_l0
     h0 = torch.zeros(2, 5, dtype=torch.float64)
-    _, last = gru_layer(x, h0, w_ih, w_hh, b_ih, b_hh)
+    _, last = gru_layers(x[None], h0[None], w_ih[None], w_hh[None], b_ih[None], b_hh[None])
     last.sum().backward()
     eps, (i, j) = 1e-6, (7, 3)
     with torch.no_grad():
