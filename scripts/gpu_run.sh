@@ -8,7 +8,8 @@
 # LONG_SECONDS=N trains the variants of LONG_VARIANTS from the packs at once (one process each, sharing the GPU),
 # N seconds each, or a variant's STEPS optimiser steps with N seconds as a cap (equal steps), the learning rate
 # over each stage by LONG_SCHEDULE (cosine, the default, or constant), then the CUDA tests; curves in $OUT/long-NAME.json, weights
-# in $OUT/weights/NAME/ (to be scored on the CPU machine by the library's animation).
+# in $OUT/weights/NAME/ (to be scored on the CPU machine by the library's animation). Training from the packs needs
+# no wheel: a call may carry only .gpu/anny and the packs, with SKIP_TESTS=1 (the CUDA tests need the wheels).
 set -u
 export PYTHONUNBUFFERED=1
 DEVICE=${DEVICE:-cuda}
