@@ -269,6 +269,9 @@ def test_bandwidth_is_chosen_by_fit_ensemble_saved_and_validated(networks, tiny_
     ensemble, report = fit_ensemble(networks, PARAMS, [tiny_train] * 4, config)
     assert report["bandwidth"] in (1.0, 8.0) and set(report["bandwidth_cv_rmse_mm"]) == {"1", "8"}
     assert ensemble.bandwidth == report["bandwidth"]
+    # two sets leave nothing to cross-validate on: the fixed kernel, no error
+    pair, pair_report = fit_ensemble(networks[:2], PARAMS[:2], [tiny_train] * 2, EnsembleConfig(pivots=2, steps=5))
+    assert pair.bandwidth == 1.0 and "bandwidth_cv_rmse_mm" not in pair_report
     held_out = [{**PARAMS[0], "bending": 2e-6, "density": 0.15}]
     ensemble.bandwidth = 1.0
     fixed = evaluate_parameter_sets(ensemble, held_out, [tiny_train])

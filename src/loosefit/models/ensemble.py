@@ -501,7 +501,8 @@ def fit_ensemble(models: Sequence[nn.Module], params: Sequence[Mapping], data: S
         The ensemble and a report: ``space`` (names), ``pivots`` (indices in selection order),
         ``fit_rmse_mm`` (per set, the RBF ensemble after training, all pivots taking part), ``loss``
         (first and last of the fit, leave-one-out when configured), ``bandwidth`` (the factor of ``sigma``
-        used) and, when it was chosen, ``bandwidth_cv_rmse_mm`` (each candidate's cross-validated RMSE).
+        used) and, when it was chosen (several candidates, at least 3 sets), ``bandwidth_cv_rmse_mm`` (each
+        candidate's cross-validated RMSE).
     """
     if not len(models) == len(params) == len(data):
         raise InputError(f"got {len(models)} networks, {len(params)} parameter sets and {len(data)} data sets")
@@ -515,7 +516,7 @@ def fit_ensemble(models: Sequence[nn.Module], params: Sequence[Mapping], data: S
         own = [pivots.index(s) if s in pivots else -1 for s in range(len(data))] if config.leave_one_out else None
         history = ensemble.fit(sub, counts, theta, own)
         cv = None
-        if len(config.bandwidths) > 1:
+        if len(config.bandwidths) > 1 and len(data) >= 3:  # with two sets a fold would train g on one
             ensemble.bandwidth, cv = cross_validated_bandwidth(ensemble, sub, counts, theta, own)
         with torch.no_grad():
             w = ensemble.weights(torch.tensor(theta, dtype=torch.float32, device=ensemble.pivot_theta.device)).cpu().numpy()
