@@ -345,22 +345,25 @@ class RBFEnsemble(nn.Module):
     def num_pivots(self) -> int:
         return len(self.pivots)
 
-    def weights(self, theta: torch.Tensor, exclude: torch.Tensor | None = None) -> torch.Tensor:
+    def weights(self, theta: torch.Tensor, exclude: torch.Tensor | None = None,
+                bandwidth: float | None = None) -> torch.Tensor:
         """Normalised RBF weights ``(..., K)`` of normalised parameters ``theta (..., P)`` (a softmax of
         the log-kernel: equal to VirtualBones Eq. 4 normalised, without underflow for a sharp kernel).
 
         ``exclude`` (``(...,)`` int64, -1 for none) names one pivot per row whose weight is forced to 0
-        (the others renormalised): the leave-one-out fit."""
-        sigma = self.config.sigma * self.bandwidth
+        (the others renormalised): the leave-one-out fit. ``bandwidth``: the factor of ``sigma`` (None: the
+        ensemble's own)."""
+        sigma = self.config.sigma * (self.bandwidth if bandwidth is None else bandwidth)
         logits = -((self.g(theta)[..., None, :] - self.g(self.pivot_theta)) ** 2).sum(-1) / (2 * sigma**2)
         if exclude is not None:
             hit = torch.arange(self.num_pivots, device=logits.device) == exclude[..., None]
             logits = logits.masked_fill(hit, float("-inf"))
         return torch.softmax(logits, -1)
 
-    def weights_for(self, params: Mapping) -> torch.Tensor:
-        """RBF weights ``(K,)`` of one parameter dict."""
-        return self.weights(torch.tensor(self.space.transform(params), dtype=torch.float32, device=self.pivot_theta.device))
+    def weights_for(self, params: Mapping, bandwidth: float | None = None) -> torch.Tensor:
+        """RBF weights ``(K,)`` of one parameter dict (``bandwidth``: as :meth:`weights` takes it)."""
+        theta = torch.tensor(self.space.transform(params), dtype=torch.float32, device=self.pivot_theta.device)
+        return self.weights(theta, bandwidth=bandwidth)
 
     def linear_weights_for(self, params: Mapping) -> np.ndarray:
         """The inverse-distance baseline's weights ``(K,)`` of one parameter dict."""
@@ -480,9 +483,8 @@ def cross_validated_bandwidth(ensemble: RBFEnsemble, grams: np.ndarray, counts: 
         fold.fit(grams[rest], counts[rest], theta[rest], [own[s] for s in rest])
         exclude = torch.tensor([own[i]]) if ensemble.num_pivots > 1 else None
         for b in factors:
-            fold.bandwidth = b
             with torch.no_grad():
-                w = fold.weights(torch.tensor(theta[i:i + 1], dtype=torch.float32), exclude)[0].double().numpy()
+                w = fold.weights(torch.tensor(theta[i:i + 1], dtype=torch.float32), exclude, b)[0].double().numpy()
             errors[b] += float(w @ per_sample[i] @ w) / S
     return min(factors, key=lambda b: (errors[b], b)), errors
 
@@ -551,22 +553,15 @@ def evaluate_parameter_sets(ensemble: RBFEnsemble, params: Sequence[Mapping], da
         raise InputError(f"got {len(params)} parameter sets and {len(data)} data sets")
     with torch_threads(ensemble.config.threads):
         grams, counts = error_grams(list(ensemble.pivots), data)
-    chosen = ensemble.bandwidth
-    totals = {"rbf": 0.0, "linear": 0.0, "best_convex": 0.0, "best_pivot": 0.0, **({"rbf_sigma1": 0.0} if chosen != 1 else {})}
+    rbf = {"rbf": None, **({"rbf_sigma1": 1.0} if ensemble.bandwidth != 1 else {})}  # name -> bandwidth
+    totals = dict.fromkeys([*rbf, "linear", "best_convex", "best_pivot"], 0.0)
     rows = []
     for p, E, n in zip(params, grams, counts):
         with torch.no_grad():
-            w_rbf = ensemble.weights_for(p).cpu().numpy().astype(np.float64)
-        w_lin = ensemble.linear_weights_for(p)
-        weights = {"rbf": w_rbf, "linear": w_lin, "best_convex": best_convex_weights(E),
-                   "best_pivot": np.eye(len(E))[int(np.argmin(np.diag(E)))]}
-        if chosen != 1:
-            try:
-                ensemble.bandwidth = 1.0
-                with torch.no_grad():
-                    weights["rbf_sigma1"] = ensemble.weights_for(p).cpu().numpy().astype(np.float64)
-            finally:
-                ensemble.bandwidth = chosen
+            weights = {key: ensemble.weights_for(p, b).cpu().numpy().astype(np.float64) for key, b in rbf.items()}
+        w_rbf, w_lin = weights["rbf"], ensemble.linear_weights_for(p)
+        weights.update(linear=w_lin, best_convex=best_convex_weights(E),
+                       best_pivot=np.eye(len(E))[int(np.argmin(np.diag(E)))])
         row = {"params": dict(p)}
         for key, w in weights.items():
             rmse = weighted_rmse(E, int(n), w)

@@ -57,7 +57,7 @@ from loosefit.models.base import GarmentModel
 from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
-from loosefit.models.layers.gru_bptt import gru_layers
+from loosefit.models.layers.gru_bptt import by_hand, gru_layers
 from loosefit.models.layers.mlp import MLP
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig
@@ -199,8 +199,8 @@ class JointGRU(nn.Module):
     (:meth:`all_joints_by_hand`). Many frames without autograd (batched animation) run each joint's GRU through
     torch's own GRU kernel in turn (:meth:`joint_by_joint`):
     the joint's weights then stay in cache over the frames instead of all joints' weights being read
-    again every frame. Measured on one CPU thread (22 joints, 256 units, 8 windows of 60 frames): forward
-    and backward 1.84 s frame by frame, 0.59 s joint by joint. On CUDA every call runs frame by frame:
+    again every frame (under torch's autograd, one CPU thread, 22 joints, 256 units, 8 windows of 60 frames:
+    forward and backward 1.84 s frame by frame, 0.59 s joint by joint). On CUDA every call runs frame by frame:
     cuDNN's GRU computes in TF32 on Ampere and newer GPUs (``torch.backends.cudnn.allow_tf32`` is on by
     default), about 1e-3 relative, so the batched and the streamed animation would differ (measured on an
     NVIDIA H100: 2e-5 on this class's unit test, 0.61 m on a diverged JointNet), while the grouped products
@@ -217,7 +217,7 @@ class JointGRU(nn.Module):
         self.bias_hh = nn.Parameter(torch.empty(groups, 1, 3 * hidden).uniform_(-bound, bound))
 
     def forward(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-        if torch.is_grad_enabled() and x.device.type == "cpu" and x.shape[1] > 1:
+        if by_hand(x) and x.shape[1] > 1:
             return self.all_joints_by_hand(x, h)
         if x.shape[1] == 1 or x.is_cuda:
             return self.all_joints_per_frame(x, h)

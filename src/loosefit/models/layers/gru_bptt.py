@@ -88,6 +88,12 @@ class _GRUSequence(torch.autograd.Function):
         return d_x, dh, d_w_ih, d_w_hh, d_b_ih, d_b_hh
 
 
+def by_hand(x: torch.Tensor) -> bool:
+    """Whether ``x`` goes through the hand-written pass: autograd on and the tensor on the CPU. Without autograd
+    torch's fused kernel is faster, and on CUDA cuDNN's."""
+    return torch.is_grad_enabled() and x.device.type == "cpu"
+
+
 def gru_layers(x: torch.Tensor, h0: torch.Tensor, w_ih: torch.Tensor, w_hh: torch.Tensor, b_ih: torch.Tensor,
                b_hh: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """``G`` independent GRU layers with torch's weight layout, differentiated by :class:`_GRUSequence`.
@@ -98,13 +104,14 @@ def gru_layers(x: torch.Tensor, h0: torch.Tensor, w_ih: torch.Tensor, w_hh: torc
 
 
 def gru_bptt(gru: nn.GRU, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """``gru(x, h)`` for a unidirectional, batch-first ``nn.GRU`` with biases and no dropout, differentiated by
-    :class:`_GRUSequence` (see the module doc).
+    """``gru(x, h)``: for a unidirectional, batch-first ``nn.GRU`` with biases and no dropout, where :func:`by_hand`
+    says so, differentiated by :class:`_GRUSequence` (see the module doc); otherwise torch's own.
 
     Shapes: x ``(B, T, in)``, h ``(layers, B, hidden)`` or None (zeros) -> ``(B, T, hidden)``, ``(layers, B, hidden)``.
     """
-    if gru.bidirectional or not gru.batch_first or not gru.bias or (gru.dropout and gru.training) or gru.proj_size:
-        return gru(x, h)  # not this layer's case: torch's own
+    if (not by_hand(x) or gru.bidirectional or not gru.batch_first or not gru.bias or (gru.dropout and gru.training)
+            or gru.proj_size):
+        return gru(x, h)
     if h is None:
         h = x.new_zeros(gru.num_layers, x.shape[0], gru.hidden_size)
     last = []
