@@ -14,6 +14,7 @@ when one is missing.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from types import ModuleType
 
 from loosefit.errors import InputError
@@ -21,6 +22,25 @@ from loosefit.errors import InputError
 #: module -> the extra that installs it
 EXTRA_OF = {"bpy": "sim", "newton": "sim", "warp": "sim", "ray": "sim", "pyvista": "viz", "imageio": "viz",
             "imageio_ffmpeg": "viz", "matplotlib": "viz", "jinja2": "viz", "smplx": "smpl"}
+
+
+def _missing(module: str, what: str, error) -> InputError:
+    top = module.split(".")[0]
+    extra = EXTRA_OF.get(top)
+    hint = f"pip install 'loosefit[{extra}]'" if extra else f"pip install {top}"
+    return InputError(f"{what} needs {top!r}, which is not installed ({error}): {hint}")
+
+
+def require_installed(module: str, what: str) -> None:
+    """Check that ``module`` is installed without importing it, for a process that hands the work to others.
+    (Importing ``bpy`` puts Blender's script folders first on ``sys.path``; processes spawned afterwards inherit
+    it, and there Blender's own ``bpy`` package shadows the module: ``No module named '_bpy'``.)
+
+    Raises:
+        InputError: the module is not installed, as :func:`require`.
+    """
+    if importlib.util.find_spec(module.split(".")[0]) is None:
+        raise _missing(module, what, f"no module named {module!r}")
 
 
 def require(module: str, what: str) -> ModuleType:
@@ -32,7 +52,4 @@ def require(module: str, what: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError as e:
-        top = module.split(".")[0]
-        extra = EXTRA_OF.get(top)
-        hint = f"pip install 'loosefit[{extra}]'" if extra else f"pip install {top}"
-        raise InputError(f"{what} needs {top!r}, which is not installed ({e}): {hint}") from None
+        raise _missing(module, what, e) from None

@@ -115,6 +115,27 @@ def test_test_sequences_and_their_runs_come_before_the_training_sequences(root, 
     assert calls == [("jump", False), ("jump", True), ("jump", True), ("walk", False)]
 
 
+def test_splits_simulate_the_training_motions_first_and_the_held_out_one_later(done, root, tmp_path, monkeypatch):
+    """The demo's order: the training split alone (no reference runs), then the test split with its runs; the
+    store ends as one run of the whole plan leaves it, bit for bit."""
+    calls = []
+    real = runner.simulate_job
+    monkeypatch.setattr(runner, "simulate_job",
+                        lambda payload: calls.append((payload["motion"].name, is_reference(payload))) or real(payload))
+    plan, out = write_plan(root, {"count": 2, "noise": 1.0e-5}), tmp_path / "splits.zarr"
+    first = run_plan(plan, out, progress=False, splits=("train",))
+    assert calls == [("walk", False)] and (first["jobs"], first["ok"]) == (1, 1) and "references" not in first
+    assert not DatasetStore.open(out).has_sequence(TEST)
+    second = run_plan(plan, out, progress=False, splits=("test",))
+    assert calls[1:] == [("jump", False), ("jump", True), ("jump", True)]
+    assert (second["jobs"], second["ok"], second["references"]["ok"]) == (1, 1, 2)
+    whole = run_plan(plan, out, progress=False)
+    assert (whole["skipped"], whole["references"]["skipped"]) == (2, 2) and len(calls) == 4
+    store, reference = DatasetStore.open(out), DatasetStore.open(done[1])
+    np.testing.assert_array_equal(store.sequence(TEST).verts[:], reference.sequence(TEST).verts[:])
+    np.testing.assert_array_equal(store.references(TEST), reference.references(TEST))
+
+
 def test_a_crashed_run_is_stored_failed_and_retried(done, root, tmp_path, monkeypatch):
     _, out = done
     copy = tmp_path / "copy.zarr"

@@ -149,26 +149,27 @@ def prepare(
         and the names of the dataset statistics.
     """
     s = prepare_settings({**settings, **({} if bones is None else {"bones": int(bones)})})
-    store = DatasetStore.open(store_path, mode="a")
-    sequences = {name: store.sequence(name) for name in store.sequence_names(status="ok")}
-    train = {g: [] for g in store.garment_names()}
-    for name, q in sequences.items():
-        if q.split == "train":
-            train[q.garment].append(name)
-    _check_before_writing(store, s, train, force)
-    store.write_attrs("prepare", {"status": "writing"})
-    summary: dict = {"garments": {}}
-    for g in tqdm(store.garment_names(), desc="garments", disable=not progress):
-        garment = store.garment(g)
-        _prepare_descriptor(store, g, garment, s, force)
-        entry = {"descriptor": s.descriptor(), "training_sequences": len(train[g])}
-        if train[g]:
-            entry.update(_prepare_rig(store, g, garment, train[g], s, force, progress))
-        summary["garments"][g] = entry
-    summary["fit_attribute"] = _prepare_fit_attribute(store, sequences, body, s, force)
-    summary["stats"] = sorted(_prepare_dataset_stats(store, sequences, train))
-    store.write_attrs("prepare", {"status": DONE, "settings": dataclasses.asdict(s)})
-    return summary
+    with DatasetStore.open(store_path, mode="a") as store:  # the write lock is let go on return (the demo's
+        # held-out simulation writes the store next)
+        sequences = {name: store.sequence(name) for name in store.sequence_names(status="ok")}
+        train = {g: [] for g in store.garment_names()}
+        for name, q in sequences.items():
+            if q.split == "train":
+                train[q.garment].append(name)
+        _check_before_writing(store, s, train, force)
+        store.write_attrs("prepare", {"status": "writing"})
+        summary: dict = {"garments": {}}
+        for g in tqdm(store.garment_names(), desc="garments", disable=not progress):
+            garment = store.garment(g)
+            _prepare_descriptor(store, g, garment, s, force)
+            entry = {"descriptor": s.descriptor(), "training_sequences": len(train[g])}
+            if train[g]:
+                entry.update(_prepare_rig(store, g, garment, train[g], s, force, progress))
+            summary["garments"][g] = entry
+        summary["fit_attribute"] = _prepare_fit_attribute(store, sequences, body, s, force)
+        summary["stats"] = sorted(_prepare_dataset_stats(store, sequences, train))
+        store.write_attrs("prepare", {"status": DONE, "settings": dataclasses.asdict(s)})
+        return summary
 
 
 # ---------------------------------------------------------------- per garment

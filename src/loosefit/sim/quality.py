@@ -47,6 +47,7 @@ from scipy.spatial import cKDTree
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
 from loosefit.geometry.signed_distance import BodySDF
+from loosefit.metrics.collision import PosedBodySDF
 
 #: A garment vertex this far inside the body counts as penetrating, m.
 PENETRATION_DEPTH = 0.002
@@ -100,6 +101,7 @@ def body_contact(
     Fb = len(body_faces)
     corners = (body_faces.T.ravel(), np.tile(np.arange(Fb), 3))
     incidence = sp.csr_matrix((np.ones(3 * Fb), corners), shape=(body_frames.shape[1], Fb))
+    first = None  # the first exact SDF built: later frames take its edge map (PosedBodySDF, the same distances)
     for t in range(T):
         body = body_frames[t]
         dist, nearest = cKDTree(body).query(frames[t])
@@ -107,7 +109,9 @@ def body_contact(
         normals = incidence[nearest] @ np.cross(b - a, c - a)
         candidates = np.einsum("ij,ij->i", frames[t] - body[nearest], normals) < 0.0
         if candidates.any():
-            sdf = BodySDF(body, body_faces).query(frames[t][candidates])
+            exact = BodySDF(body, body_faces) if first is None else PosedBodySDF(body, first)
+            first = first or exact
+            sdf = exact.query(frames[t][candidates])
             inside[t] = (sdf < -depth).sum() / V
             deepest[t] = max(0.0, -float(sdf.min()))
         gap[t] = dist[pinned]

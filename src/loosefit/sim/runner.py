@@ -35,7 +35,7 @@ from loosefit.sim.params import SimParams
 from loosefit.sim.plan import Plan, ProceduralMotion, SequenceJob, TemplateGarment, load_plan
 from loosefit.sim.quality import QualityGate
 from loosefit.extras import require
-from loosefit.sim.sequence import SimResult, backend_run_cloth, save_result, simulate_sequence
+from loosefit.sim.sequence import SimResult, backend_run_cloth, check_backend, save_result, simulate_sequence
 
 log = logging.getLogger(__name__)
 
@@ -201,6 +201,7 @@ def run_plan(
     workers: int = 1,
     address: str | None = None,
     progress: bool = True,
+    splits: tuple[str, ...] | None = None,
 ) -> dict[str, Any]:
     """Simulate a plan into a dataset store, resuming what an earlier run left.
 
@@ -210,6 +211,9 @@ def run_plan(
         workers: parallel simulations on a local Ray (1: in this process, no Ray).
         address: address of an existing Ray cluster (``"auto"``, ``"ray://host:10001"``...).
         progress: show a progress bar and a line per finished sequence.
+        splits: simulate only the sequences of these splits (``None``: all); the reference runs only with
+            ``"test"`` among them. The demo simulates the training motions first and the held-out one while
+            it trains.
 
     Returns:
         Summary: ``jobs``, ``skipped`` (already done), ``ok``, ``failed``, ``crashed``, ``wall_s``
@@ -222,13 +226,14 @@ def run_plan(
         raise InputError(f"workers must be a positive integer, got {workers!r}")
     start = time.perf_counter()
     plan = load_plan(plan_path)
+    in_process = workers == 1 and address is None
     for params in plan.sim_params.values():  # a missing simulator is an error, not a crashed sequence each
-        backend_run_cloth(params.backend)
+        backend_run_cloth(params.backend) if in_process else check_backend(params.backend)
     if workers > 1 or address is not None:
         require("ray", "parallel simulation (--workers / --address)")
     store = DatasetStore.open_or_create(Path(out))  # holds the store's write lock until the run ends
     try:
-        return _run_jobs(plan, store, workers, address, progress, start)
+        return _run_jobs(plan, store, workers, address, progress, start, splits)
     except BaseException:
         if store.created:  # a first run that fails before storing any sequence leaves no store behind
             store.remove_if_empty()
@@ -264,13 +269,15 @@ def summary_line(summary: dict[str, Any], store) -> str:
     return line
 
 
-def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bool, start: float) -> dict[str, Any]:
-    """Simulate the plan's jobs that are not done into the open ``store``; see :func:`run_plan`."""
-    todo = [job for job in plan.jobs if not _done(store, job)]
-    summary: dict[str, Any] = {"plan": plan.name, "jobs": len(plan.jobs), "skipped": len(plan.jobs) - len(todo),
+def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bool, start: float,
+              splits: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Simulate the plan's jobs (of ``splits``) that are not done into the open ``store``; see :func:`run_plan`."""
+    jobs = [job for job in plan.jobs if splits is None or job.split in splits]
+    todo = [job for job in jobs if not _done(store, job)]
+    summary: dict[str, Any] = {"plan": plan.name, "jobs": len(jobs), "skipped": len(jobs) - len(todo),
                                "ok": 0, "failed": 0, "crashed": 0, "sequences": {}}
     payloads = _inputs(plan, store, todo)  # made before simulating: a bad garment or motion stops the run at once
-    bar = tqdm(total=len(plan.jobs), initial=summary["skipped"], desc=plan.name, unit="seq", disable=not progress)
+    bar = tqdm(total=len(jobs), initial=summary["skipped"], desc=plan.name, unit="seq", disable=not progress)
 
     def record(job: SequenceJob, result: dict[str, Any]) -> None:
         stats = {**result["stats"], "job_hash": job.hash}
@@ -293,7 +300,8 @@ def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bo
     rest = sorted(set(range(len(todo))) - set(test))
     try:
         _dispatch([todo[k] for k in test], [payloads[k] for k in test], workers, address, record)
-        summary["references"] = _run_references(plan, store, workers, address, progress)
+        if splits is None or "test" in splits:
+            summary["references"] = _run_references(plan, store, workers, address, progress)
         _dispatch([todo[k] for k in rest], [payloads[k] for k in rest], workers, address, record)
     finally:
         bar.close()

@@ -13,7 +13,7 @@ import numpy as np
 
 from loosefit.body.base import BodyModel
 from loosefit.errors import InputError
-from loosefit.extras import require
+from loosefit.extras import require, require_installed
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.motion.motion import Motion
 from loosefit.sim.attach import garment_weights, skin_garment
@@ -44,16 +44,26 @@ class SimResult:
     body_verts: np.ndarray = field(default=None, repr=False)
 
 
+#: backend -> the module that simulates
+BACKEND_MODULES = {"blender": ("bpy", "simulation backend 'blender' (Blender cloth)"),
+                   "newton": ("newton", "simulation backend 'newton'")}
+
+
+def check_backend(backend: str) -> None:
+    """That a backend's simulator is installed, without importing it (for a process whose workers simulate)."""
+    if backend not in BACKEND_MODULES:
+        raise InputError(f"unknown simulation backend {backend!r}; known: {list(BACKENDS)}")
+    require_installed(*BACKEND_MODULES[backend])
+
+
 def backend_run_cloth(backend: str):
     """The ``run_cloth`` function of a backend (``"blender"`` or ``"newton"``); each imports its simulator lazily."""
+    check_backend(backend)
+    require(*BACKEND_MODULES[backend])
     if backend == "newton":
-        require("newton", "simulation backend 'newton'")
         from loosefit.sim.newton import run_cloth
-    elif backend == "blender":
-        require("bpy", "simulation backend 'blender' (Blender cloth)")
-        from loosefit.sim.blender import run_cloth
     else:
-        raise InputError(f"unknown simulation backend {backend!r}; known: {list(BACKENDS)}")
+        from loosefit.sim.blender import run_cloth
     return run_cloth
 
 
