@@ -129,45 +129,51 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     garment = store.garment(seq.garment)
     motion = store.motion(seq.motion)
     gt = np.asarray(seq.verts[:])
-    predictions = {m: Animator(out / "runs" / m).animate(motion) for m in DEMO_TRAINING}
-
-    t = _step("evaluate", f"evaluate on the held-out motion {seq.motion!r}")
-    body = AnnyBody(_shape(store, seq.body))
-    posed = body.pose(motion)
-    # the held-out spin's reference runs (start noise): RMSE against their mean and their spread, the floor
-    references = store.references(seq.name)
-    pairs = [SequencePair(m, p, gt, garment.faces, posed.verts, body.faces, references) for m, p in predictions.items()]
-    result = evaluate(pairs, progress=False)
-    print(result.table(overall=False))  # rows are methods: pooling them means nothing
-    result.write_csv(out / "metrics.csv")
-    result.write_json(out / "metrics.json")
-
-    t = _step("render and export", "render and export")
-    err = {m: np.linalg.norm(predictions[m] - gt, axis=-1) * 1e3 for m in ("virtualbones", "jointnet")}
-    clim = (0.0, float(max(np.percentile(e, 95) for e in err.values())))  # one colour scale for both
-
-    def panel(verts, label, scalars=None):
-        body_track = MeshTrack(posed.verts, body.faces, color=BODY_COLOR, label="body")
-        garment_track = MeshTrack(verts, garment.faces, scalars=scalars, cmap="inferno", clim=clim,
-                                  label=label, scalar_name="error (mm)")
-        return [body_track, garment_track]
-
-    panels = [panel(gt, "simulation (Blender)"), panel(predictions["virtualbones"], "VirtualBones", err["virtualbones"]),
-              panel(predictions["jointnet"], "JointNet", err["jointnet"])]
-    titles = ["simulation", "VirtualBones", "JointNet"]
-    render_video(panels, out / "demo.mp4", fps=motion.fps, size=(480, 540), titles=titles)
-    middle = motion.num_frames // 2
-    save_png(out / "demo.png", render_frames(panels, size=(480, 540), frames=[middle], titles=titles)[0])
-    export_animation(out / "jointnet.usdc", predictions["jointnet"], garment.faces, motion.fps, posed.verts, body.faces)
-    export_animation(out / "jointnet.glb", predictions["jointnet"], garment.faces, motion.fps)
-    for method, verts in predictions.items():
-        export_animation(out / "predictions" / f"{method}.npz", verts, garment.faces, motion.fps)
-    print(f"   wrote {out}/demo.mp4, demo.png, metrics.csv, metrics.json, jointnet.usdc, jointnet.glb, predictions/")
-
-    t = _step("report", "report: every method on the held-out sequences")
     from loosefit.report import build_report
 
-    index = build_report(data, [out / "runs" / m for m in DEMO_TRAINING], out / "report")
+    # The report animates and evaluates every run again, with collision handling: built on the other core meanwhile.
+    reporter = ProcessPoolExecutor(1, mp_context=context)
+    try:
+        report = reporter.submit(build_report, data, [out / "runs" / m for m in DEMO_TRAINING], out / "report")
+        predictions = {m: Animator(out / "runs" / m).animate(motion) for m in DEMO_TRAINING}
+
+        t = _step("evaluate", f"evaluate on the held-out motion {seq.motion!r}")
+        body = AnnyBody(_shape(store, seq.body))
+        posed = body.pose(motion)
+        # the held-out spin's reference runs (start noise): RMSE against their mean and their spread, the floor
+        references = store.references(seq.name)
+        pairs = [SequencePair(m, p, gt, garment.faces, posed.verts, body.faces, references) for m, p in predictions.items()]
+        result = evaluate(pairs, progress=False)
+        print(result.table(overall=False))  # rows are methods: pooling them means nothing
+        result.write_csv(out / "metrics.csv")
+        result.write_json(out / "metrics.json")
+
+        t = _step("render and export", "render and export")
+        err = {m: np.linalg.norm(predictions[m] - gt, axis=-1) * 1e3 for m in ("virtualbones", "jointnet")}
+        clim = (0.0, float(max(np.percentile(e, 95) for e in err.values())))  # one colour scale for both
+
+        def panel(verts, label, scalars=None):
+            body_track = MeshTrack(posed.verts, body.faces, color=BODY_COLOR, label="body")
+            garment_track = MeshTrack(verts, garment.faces, scalars=scalars, cmap="inferno", clim=clim,
+                                      label=label, scalar_name="error (mm)")
+            return [body_track, garment_track]
+
+        panels = [panel(gt, "simulation (Blender)"), panel(predictions["virtualbones"], "VirtualBones", err["virtualbones"]),
+                  panel(predictions["jointnet"], "JointNet", err["jointnet"])]
+        titles = ["simulation", "VirtualBones", "JointNet"]
+        render_video(panels, out / "demo.mp4", fps=motion.fps, size=(480, 540), titles=titles)
+        middle = motion.num_frames // 2
+        save_png(out / "demo.png", render_frames(panels, size=(480, 540), frames=[middle], titles=titles)[0])
+        export_animation(out / "jointnet.usdc", predictions["jointnet"], garment.faces, motion.fps, posed.verts, body.faces)
+        export_animation(out / "jointnet.glb", predictions["jointnet"], garment.faces, motion.fps)
+        for method, verts in predictions.items():
+            export_animation(out / "predictions" / f"{method}.npz", verts, garment.faces, motion.fps)
+        print(f"   wrote {out}/demo.mp4, demo.png, metrics.csv, metrics.json, jointnet.usdc, jointnet.glb, predictions/")
+
+        t = _step("report", "report: every method on the held-out sequences (built beside the evaluation)")
+        index = report.result()
+    finally:
+        reporter.shutdown(cancel_futures=True)
     view = " ".join(["loosefit view", f"{data}:{seq.name}"] + [str(out / "predictions" / f"{m}.npz") for m in predictions])
     _step.stop()
     total = time.perf_counter() - started
