@@ -131,14 +131,12 @@ class VirtualBonesConfig:
     bone_weight: float = 0.0
     hf_loss_frames: int = 0
     hf_target: str = "simulation"
-    input_noise: float = 0.0
 
     def __post_init__(self):
         sizes = (self.lf_hidden, self.hf_hidden, self.global_channels, *self.edge_channels, *self.head_hidden)
         if min(sizes) < 1 or not self.edge_channels or self.global_rank < 0:
             raise InputError(f"layer sizes must be >= 1 (global_rank >= 0) and edge_channels non-empty, got {self}")
-        for name in ("laplacian_weight", "collision_weight", "collision_margin", "bone_weight", "hf_loss_frames",
-                     "input_noise"):
+        for name in ("laplacian_weight", "collision_weight", "collision_margin", "bone_weight", "hf_loss_frames"):
             if not getattr(self, name) >= 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.hf_target not in HF_TARGETS:
@@ -326,8 +324,6 @@ class VirtualBones(GarmentModel):
         mask = self.mask(batch)
         x = self._inputs(batch["root"], batch["joints"])
         c = self.config
-        if c.input_noise > 0:  # a regulariser: the low-frequency module never sees the same window twice
-            x = x + c.input_noise * torch.randn_like(x)
         h_low, h_high = self.carry.initial(batch) or (None, None)
         if stage == "low":
             raw, _, _, lf, h_low = self.low_frequency(x, h_low)
