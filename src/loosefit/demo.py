@@ -40,7 +40,7 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 WHOLE_SEQUENCES = ["data.window=90", "data.stride=90", "data.burn_in=0", "train.batch_size=4", "train.progress=false"]
 DEMO_TRAINING = {
     "body-lbs": [],
-    "virtualbones": ["train.stages.low.epochs=150", "train.stages.high.epochs=15", "train.lr=2e-3",
+    "virtualbones": ["train.stages.low.epochs=150", "train.stages.high.epochs=10", "train.lr=2e-3",
                      "model.global_rank=64", "model.hf_loss_frames=30", *WHOLE_SEQUENCES],
     "jointnet": ["model.gru_hidden=128", "model.features=128", "model.bone_mlp=[256,256]", "model.psd_mlp=[128]",
                  "model.psd_shapes=16", "train.optimizer=adam", "train.stages.stage1.epochs=32",

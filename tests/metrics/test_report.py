@@ -95,3 +95,18 @@ def test_dataset_sequences_as_ground_truth(tmp_path):
         pairs_from_store(tmp_path / "data.zarr", tmp_path / "pred", split="train")
     with pytest.raises(InputError, match="no prediction"):
         pairs_from_store(tmp_path / "data.zarr", tmp_path / "data.zarr")
+
+
+def test_methods_on_one_posed_body_share_its_distance_field():
+    """Several predictions of one motion (one body array) are measured together, frame by frame; each pair's
+    collision percentage equals the one measured alone, and a pair with another body is measured alone."""
+    box = trimesh.creation.box(extents=(0.62, 0.62, 0.62))
+    body = np.repeat(np.asarray(box.vertices)[None] + [0, 0, 1.0], 4, 0) + np.linspace(0, 0.05, 4)[:, None, None]
+    faces = np.asarray(box.faces)
+    preds = [sequence(4, seed, noise=0.03) for seed in range(3)]
+    pairs = [SequencePair(f"m{k}", p, g, F, body, faces) for k, (p, g) in enumerate(preds)]
+    pairs.append(SequencePair("other body", preds[0][0], preds[0][1], F, body.copy(), faces))
+    together = [r["collision_pct"] for r in evaluate(pairs, progress=False).rows]
+    alone = [evaluate([p], progress=False).rows[0]["collision_pct"] for p in pairs]
+    assert together == alone and together[0] == together[3]
+    assert len(set(together[:3])) == 3 and all(0 < c < 100 for c in together)  # the noise moves vertices across
