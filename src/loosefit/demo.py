@@ -1,8 +1,9 @@
 """``make demo`` / ``loosefit demo``: the whole pipeline on the embedded default data, from nothing.
 
-simulate ``configs/datasets/demo.yaml`` (a skirt on short procedural motions) -> prepare (virtual bones)
--> train VirtualBones and JointNet briefly -> animate the held-out motion with both and the body-LBS
-baseline -> metrics table -> ``demo_out/``: a side-by-side MP4 (ground truth | VirtualBones | JointNet,
+simulate the training motions of ``configs/datasets/demo.yaml`` (a skirt on short procedural motions) -> prepare
+(virtual bones) -> train VirtualBones and JointNet briefly, while the held-out motion is simulated on the other
+core -> animate the held-out motion with both and the body-LBS baseline -> metrics table (the report is built
+beside it) -> ``demo_out/``: a side-by-side MP4 (ground truth | VirtualBones | JointNet,
 coloured by error), a PNG of one frame, the metrics as CSV / JSON, the JointNet animation as
 ``.usdc`` and ``.glb``, every prediction as a mesh-sequence ``.npz`` (``predictions/``), and last the
 comparison report (``report/index.html``, ``loosefit report``) with the ``loosefit view`` command that
@@ -30,13 +31,12 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 #: Short training for the demo, in minutes on 2 cores: the paper's layer sizes for VirtualBones (its global
 #: layer factorised through 64 channels: the high-frequency stage 2.3x faster, the held-out spin 71.4 against
 #: 71.2 mm), a narrower JointNet (its paper sizes need a GPU to train). Every 3 s motion is one training window
-#: from the zero state, as animation starts (90 frames, no warm-up), four to a batch. With the longer
-#: low-frequency stage VirtualBones fits the training motions to 15-22 mm (was 19-76); the held-out spin is the
-#: data's part (demo.yaml). Measured and not taken (held-out spin, VirtualBones): GRUs of 256 units, 85.7 mm;
-#: batches of 8, 92.2 mm (benchmarks/README.md, "The demo's training"). VirtualBones' high-frequency loss on 30
-#: random frames of each window: the same held-out spin (72.55 against 72.51 mm), its stage 2.6x faster. Its rate
-#: 2e-3 instead of 1e-3: 63.8 and 63.0 mm over two seeds against 72.5, 64.4 and 70.5 over three, and 150
-#: low-frequency epochs then suffice (64.2 mm). JointNet 32 + 12 epochs instead of 40 + 15: 63.0 against 60.3 mm.
+#: from the zero state, as animation starts (90 frames, no warm-up), four to a batch. Measured on the demo's store
+#: (benchmarks/README.md, "The demo's training"; held-out spin): VirtualBones at rate 2e-3 scores 63.8 and 63.0 mm
+#: over two seeds against 72.6, 64.4 and 70.5 at 1e-3, and then needs only 150 low-frequency epochs; its
+#: high-frequency loss on 30 random frames of a window costs nothing (72.55 against 72.51 mm) and makes that stage
+#: 2.6x faster. The shipped settings over three seeds: VirtualBones 60.9-64.2 mm, JointNet 57.2-63.0, body-LBS 132.4
+#: (demo-seeds.json). Not taken: GRUs of 256 units, 85.7 mm; batches of 8, 92.2 mm.
 WHOLE_SEQUENCES = ["data.window=90", "data.stride=90", "data.burn_in=0", "train.batch_size=4", "train.progress=false"]
 DEMO_TRAINING = {
     "body-lbs": [],
