@@ -77,6 +77,7 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     from loosefit.data import DatasetStore
     from loosefit.io.export import export_animation
     from loosefit.metrics.report import SequencePair, evaluate
+    from loosefit.models.collision import handle_motion_collisions
     from loosefit.rig.prepare import prepare
     from loosefit.sim import run_plan
     from loosefit.sim.plan import load_plan
@@ -137,10 +138,12 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     reporter = ProcessPoolExecutor(1, mp_context=context)
     try:
         report = reporter.submit(build_report, data, [out / "runs" / m for m in DEMO_TRAINING], out / "report")
-        predictions = {m: Animator(out / "runs" / m).animate(motion) for m in DEMO_TRAINING}
-
-        t = _step("evaluate", f"evaluate on the held-out motion {seq.motion!r}")
         body = AnnyBody(_shape(store, seq.body))
+        # with the collision handling `loosefit animate` applies by default (exact, against the posed body)
+        predictions = {m: handle_motion_collisions(Animator(out / "runs" / m).animate(motion), garment.faces, body,
+                                                   motion, "exact") for m in DEMO_TRAINING}
+
+        t = _step("evaluate", f"evaluate on the held-out motion {seq.motion!r} (collision handling exact)")
         posed = body.pose(motion)
         # the held-out spin's reference runs (start noise): RMSE against their mean and their spread, the floor
         references = store.references(seq.name)
@@ -195,7 +198,7 @@ def _train(method: str, data: Path, garment: str, run: Path, overrides: list[str
     settings = {"config": CONFIGS / "models" / f"{method}.yaml", "overrides": overrides}
     try:
         train_model(method, data, garment, run, resume=True, **settings)
-    except StaleRunError as e:  # the demo's data changed since (prepared again): its old run is out of date
+    except StaleRunError as e:  # the demo's data or settings changed since: its old run is out of date
         print(f"   {e}: training again", flush=True)
         shutil.rmtree(run)
         train_model(method, data, garment, run, **settings)

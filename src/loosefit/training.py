@@ -34,7 +34,7 @@ from loosefit.train.run import RunDir, save_checkpoint
 from loosefit.train.seeding import rng_state, seed_everything
 from loosefit.train.settings import TrainResult
 from loosefit.train.validation import choose_validation, train_on_fraction
-from loosefit.train.trainer import train
+from loosefit.train.trainer import StaleRunError, train  # noqa: F401 - StaleRunError re-exported
 
 MODEL_META = "model.json"
 METHOD_CONFIG = "method.yaml"
@@ -204,10 +204,6 @@ def _write_run(run: RunDir, meta: dict, cfg, resume: bool, motion_range: bool = 
     with atomic_path(run.path / MODEL_META) as tmp:
         tmp.write_text(json.dumps(meta, indent=2))
     save_config(run.path / METHOD_CONFIG, cfg)
-
-
-class StaleRunError(InputError):
-    """A run cannot be resumed: it was trained on other data."""
 
 
 #: What a run's training data is: resuming on data that differs in any of these would silently mix two datasets.

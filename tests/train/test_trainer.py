@@ -12,6 +12,7 @@ import torch
 
 from loosefit.errors import InputError
 from loosefit.train import StageConfig, TrainConfig, TrainingError, load_checkpoint, train
+from loosefit.train.trainer import StaleRunError
 from tests.train.conftest import SineGRU, SineSequences, make_model, quick_config
 
 STEPS_PER_EPOCH = 5  # 20 samples, batches of 4
@@ -199,9 +200,10 @@ def test_resume_checks_config_and_model(data, tmp_path):
     model.crash_at_call = 8
     with pytest.raises(KeyboardInterrupt):
         train(model, train_set, val_set, quick_config(), run)
-    with pytest.raises(InputError, match=r"differs from the checkpoint's in \['lr'\]"):
+    # StaleRunError: the demo trains such a run again from the start
+    with pytest.raises(StaleRunError, match=r"differs from the checkpoint's in \['lr'\]"):
         train(make_model(), train_set, val_set, quick_config(lr=0.5), run, resume=True)
-    with pytest.raises(InputError, match="does not fit this model"):
+    with pytest.raises(StaleRunError, match="does not fit this model"):
         train(SineGRU(hidden=5), train_set, val_set, quick_config(), run, resume=True)
     # settings that leave the numbers alone may change
     train(make_model(), train_set, val_set, quick_config(progress=True, log_every=2), run, resume=True)

@@ -54,6 +54,10 @@ class TrainingError(LoosefitError):
     """Training cannot go on (e.g. the loss became NaN); the last good checkpoint is kept."""
 
 
+class StaleRunError(InputError):
+    """A run cannot be resumed: it was trained on other data, with other settings or another network."""
+
+
 def _device(name: str) -> torch.device:
     return distributed.resolve_device(name)
 
@@ -219,7 +223,7 @@ class _Trainer:
             raise InputError(f"checkpoint was trained with stages {state['stages']}, the model has {self.stages}", path)
         differences = _config_differences(state["config"], config_to_dict(self.config))
         if differences:
-            raise InputError(
+            raise StaleRunError(
                 f"the training config differs from the checkpoint's in {differences}; resume with the run's "
                 f"config.yaml or start a new run folder",
                 path,
@@ -227,7 +231,7 @@ class _Trainer:
         try:
             self.model.load_state_dict(state["model"])
         except RuntimeError as e:
-            raise InputError(f"checkpoint does not fit this model: {e}", path) from None
+            raise StaleRunError(f"checkpoint does not fit this model: {e}", path) from None
         self.global_step = state["global_step"]
         self.history = [dict(r) for r in state["history"]]
         self.elapsed_before = state["elapsed_s"]
