@@ -39,7 +39,11 @@ def require_installed(module: str, what: str) -> None:
     Raises:
         InputError: the module is not installed, as :func:`require`.
     """
-    if importlib.util.find_spec(module.split(".")[0]) is None:
+    try:
+        found = importlib.util.find_spec(module.split(".")[0]) is not None
+    except (ImportError, ValueError) as e:  # a finder that refuses it, a module with no spec
+        raise _missing(module, what, e) from None
+    if not found:
         raise _missing(module, what, f"no module named {module!r}")
 
 
