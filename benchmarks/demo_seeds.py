@@ -68,7 +68,8 @@ def main() -> None:
     gt, motion = np.asarray(seq.verts[:]), store.motion(seq.motion)
     runs_and_refs = [gt, *store.references(seq.name)]
     mean = mean_run(runs_and_refs)
-    results = {"data": str(Path(a.data).resolve()), "sequence": seq.name, "changes": a.set, "floor_mm": floor_m(runs_and_refs, mean) * 1e3,
+    results = {"data": str(Path(a.data).resolve()), "sequence": seq.name, "changes": a.set,
+               "floor_mm": floor_m(runs_and_refs, mean) * 1e3,
                "references": len(runs_and_refs) - 1, "methods": {}}
     for m in methods:
         predictions = {s: Animator(runs[m, s]).animate(motion) for s in seeds}
