@@ -18,7 +18,6 @@ import argparse
 import multiprocessing
 import statistics
 import sys
-import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -30,15 +29,12 @@ from _common import save_results  # noqa: E402
 
 
 def train(method: str, seed: int, data: str, garment: str, run: str, changes: tuple[str, ...] = ()) -> float:
-    """Train (or resume) one run with the demo's settings, ``train.seed=seed`` and ``changes``; seconds taken."""
-    from loosefit.demo import CONFIGS, DEMO_TRAINING
-    from loosefit.training import train_model
+    """Train (or resume) one run as the demo does, with ``train.seed=seed`` and ``changes`` after its settings;
+    seconds taken."""
+    from loosefit.demo import DEMO_TRAINING, _train
 
-    started = time.perf_counter()
-    train_model(method, data, garment, run, config=CONFIGS / "models" / f"{method}.yaml",
-                overrides=[*DEMO_TRAINING[method], *([f"train.seed={seed}", *changes] if method != "body-lbs" else [])],
-                resume=True)
-    return time.perf_counter() - started
+    seeded = [f"train.seed={seed}", *changes] if method != "body-lbs" else []  # the baseline has no weights
+    return _train(method, Path(data), garment, Path(run), [*DEMO_TRAINING[method], *seeded])
 
 
 def main() -> None:

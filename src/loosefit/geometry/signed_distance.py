@@ -81,3 +81,43 @@ class BodySDF:
         keep = np.argmax(bary, 1)
         normal[on_vertex] = self._vertex_normals[self.faces[face[on_vertex], keep[on_vertex]]]
         return normal
+
+
+class PosedBodySDF(BodySDF):
+    """:class:`BodySDF` of one frame of a body whose triangles never change (a posed body sequence): the
+    edge map of its edge pseudonormals, a sort of every edge and most of the constructor's time (35 of
+    ~70 ms a frame for the 1,229-vertex collision proxy on the shared 2-core machines), comes from ``like``,
+    a frame of the same mesh. Distances are those of ``BodySDF(verts, like.faces)``, bit for bit.
+
+    Args:
+        verts: ``(V, 3)`` vertex positions of this frame, metres.
+        like: the :class:`BodySDF` of another frame of the same triangles.
+    """
+
+    def __init__(self, verts: np.ndarray, like: BodySDF):
+        verts = np.ascontiguousarray(verts, dtype=np.float64)
+        if verts.shape != like.verts.shape:
+            raise InputError(f"a posed frame needs vertices {like.verts.shape} like its first frame, got {verts.shape}")
+        self.verts, self.faces, self._corner_edge = verts, like.faces, like._corner_edge
+        self._tree = igl.AABB()
+        self._tree.init(verts, self.faces)
+        self.face_normals = igl.per_face_normals(verts, self.faces, np.array([0.0, 0.0, 1.0]))
+        self._vertex_normals = igl.per_vertex_normals(
+            verts, self.faces, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE, self.face_normals)
+        # the sum of the faces' normals at each edge, in the order np.add.at adds them (the same bits)
+        index, n = self._corner_edge.reshape(-1), len(like._edge_normals)
+        faces_normals = np.repeat(self.face_normals, 3, 0)
+        self._edge_normals = np.stack([np.bincount(index, faces_normals[:, k], n) for k in range(3)], 1)
+
+
+def posed_body_sdfs(verts: np.ndarray, faces: np.ndarray):
+    """The :class:`BodySDF` of each frame of a posed body ``verts (T, Vb, 3)``, ``faces (F, 3)``, one at a time
+    (a generator: the trees of a long motion are never all held): the first built in full, the others
+    :class:`PosedBodySDF` like it."""
+    first = None
+    for frame in verts:
+        if first is None:
+            first = BodySDF(frame, faces)
+            yield first
+        else:
+            yield PosedBodySDF(frame, first)

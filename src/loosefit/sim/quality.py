@@ -46,8 +46,7 @@ from scipy.spatial import cKDTree
 
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
-from loosefit.geometry.signed_distance import BodySDF
-from loosefit.metrics.collision import PosedBodySDF
+from loosefit.geometry.signed_distance import BodySDF, PosedBodySDF
 
 #: A garment vertex this far inside the body counts as penetrating, m.
 PENETRATION_DEPTH = 0.002
@@ -109,8 +108,10 @@ def body_contact(
         normals = incidence[nearest] @ np.cross(b - a, c - a)
         candidates = np.einsum("ij,ij->i", frames[t] - body[nearest], normals) < 0.0
         if candidates.any():
-            exact = BodySDF(body, body_faces) if first is None else PosedBodySDF(body, first)
-            first = first or exact
+            if first is None:
+                exact = first = BodySDF(body, body_faces)
+            else:
+                exact = PosedBodySDF(body, first)
             sdf = exact.query(frames[t][candidates])
             inside[t] = (sdf < -depth).sum() / V
             deepest[t] = max(0.0, -float(sdf.min()))

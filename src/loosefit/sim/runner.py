@@ -228,8 +228,11 @@ def run_plan(
     plan = load_plan(plan_path)
     in_process = workers == 1 and address is None
     for params in plan.sim_params.values():  # a missing simulator is an error, not a crashed sequence each
-        backend_run_cloth(params.backend) if in_process else check_backend(params.backend)
-    if workers > 1 or address is not None:
+        if in_process:
+            backend_run_cloth(params.backend)
+        else:  # never imported here: bpy would shadow itself in the processes this one spawns
+            check_backend(params.backend)
+    if not in_process:
         require("ray", "parallel simulation (--workers / --address)")
     store = DatasetStore.open_or_create(Path(out))  # holds the store's write lock until the run ends
     try:

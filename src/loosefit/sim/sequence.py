@@ -49,17 +49,20 @@ BACKEND_MODULES = {"blender": ("bpy", "simulation backend 'blender' (Blender clo
                    "newton": ("newton", "simulation backend 'newton'")}
 
 
-def check_backend(backend: str) -> None:
-    """That a backend's simulator is installed, without importing it (for a process whose workers simulate)."""
+def _backend_module(backend: str) -> tuple[str, str]:
     if backend not in BACKEND_MODULES:
         raise InputError(f"unknown simulation backend {backend!r}; known: {list(BACKENDS)}")
-    require_installed(*BACKEND_MODULES[backend])
+    return BACKEND_MODULES[backend]
+
+
+def check_backend(backend: str) -> None:
+    """That a backend's simulator is installed, without importing it (for a process whose workers simulate)."""
+    require_installed(*_backend_module(backend))
 
 
 def backend_run_cloth(backend: str):
     """The ``run_cloth`` function of a backend (``"blender"`` or ``"newton"``); each imports its simulator lazily."""
-    check_backend(backend)
-    require(*BACKEND_MODULES[backend])
+    require(*_backend_module(backend))
     if backend == "newton":
         from loosefit.sim.newton import run_cloth
     else:

@@ -33,7 +33,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
 from loosefit.geometry.ray_cull import AxisRayCuller
 from loosefit.geometry.signed_distance import BodySDF
-from loosefit.metrics.collision import posed_body_sdfs
+from loosefit.geometry.signed_distance import posed_body_sdfs
 from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF, flushed_denormals, value_and_gradient_fn
 from loosefit.models.collision.network import BodySDFNet, SDFFunction, motion_sdf_inputs
 from loosefit.threads import torch_threads
