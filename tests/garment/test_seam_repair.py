@@ -49,6 +49,23 @@ def test_weld_and_slivers():
     out_v, out_f, merged = weld(verts, faces, 1e-4)
     assert merged == 2 and out_f.tolist() == [[0, 1, 2], [0, 2, 3]] and out_v.tolist() == verts[[0, 1, 2, 5]].tolist()
     assert weld(verts, faces, 1e-7)[2] == 0
+    # A 6 x 6 sheet folded onto itself: the fold puts its interior vertex 7 (row 1, column 1) 1e-6 from the
+    # interior vertex 10 (row 1, column 4). They are different points of the cloth: not welded.
+    n = 6
+    grid = np.array([[x, y, 0.0] for y in range(n) for x in range(n)])
+    quads = [(r * n + c, r * n + c + 1, (r + 1) * n + c + 1, (r + 1) * n + c) for r in range(n - 1) for c in range(n - 1)]
+    sheet = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    folded = grid.copy()
+    folded[10] = folded[7] + [0.0, 0.0, 1e-6]
+    assert weld(folded, sheet, 1e-4)[2] == 0
+    # Two triangles folded flat about their common edge 0-1, their tips 2 and 3 1e-6 apart: merged, they would
+    # be one face written twice.
+    flap = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, 1, 1e-6]])
+    assert weld(flap, np.array([[0, 1, 2], [1, 0, 3]]), 1e-4)[2] == 0
+    # A collapsed edge (vertex 8 moved 1e-6 from its neighbour 7) is one point written twice: welded.
+    collapsed = grid.copy()
+    collapsed[8] = collapsed[7] + [1e-6, 0.0, 0.0]
+    assert weld(collapsed, sheet, 1e-4)[2] == 1
     tri = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 2e-4, 0], [0.5, 1, 0]])
     # Height 2e-4 of a unit edge is below 1e-3 of it; height 1 is not.
     assert slivers(tri, np.array([[0, 1, 2], [0, 1, 3]])).tolist() == [True, False]

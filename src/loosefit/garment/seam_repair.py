@@ -24,6 +24,12 @@ from loosefit.garment.mesh_checks import unique_edges
 def weld(verts: np.ndarray, faces: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, int]:
     """Merge vertices closer than ``tol`` (transitively) into their first one.
 
+    Only pairs that are one point of the cloth written twice are merged: two ends of an edge (a collapsed edge),
+    vertices with a common neighbour, or with neighbours that are themselves within ``tol`` (a seam written as
+    two panels, a triangle soup), or a vertex no face uses. Two vertices of the surface that merely touch (a
+    fold resting on itself in a draped garment) have neither and stay apart, and so do the tips of two triangles
+    folded flat onto each other about their common edge (merged, they would be one face written twice).
+
     Args:
         verts: ``(V, 3)`` positions; faces: ``(F, 3)`` int64 triangles.
         tol: welding distance, in the units of ``verts``.
@@ -34,6 +40,27 @@ def weld(verts: np.ndarray, faces: np.ndarray, tol: float) -> tuple[np.ndarray, 
     """
     pairs = cKDTree(verts).query_pairs(tol, output_type="ndarray") if tol > 0 else np.zeros((0, 2), int)
     n = len(verts)
+    if len(pairs):
+        edges, face_edge, count = unique_edges(faces)
+        # The tips of the two faces on each edge (face_edge[:, c] runs from corner c to c + 1).
+        edge, tip = face_edge.ravel(), faces[:, [2, 0, 1]].ravel()
+        order = np.argsort(edge, kind="stable")
+        edge, tip = edge[order], tip[order]
+        starts = np.nonzero((count[edge] == 2) & np.r_[True, edge[1:] != edge[:-1]])[0]
+        folded = np.stack([tip[starts], tip[starts + 1]], 1)
+        edges = edges[edges[:, 0] != edges[:, 1]]
+        link = sp.coo_matrix((np.ones(2 * len(edges)), (edges.ravel(), edges[:, ::-1].ravel())), shape=(n, n)).tocsr()
+        near = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        near = (near + near.T + sp.identity(n)).tocsr()
+        # (A (I + W) A)[i, j] > 0: a common neighbour, or a neighbour of i within tol of one of j.
+        reach = (link[pairs[:, 0]] @ near @ link).tocsr()
+        linked = np.asarray(reach[np.arange(len(pairs)), pairs[:, 1]]).ravel() > 0
+        linked |= np.asarray(link[pairs[:, 0], pairs[:, 1]]).ravel() > 0
+        unused = np.ones(n, bool)
+        unused[np.unique(faces)] = False
+        key = lambda a: a.min(1) * n + a.max(1)  # noqa: E731
+        linked &= ~np.isin(key(pairs), key(folded))
+        pairs = pairs[linked | unused[pairs[:, 0]] | unused[pairs[:, 1]]]
     graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     _, label = connected_components(graph, directed=False)
     first = np.full(label.max() + 1, n)

@@ -36,6 +36,7 @@ from loosefit.geometry.signed_distance import BodySDF
 from loosefit.geometry.signed_distance import posed_body_sdfs
 from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF, flushed_denormals, value_and_gradient_fn
 from loosefit.models.collision.network import BodySDFNet, SDFFunction, motion_sdf_inputs
+from loosefit.sim.collider import enclosing_frames
 from loosefit.threads import torch_threads
 
 class ExactSDF:
@@ -424,9 +425,12 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
         raise InputError(f"proxy inflation must be a non-negative number of metres, got {inflate!r}")
     proxy = body.collision_proxy()
     out = np.array(verts, np.float32, copy=True)
-    posed = proxy.pose(motion).verts if (cull or mode != "neural") else None
-    if mode == "exact" and inflate > 0:
-        posed = inflated(posed, proxy.faces, inflate)
+    if mode == "exact":
+        posed = enclosing_frames(body, motion, within=out)
+        if inflate > 0:
+            posed = inflated(posed, proxy.faces, inflate)
+    else:
+        posed = proxy.pose(motion).verts if cull or mode == "pushout" else None
     culler = AxisRayCuller(posed[0], proxy.faces, cull_cell) if cull and mode != "pushout" else None
     resolver = CollisionResolver(faces, out.shape[1])
     if mode == "neural":
