@@ -25,13 +25,21 @@ from loosefit.sim.attach import skin_garment
 
 def inflated_rest(body: BodyModel, proxy: BodyModel, shape=None) -> np.ndarray:
     """``(Vp, 3)`` float32 rest vertices of ``proxy`` pushed out so that ``body`` (full resolution) is inside."""
+    low = proxy.rest_verts(shape).astype(np.float64)
+    return (low + _rest_push(body, proxy, shape)[0][:, None] * vertex_normals(low, proxy.faces)).astype(np.float32)
+
+
+def _rest_push(body: BodyModel, proxy: BodyModel, shape=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(push (Vp,), nearest (Vb,))``: the largest distance, m, by which the full-body rest vertices nearest to
+    each proxy vertex lie outside the rest proxy (0 when none does), and each full-body vertex's nearest proxy
+    vertex."""
     full = body.rest_verts(shape).astype(np.float64)
     low = proxy.rest_verts(shape).astype(np.float64)
     outside = igl.signed_distance(full, low, proxy.faces, igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
     _, nearest = cKDTree(low).query(full)
     push = np.zeros(len(low))
     np.maximum.at(push, nearest, outside)
-    return (low + push[:, None] * vertex_normals(low, proxy.faces)).astype(np.float32)
+    return push, nearest
 
 
 def enclosing_frames(body: BodyModel, motion: Motion, within: np.ndarray | None = None,
@@ -55,11 +63,7 @@ def enclosing_frames(body: BodyModel, motion: Motion, within: np.ndarray | None 
     """
     proxy = body.collision_proxy()
     faces = np.asarray(proxy.faces, np.int64)
-    full, low = body.rest_verts().astype(np.float64), proxy.rest_verts().astype(np.float64)
-    outside = igl.signed_distance(full, low, faces, igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
-    _, nearest = cKDTree(low).query(full)
-    rest_push = np.zeros(len(low))
-    np.maximum.at(rest_push, nearest, outside)
+    rest_push, nearest = _rest_push(body, proxy)
     posed_full, posed_low = body.pose(motion).verts, proxy.pose(motion).verts
     out = np.empty(posed_low.shape, np.float32)
     for t in range(len(posed_low)):

@@ -368,12 +368,13 @@ def post_process(verts: np.ndarray, faces: np.ndarray, body, motion, handling: s
     return handle_motion_collisions(verts, faces, body, motion, handling)
 
 
-#: Metres the exact handling moves the posed collision proxy's surface out along its vertex normals. The
-#: 1,229-vertex proxy lies inside the full-resolution body a user sees (over hips and legs by 2 mm at the
-#: median, 12 mm at the 99th percentile, on a spin), so a vertex put on the proxy's surface could stay more
-#: than 5 mm inside the body: held-out spin, VirtualBones skirt, 1.03 % of the vertices, 0.3 % with 4 mm,
-#: 0.14 % with 7 mm (benchmarks/README.md, ``penetration.py``); 4 mm keeps cloth resting on the body close to it.
-PROXY_INFLATE = 0.004
+#: Metres the exact handling moves its collision surface out along its vertex normals, beyond the posed proxy
+#: pushed to enclose the posed full-resolution body (:func:`~loosefit.sim.collider.enclosing_frames`). The
+#: 1,229-vertex proxy itself lies up to 13 mm inside the body a user sees (the lower back on a walk), so a vertex
+#: put on its surface could stay more than 5 mm inside the body: worst frame 1.45 % of the VirtualBones skirt's
+#: vertices on the CMU walk with the proxy moved out 4 mm, 0.94 % on the enclosing surface plus 2 mm
+#: (``benchmarks/penetration.py``); 2 mm keeps cloth resting on the body close to it.
+PROXY_INFLATE = 0.002
 
 
 def inflated(verts: np.ndarray, faces: np.ndarray, distance: float) -> np.ndarray:
@@ -412,8 +413,9 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     on the wrong side of its zero level; the margin catches them (the cull still skips every vertex it proves
     outside the proxy, so no vertex far from the body moves).
 
-    ``inflate`` (metres, ``"exact"`` only): the posed proxy is moved out that far along its vertex normals
-    before the cull and the distance (:data:`PROXY_INFLATE`: the proxy lies inside the full-resolution body).
+    ``"exact"`` corrects against the posed proxy pushed out to enclose the posed full-resolution body in every
+    frame (:func:`~loosefit.sim.collider.enclosing_frames`, over the garment's box), moved ``inflate`` metres
+    further out along its vertex normals (:data:`PROXY_INFLATE`).
     """
     if mode not in ("neural", "exact", "pushout"):
         raise InputError(f"collision mode must be 'neural', 'exact' or 'pushout', got {mode!r}")
