@@ -16,11 +16,15 @@ Per case (``<kind>-<seed>/<body>/...``):
 * ``shape``: the Anny shape found, beside ``true_shape`` (the body it was made on);
 * ``round_trip_mm`` (floor: at most 10 mm): the shape kept once the body change is undone. The fitted
   garment is draped back from the default body to the shape found (the same drape, the other way), and compared
-  with the reference: the garment draped the same way on the found body without any body change
+  with its control: the garment as placed on the found body, draped twice there without any body change
   (:func:`loosefit.garment.body_fit.drape` from the found shape to itself: it settles under gravity and nothing
-  else). What is left after the rigid motion (Kabsch) that best maps one onto the other is the mean distance
-  between the two, vertex to vertex: what the trip did to the garment that coming back did not undo;
-* ``kept_mm``: the fitted garment itself (on the default body) against that reference, after the same rigid
+  else), so that both have been through two drapes and differ by the body change alone. What is left after the
+  rigid motion (Kabsch) that best maps one onto the other is the mean distance between the two, vertex to vertex:
+  what the trip did to the garment that coming back did not undo. Beside it: ``round_trip_vs_one_drape_mm``
+  (against the control's first drape, the figure before), ``control_moved_mm`` (how far the second drape alone
+  moves the control: a garment still settling) and ``reference_noise_mm`` (the control run again from the
+  placement moved by 10 micrometres of noise: the drapes' own spread);
+* ``kept_mm``: the fitted garment itself (on the default body) against the control's first drape, after the same rigid
   motion. It also counts what the new body changes by right (sleeves drawn for longer arms hang differently
   on shorter ones, a waistband cut for a narrower waist is stretched to this one): reported, no floor.
   ``vs_file_mm`` is the same against the file's garment itself (as placed on the found body): it also counts

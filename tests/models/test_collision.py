@@ -79,6 +79,21 @@ def test_exact_sdf_and_push_out_on_a_mesh(cloth):
     np.testing.assert_allclose(body.query(pushed)[mask], 0.004, atol=1e-5)  # every one exactly 4 mm out
 
 
+def test_exact_sdf_takes_the_winding_number_where_a_body_passes_through_itself():
+    """Two unit spheres in one mesh, 1.2 apart along x, as a posed body whose parts pass through each other: at
+    x = 0.15 a point is inside the first, 5 cm from the second's surface, whose side faces it: the closest
+    triangle says outside, the winding number inside. Outside both, both say outside."""
+    a = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    verts = np.concatenate([a.vertices, a.vertices + [1.2, 0.0, 0.0]])
+    faces = np.concatenate([a.faces, a.faces + len(a.vertices)])
+    exact = ExactSDF(BodySDF(verts, faces))
+    points = torch.tensor([[0.15, 0.0, 0.0], [-1.5, 0.0, 0.0], [0.6, 0.0, 1.2]], dtype=torch.float64)
+    closest_side = BodySDF(verts, faces).query(points.numpy())
+    assert closest_side[0] == pytest.approx(0.05, abs=2e-3)  # libigl's sign alone: outside
+    value = exact(points).detach().numpy()
+    assert value[0] == pytest.approx(-0.05, abs=2e-3) and value[1] == pytest.approx(0.5, abs=2e-3) and value[2] > 0.2
+
+
 def test_network_shape_init_and_bad_input():
     torch.manual_seed(0)
     net = BodySDFNet(code_size=4, config=BodySDFConfig(hidden=64, init_radius=0.5))

@@ -55,6 +55,14 @@ class ExactSDF:
         """Signed distances ``(N,)`` and unit outward gradients ``(N, 3)``, as tensors like ``points``."""
         p = points.detach().cpu().double().numpy()
         dist, closest, face = self.mesh.closest(p)
+        # A posed body can fold through itself (the hips on a spin): there the closest triangle's side can say
+        # outside for a point centimetres inside; the winding number settles it.
+        out = np.nonzero(dist > 0)[0]
+        if len(out):
+            import igl
+
+            inside = igl.winding_number(self.mesh.verts, self.mesh.faces, p[out]) > 0.5
+            dist[out[inside]] *= -1.0
         away = p - closest
         norm = np.linalg.norm(away, axis=1, keepdims=True)
         direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None],
