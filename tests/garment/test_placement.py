@@ -33,6 +33,26 @@ def test_attachment_and_up_axis(garments):
             np.testing.assert_allclose(to_z_up(y_up, "y"), v)
 
 
+def test_up_axis_from_the_longest_flat_loop():
+    """A Y-up tube, as a sleeveless jumpsuit's file: a flat hem at y = 0 (1.26 m around) and a longer top opening
+    that is not flat (neckline and arm holes in one loop, rising and falling 25 cm twice around; 2.1 m). The top's
+    best plane faces z, which misread the file as Z-up; the hem's faces y."""
+    theta = np.linspace(0.0, 2.0 * np.pi, 64, endpoint=False)
+    hem = np.stack([0.2 * np.cos(theta), np.zeros_like(theta), 0.2 * np.sin(theta)], 1)
+    top = np.stack([0.2 * np.cos(theta), 1.0 + 0.25 * np.cos(2.0 * theta), 0.12 * np.sin(theta)], 1)
+    n = len(theta)
+    i, j = np.arange(n), (np.arange(n) + 1) % n
+    faces = np.concatenate([np.stack([i, n + i, j], 1), np.stack([j, n + i, n + j], 1)])
+    verts = np.concatenate([hem, top])
+    spread = np.linalg.svd(top - top.mean(0), full_matrices=False)
+    assert abs(spread[2][-1][2]) > 0.99 and spread[1][2] > 0.5 * spread[1][1]  # facing z, not flat
+    assert np.linalg.norm(top - np.roll(top, 1, 0), axis=1).sum() > 1.5 * np.linalg.norm(hem - np.roll(hem, 1, 0), axis=1).sum()
+    assert detect_up(verts, faces) == "y"
+    # The same file turned Z-up reads as Z-up; a tube with only non-flat openings does not decide.
+    assert detect_up(np.stack([verts[:, 0], -verts[:, 2], verts[:, 1]], 1), faces) == "z"
+    assert detect_up(np.concatenate([top - [0.0, 1.0, 0.0], top]), faces) is None
+
+
 def test_fit_score_closed_form():
     # Gaps of the top band 1, 2, 3 cm (median 2 cm, mean deviation 2/3 cm); one point 1 cm inside.
     dist = np.array([0.01, 0.02, 0.03, -0.01, 0.05])
