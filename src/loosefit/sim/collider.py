@@ -49,8 +49,8 @@ def enclosing_frames(body: BodyModel, motion: Motion, within: np.ndarray | None 
     The rest-pose push of :func:`inflated_rest` does not hold in every pose: the two meshes are skinned with
     their own weights, and on a walk the full body's lower back bulges up to 13 mm out of the posed proxy where
     it lies within 2 mm at rest. Here each proxy vertex moves out along its posed normal by the largest distance
-    by which the posed full-body vertices nearest to it (at rest) lie outside the posed proxy (the distance to
-    the closest proxy triangle, outside by that triangle's normal).
+    by which the posed full-body vertices nearest to it (at rest) lie outside the posed proxy (their height above
+    the plane of the proxy triangle closest to them at rest).
 
     Args:
         body: the full-resolution body; motion: ``T`` frames on its rig.
@@ -64,6 +64,11 @@ def enclosing_frames(body: BodyModel, motion: Motion, within: np.ndarray | None 
     proxy = body.collision_proxy()
     faces = np.asarray(proxy.faces, np.int64)
     rest_push, nearest = _rest_push(body, proxy)
+    # Each full-body vertex is measured against the plane of the proxy triangle closest to it at rest: exact
+    # while that triangle stays the closest, and a tenth of the cost of a closest-point query per frame.
+    _, face, _ = igl.point_mesh_squared_distance(body.rest_verts().astype(np.float64),
+                                                 proxy.rest_verts().astype(np.float64), faces)
+    corner = faces[face]
     posed_full, posed_low = body.pose(motion).verts, proxy.pose(motion).verts
     out = np.empty(posed_low.shape, np.float32)
     for t in range(len(posed_low)):
@@ -73,12 +78,10 @@ def enclosing_frames(body: BodyModel, motion: Motion, within: np.ndarray | None 
         if within is not None:
             lo, hi = within[t].min(0) - margin, within[t].max(0) + margin
             rows = np.nonzero(((posed_full[t] >= lo) & (posed_full[t] <= hi)).all(1))[0]
-        points = posed_full[t][rows].astype(np.float64)
-        _, face, closest = igl.point_mesh_squared_distance(points, v, faces)
-        tri = v[faces[face]]
+        tri = v[corner[rows]]
         side = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         side /= np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
-        distance = np.einsum("nd,nd->n", points - closest, side)
+        distance = np.einsum("nd,nd->n", posed_full[t][rows] - tri[:, 0], side)
         seen = np.full(len(v), -np.inf)
         np.maximum.at(seen, nearest[rows], distance)
         push = np.where(np.isfinite(seen), np.maximum(seen, 0.0), rest_push)
