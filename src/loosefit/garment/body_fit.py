@@ -9,8 +9,8 @@ bring it onto the body without changing its cut:
    shape is scored by the existing placement (:func:`~loosefit.garment.placement.place` on
    :data:`SEARCH_SAMPLES` points): :func:`~loosefit.garment.placement.fit_score` over the garment's top
    :data:`SEARCH_BAND` (how uneven the gap is there, plus the penalties for cloth more than 3 mm inside the
-   body), plus :data:`GAP_WEIGHT` times the mean gap at the top 4 cm, plus :data:`PRIOR` metres per unit of
-   shape distance from the target. The evenness is what tells the body apart: a strapless top cut for a thin
+   body), plus :data:`GAP_WEIGHT` times the mean gap at the top 4 cm, plus :data:`FLOOR_WEIGHT` times the
+   garment's mean depth below the floor, plus :data:`PRIOR` metres per unit of shape distance from the target. The evenness is what tells the body apart: a strapless top cut for a thin
    Anny (height 0.45, weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away
    in a key (over its top 10 cm). The band reaches past a strap dress's or a shirt's shoulders to the bust,
    a skirt's waistband to the hips: on the 12 garments of ``benchmarks/garment_fit.py`` the height, weight and
@@ -61,6 +61,10 @@ PRIOR = 0.001
 SEARCH_BAND = 0.25
 #: Weight of the mean gap at the top 4 cm in the objective.
 GAP_WEIGHT = 0.05
+#: Weight of the garment's mean depth below the floor (the soles, z = 0) in the objective: a garment is not made
+#: to pass through the floor on its own body. Without it a sleeveless jumpsuit cut for a tall body (height 0.8)
+#: was found on the shortest (0.0), its legs 10 cm through the floor; the top's evenness does not see height.
+FLOOR_WEIGHT = 1.0
 #: Points the placement scores per shape during the search (the final placement uses all its samples).
 SEARCH_SAMPLES = 300
 #: Most shapes scored in one search.
@@ -160,7 +164,8 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
                 checked.append(True)
                 check(to_z_up(verts, p.up) + p.offset, lm)
             pts = to_z_up(verts[pick[unit]], p.up) + p.offset
-            score = fit_score(lm.sdf.query(pts), pts[:, 2], SEARCH_BAND)[0] + GAP_WEIGHT * p.top_gap + PRIOR * distance
+            score = (fit_score(lm.sdf.query(pts), pts[:, 2], SEARCH_BAND)[0] + GAP_WEIGHT * p.top_gap
+                     + FLOOR_WEIGHT * np.maximum(-pts[:, 2], 0.0).mean() + PRIOR * distance)
             if score < best[0]:
                 best = (score, p, unit, shape, lm)
         memo[values] = best
