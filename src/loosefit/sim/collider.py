@@ -29,17 +29,17 @@ def inflated_rest(body: BodyModel, proxy: BodyModel, shape=None) -> np.ndarray:
     return (low + _rest_push(body, proxy, shape)[0][:, None] * vertex_normals(low, proxy.faces)).astype(np.float32)
 
 
-def _rest_push(body: BodyModel, proxy: BodyModel, shape=None) -> tuple[np.ndarray, np.ndarray]:
-    """``(push (Vp,), nearest (Vb,))``: the largest distance, m, by which the full-body rest vertices nearest to
-    each proxy vertex lie outside the rest proxy (0 when none does), and each full-body vertex's nearest proxy
-    vertex."""
+def _rest_push(body: BodyModel, proxy: BodyModel, shape=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(push (Vp,), nearest (Vb,), face (Vb,))``: the largest distance, m, by which the full-body rest vertices
+    nearest to each proxy vertex lie outside the rest proxy (0 when none does), each full-body vertex's nearest
+    proxy vertex, and the proxy triangle closest to it."""
     full = body.rest_verts(shape).astype(np.float64)
     low = proxy.rest_verts(shape).astype(np.float64)
-    outside = igl.signed_distance(full, low, proxy.faces, igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[0]
+    outside, face = igl.signed_distance(full, low, proxy.faces, igl.SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER)[:2]
     _, nearest = cKDTree(low).query(full)
     push = np.zeros(len(low))
     np.maximum.at(push, nearest, outside)
-    return push, nearest
+    return push, nearest, face
 
 
 def enclosing_frames(body: BodyModel, motion: Motion, within: np.ndarray | None = None,
@@ -63,11 +63,9 @@ def enclosing_frames(body: BodyModel, motion: Motion, within: np.ndarray | None 
     """
     proxy = body.collision_proxy()
     faces = np.asarray(proxy.faces, np.int64)
-    rest_push, nearest = _rest_push(body, proxy)
     # Each full-body vertex is measured against the plane of the proxy triangle closest to it at rest: exact
     # while that triangle stays the closest, and a tenth of the cost of a closest-point query per frame.
-    _, face, _ = igl.point_mesh_squared_distance(body.rest_verts().astype(np.float64),
-                                                 proxy.rest_verts().astype(np.float64), faces)
+    rest_push, nearest, face = _rest_push(body, proxy)
     corner = faces[face]
     posed_full, posed_low = body.pose(motion).verts, proxy.pose(motion).verts
     out = np.empty(posed_low.shape, np.float32)
