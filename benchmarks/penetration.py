@@ -5,7 +5,9 @@ For each run and motion the garment is animated as ``loosefit animate RUN --moti
 (:class:`~loosefit.animate.Animator` with the best checkpoint, one torch thread, on the CPU; then
 :func:`~loosefit.models.collision.handle_motion_collisions` in mode ``exact``, margin 0), and measured with
 :func:`~loosefit.metrics.collision.inside_body_report`'s measure (vertices more than 5 mm inside the body's collision
-proxy) on every frame, against the same animation with ``--collision none``. Frames per second: the model alone
+proxy) on every frame, against the same animation with ``--collision none``; then against the full-resolution body,
+at the vertices and at points between them (:func:`~loosefit.metrics.collision.surface_samples`: edge midpoints and
+triangle centroids, where a limb through a triangle shows). Frames per second: the model alone
 (``--collision none``) and the model plus the handling, both timed on a second, warm pass.
 
     python benchmarks/penetration.py --run vb=/work/stores/demo/runs/vb-e2 \\
@@ -27,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import save_results
+from loosefit.metrics.collision import surface_samples
 
 DEFAULT_MOTIONS = ["walk:1234:4", "spin:1234:4"]
 DEFAULT_BVH = Path(__file__).resolve().parents[2] / "shared" / "mocap" / "cmu-cc" / "007_01.bvh"
@@ -73,9 +76,10 @@ def animate_as_cli(run: Path, garment, body, motion):
     t = time.perf_counter()
     raw = animator.animate_batch([motion])[0]
     t_model = time.perf_counter() - t
-    handle_motion_collisions(raw, animator.faces, body, motion, "exact", None, margin=0.0)  # warm-up (kernels)
+    handle = dict(mode="exact", margin=0.0)
+    handle_motion_collisions(raw, animator.faces, body, motion, **handle)  # warm-up (kernels)
     t = time.perf_counter()
-    fixed = handle_motion_collisions(raw, animator.faces, body, motion, "exact", None, margin=0.0)
+    fixed = handle_motion_collisions(raw, animator.faces, body, motion, **handle)
     t_coll = time.perf_counter() - t
     return animator, raw, fixed, t_model, t_coll
 
@@ -102,6 +106,10 @@ def main() -> None:
             # inside_body_report's measure (the proxy, 5 mm) on every frame
             before, after = _per_frame(raw, body, motion), _per_frame(fixed, body, motion)
             full = _per_frame(fixed, body, motion, proxy=False)  # what a viewer sees: the full-resolution body
+            # between the vertices: edge midpoints and triangle centroids (a limb through a triangle)
+            surface = _per_frame(surface_samples(fixed, animator.faces), body, motion, proxy=False)
+            surface_none = _per_frame(surface_samples(raw, animator.faces), body, motion, proxy=False)
+            moved = np.linalg.norm(fixed - raw, axis=-1)
             row = {
                 "run": name, "run_dir": str(run), "method": animator.method, "motion": label, "frames": T,
                 "vertices": int(raw.shape[1]), "garment": None if garment is None else garment.name,
@@ -110,6 +118,12 @@ def main() -> None:
                 "worst_frame": int(np.argmax(after)),
                 "full_body_inside_5mm_percent_mean": float(full.mean()),
                 "full_body_inside_5mm_percent_worst": float(full.max()),
+                "surface_inside_5mm_percent_mean": float(surface.mean()),
+                "surface_inside_5mm_percent_worst": float(surface.max()),
+                "none_surface_inside_5mm_percent_mean": float(surface_none.mean()),
+                "none_surface_inside_5mm_percent_worst": float(surface_none.max()),
+                "moved_mm_max": float(1e3 * moved.max()), "moved_mm_mean_of_moved": float(1e3 * moved[moved > 0].mean())
+                if (moved > 0).any() else 0.0,
                 "none_inside_5mm_percent_mean": float(before.mean()),
                 "none_inside_5mm_percent_worst": float(before.max()), "none_worst_frame": int(np.argmax(before)),
                 "fps_none": T / t_model, "fps_exact": T / (t_model + t_coll),
@@ -120,7 +134,8 @@ def main() -> None:
             print(f"{name:10s} {label:22s} inside>5mm {row['inside_5mm_percent_mean']:5.2f} % (worst "
                   f"{row['inside_5mm_percent_worst']:5.2f} %), none {row['none_inside_5mm_percent_mean']:5.2f} % (worst "
                   f"{row['none_inside_5mm_percent_worst']:5.2f} %), full body {row['full_body_inside_5mm_percent_mean']:5.2f} % "
-                  f"(worst {row['full_body_inside_5mm_percent_worst']:5.2f} %); {row['fps_exact']:.0f} fps with, "
+                  f"(worst {row['full_body_inside_5mm_percent_worst']:5.2f} %), surface {row['surface_inside_5mm_percent_mean']:5.2f} % "
+                  f"(worst {row['surface_inside_5mm_percent_worst']:5.2f} %, none {row['none_surface_inside_5mm_percent_mean']:5.2f}); {row['fps_exact']:.0f} fps with, "
                   f"{row['fps_none']:.0f} without; handling {row['collision_ms_per_frame']:.1f} ms/frame", flush=True)
     save_results(args.out, {"depth_m": 0.005, "floor_percent": 1.0, "torch_threads": 1, "rows": rows})
 

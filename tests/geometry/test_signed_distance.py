@@ -57,6 +57,27 @@ def test_matches_libigl_on_body(body):
     assert bary.min() > -1e-3 and np.abs(bary.sum(1) - 1).max() < 1e-4
 
 
+@pytest.mark.parametrize("backend", ["warp", "igl"])
+def test_inside_by_winding_number_on_two_overlapping_spheres(sphere, backend):
+    """Two unit spheres in one mesh, 1.2 apart along x (a body through itself): a point is inside where it is
+    inside either sphere, in closed form; at x = 0.15, 5 cm from the second sphere whose side faces it, the
+    pseudonormal sign says outside. Points more than 2 mm from both surfaces (the icosphere's deviation is under
+    1.3 mm); the hierarchy of the first call is reused by the second, with the same answers."""
+    verts, faces = sphere
+    both = BodySDF(np.concatenate([verts, verts + [1.2, 0, 0]]), np.concatenate([faces, faces + len(verts)]))
+    rng = np.random.default_rng(1)
+    points = rng.uniform([-1.3, -1.2, -1.2], [2.5, 1.2, 1.2], (3000, 3))
+    r = np.stack([np.linalg.norm(points, axis=1), np.linalg.norm(points - [1.2, 0, 0], axis=1)], 1)
+    points = points[(np.abs(r - 1.0) > 2e-3).all(1)]
+    r = r[(np.abs(r - 1.0) > 2e-3).all(1)]
+    inside = (r < 1.0).any(1)
+    got = both.inside(points, backend=backend)
+    assert got.dtype == bool and np.array_equal(got, inside) and 0.3 < inside.mean() < 0.7
+    assert np.array_equal(both.inside(points[::-1], backend=backend), inside[::-1])
+    assert both.query([[0.15, 0.0, 0.0]])[0] > 0.04 and both.inside([[0.15, 0.0, 0.0]], backend=backend)[0]
+    assert both.inside(np.zeros((0, 3)), backend=backend).shape == (0,)
+
+
 def test_bad_input():
     with pytest.raises(InputError, match="BodySDF needs"):
         BodySDF(np.zeros((4, 2)), np.zeros((1, 3), int))

@@ -6,7 +6,7 @@ import trimesh
 
 from loosefit.errors import InputError
 from loosefit.geometry.signed_distance import BodySDF
-from loosefit.metrics.collision import collision_mask, collision_ratio, collision_ratio_per_frame
+from loosefit.metrics.collision import collision_mask, collision_ratio, collision_ratio_per_frame, surface_samples
 
 BOX = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
 BV, BF = np.asarray(BOX.vertices), np.asarray(BOX.faces)
@@ -25,6 +25,23 @@ def test_moving_body_and_per_frame_sdfs():
     assert collision_ratio_per_frame(garment, body, BF).tolist() == [50.0, 0.0]
     sdfs = [BodySDF(b, BF) for b in body]
     assert collision_ratio(garment, sdfs) == pytest.approx(25.0)
+
+
+def test_surface_samples_see_a_box_edge_between_outside_vertices():
+    """A square in the plane x + y = 0.9 across an edge of the box (half-width 0.5): its corners are 0.1 m outside
+    (two beyond x = 0.5, two beyond y = 0.5), while the midpoints of the three edges along x = y lie 5 cm inside
+    (0.45, 0.45, z) and the centroids exactly on the box's faces. Samples: the 5 edge midpoints, then the 2
+    centroids, in closed form."""
+    verts = np.array([[0.6, 0.3, -0.3], [0.3, 0.6, -0.3], [0.3, 0.6, 0.3], [0.6, 0.3, 0.3]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    samples = surface_samples(np.stack([verts, verts + [0, 0, 5.0]]), faces)  # frame 1: lifted off the box
+    assert samples.shape == (2, 7, 3)
+    edges = [(0, 1), (0, 2), (0, 3), (1, 2), (2, 3)]  # sorted unique pairs
+    np.testing.assert_allclose(samples[0, :5], [(verts[i] + verts[j]) / 2 for i, j in edges])
+    np.testing.assert_allclose(samples[0, 5:], [verts[f].mean(0) for f in faces])
+    assert collision_ratio_per_frame(verts[None], BV, BF).tolist() == [0.0]
+    inside = collision_mask(samples, np.stack([BV, BV]), BF)
+    assert inside.tolist() == [[True, True, False, False, True, False, False], [False] * 7]
 
 
 def test_bad_bodies():

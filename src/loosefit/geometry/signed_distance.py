@@ -5,14 +5,32 @@ the normal of the face, edge or vertex that holds it; points on the side it poin
 This is exact for closed, consistently oriented meshes such as the Anny body, and gives the same
 answer as ``igl.signed_distance`` with the pseudonormal sign type without rebuilding its tree on
 every call.
+
+Where a posed body passes through itself the pseudonormal sign can be wrong; :meth:`BodySDF.inside` settles a
+point's side by the generalised winding number instead (Warp's fast winding number, its hierarchy built once per
+mesh; libigl's when Warp does not load).
 """
 
 from __future__ import annotations
+
+import functools
 
 import igl
 import numpy as np
 
 from loosefit.errors import InputError
+
+
+@functools.lru_cache(maxsize=1)
+def _winding_kernel():
+    """``(warp, kernel)``, or None when Warp cannot be imported (then libigl answers)."""
+    try:
+        import warp as wp
+
+        from loosefit.geometry._winding_warp import winding_inside
+    except Exception:  # not installed or broken
+        return None
+    return wp, winding_inside
 
 
 class BodySDF:
@@ -42,6 +60,7 @@ class BodySDF:
         edge_normals = np.zeros((self._corner_edge.max() + 1, 3))
         np.add.at(edge_normals, self._corner_edge.reshape(-1), np.repeat(self.face_normals, 3, 0))
         self._edge_normals = edge_normals
+        self._warp_mesh = None  # the winding number's hierarchy (:meth:`inside`), built when first needed
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Signed distance, closest surface point and its face.
@@ -63,6 +82,30 @@ class BodySDF:
         side = np.einsum("ij,ij->i", p - close, normal)
         dist = np.sqrt(np.maximum(sq, 0.0)) * np.where(side < 0.0, -1.0, 1.0)
         return dist.astype(np.float32), close.astype(np.float32), face.astype(np.int64)
+
+    def inside(self, points: np.ndarray, backend: str = "auto") -> np.ndarray:
+        """``(N,)`` bool: the mesh's generalised winding number at ``points (N, 3)`` exceeds 1/2 (inside, also
+        where the mesh passes through itself). ``backend``: ``"auto"`` (Warp when it loads, else libigl),
+        ``"warp"`` or ``"igl"``. Warp's hierarchy is built on the first call and kept: about 1.8 ms for the
+        1,229-vertex proxy, then about 0.02 ms a point, against libigl's 5.5 ms a call plus 0.01 ms a point."""
+        p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        kernel = None if backend == "igl" else _winding_kernel()
+        if backend == "warp" and kernel is None:
+            raise InputError("the Warp winding number needs warp (pip install warp-lang)")
+        if len(p) == 0:
+            return np.zeros(0, bool)
+        if kernel is None:
+            return igl.winding_number(self.verts, self.faces, p) > 0.5
+        wp, winding_inside = kernel
+        if self._warp_mesh is None:
+            self._warp_mesh = wp.Mesh(points=wp.array(self.verts.astype(np.float32), dtype=wp.vec3, device="cpu"),
+                                      indices=wp.array(self.faces.astype(np.int32).ravel(), dtype=wp.int32,
+                                                       device="cpu"), support_winding_number=True)
+        out = np.zeros(len(p), np.uint8)
+        wp.launch(winding_inside, dim=len(p), device="cpu",
+                  inputs=[self._warp_mesh.id, wp.array(p.astype(np.float32), dtype=wp.vec3, device="cpu"),
+                          wp.array(out, dtype=wp.uint8, device="cpu", copy=False)])
+        return out.astype(bool)
 
     def query(self, points: np.ndarray) -> np.ndarray:
         """``(N,)`` float32 signed distances of ``points (N, 3)`` to the mesh, metres, negative inside."""
@@ -108,6 +151,7 @@ class PosedBodySDF(BodySDF):
         index, n = self._corner_edge.reshape(-1), len(like._edge_normals)
         faces_normals = np.repeat(self.face_normals, 3, 0)
         self._edge_normals = np.stack([np.bincount(index, faces_normals[:, k], n) for k in range(3)], 1)
+        self._warp_mesh = None
 
 
 def posed_body_sdfs(verts: np.ndarray, faces: np.ndarray):

@@ -70,6 +70,18 @@ def collision_ratio(garment_verts, body, body_faces=None, tolerance: float = DEF
     return float(collision_ratio_per_frame(garment_verts, body, body_faces, tolerance).mean())
 
 
+def surface_samples(garment_verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Points on the garment's surface between its vertices: every edge's midpoint and every triangle's centroid,
+    ``(..., E + F, 3)`` for ``garment_verts (..., V, 3)``. A limb can pass between vertices that are all outside it
+    (a triangle spanning the limb); measured at these points, the collision ratio sees it."""
+    from loosefit.geometry.laplacian import edges
+
+    v = np.asarray(garment_verts, np.float64)
+    f = np.asarray(faces, np.int64)
+    e = edges(f)
+    return np.concatenate([(v[..., e[:, 0], :] + v[..., e[:, 1], :]) / 2, v[..., f, :].mean(-2)], axis=-2)
+
+
 #: Depth (metres) beyond which an animated garment vertex counts as inside the body in what ``loosefit animate``
 #: reports: deeper than cloth resting on the skin, shallower than the collisions a user sees.
 REPORT_DEPTH = 0.005

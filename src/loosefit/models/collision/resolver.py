@@ -64,10 +64,7 @@ class ExactSDF:
         # WINDING_FROM out: the cases seen were 26-82 mm, and most candidates are cloth resting on the skin).
         out = np.nonzero(dist > WINDING_FROM)[0]
         if len(out):
-            import igl
-
-            inside = igl.winding_number(self.mesh.verts, self.mesh.faces, p[out]) > 0.5
-            dist[out[inside]] *= -1.0
+            dist[out[self.mesh.inside(p[out])]] *= -1.0
         away = p - closest
         norm = np.linalg.norm(away, axis=1, keepdims=True)
         direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None],
