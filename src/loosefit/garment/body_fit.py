@@ -28,7 +28,8 @@ bring it onto the body without changing its cut:
    (``benchmarks/garment_fit.py`` reports both).
 2. **Placed rigidly** on that body (the placement's axis swap and offset; the unit's scale).
 3. **Draped** (:func:`drape`): Blender cloth on the body's collider while the body's vertices move linearly
-   from the found shape to the target over :data:`MORPH_SECONDS`, then hold for :data:`SETTLE_SECONDS`.
+   from the found shape to the target over :data:`MORPH_SECONDS`, then hold for :data:`SETTLE_SECONDS`
+   (:data:`FIT_COLLISION_QUALITY` collision iterations a step: a body growing into a tight panel).
    The cloth's rest shape is the garment as placed (its cut is kept); its pinned vertices (the top 3 cm)
    follow the body change at their nearest body points (:func:`carry`).
 
@@ -69,6 +70,12 @@ FLOOR_WEIGHT = 1.0
 SEARCH_SAMPLES = 300
 #: Most shapes scored in one search.
 MAX_EVALUATIONS = 48
+#: Blender cloth's collision iterations a solver step in a fit's drape (the simulation's default is 2). A body
+#: growing into a garment cut for a smaller one presses a tight panel outwards: with 2, a dress made on a short
+#: body (height 0.1) let the default body's breasts through its bodice, 17 vertices 10-22 mm inside it, and the
+#: import was refused; with 4 it landed with none inside (as with 10 solver steps a frame instead of 5, at more
+#: cost; ``benchmarks/garment_fit.py``).
+FIT_COLLISION_QUALITY = 4
 #: Seconds the body takes to change shape in the drape, and seconds it then holds.
 MORPH_SECONDS = 1.0
 SETTLE_SECONDS = 0.5
@@ -229,6 +236,14 @@ def carry(points: np.ndarray, source: np.ndarray, target: np.ndarray, k: int = 8
     return np.einsum("nk,nkd->nd", w, change[nearest])
 
 
+def fit_drape_params(params=None):
+    """The simulation parameters of a fit's drape: ``params`` as given, or by default the simulation's defaults
+    with :data:`FIT_COLLISION_QUALITY` collision iterations."""
+    from loosefit.sim.params import SimParams
+
+    return params if params is not None else SimParams(collision_quality=FIT_COLLISION_QUALITY)
+
+
 def drape(verts: np.ndarray, faces: np.ndarray, pinned: np.ndarray, body, source, target=None, params=None,
           morph_seconds: float = MORPH_SECONDS, settle_seconds: float = SETTLE_SECONDS) -> tuple[np.ndarray, dict]:
     """Drape a garment from the body of shape ``source`` onto the shape ``target`` (step 3 of the module
@@ -290,7 +305,7 @@ def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = No
         body: the target Anny body.
         path: the file, named in errors.
         up: the file's up axis or ``None``.
-        params: simulation parameters of the drape.
+        params: simulation parameters of the drape (:func:`fit_drape_params` when ``None``).
         search: how hard to look for the shape, and how long the drape is.
         pieces: ``(V,)`` piece label of each vertex (each piece is pinned at its own top); one piece when ``None``.
         check: called as ``check(placed (V, 3), landmarks of the found body)`` before the drape; it raises
@@ -308,7 +323,8 @@ def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = No
     if check is not None:
         check(placed, measure_body(body, fit.shape))
     target_sdf = measure_body(body).sdf
-    verts, stats = drape(placed, faces, pinned, body, fit.shape, params=params, morph_seconds=search.morph_seconds,
+    verts, stats = drape(placed, faces, pinned, body, fit.shape, params=fit_drape_params(params),
+                         morph_seconds=search.morph_seconds,
                          settle_seconds=search.settle_seconds)
     info = {
         "shape": {k: round(getattr(fit.shape, k), 3) for k in SEARCH_KEYS},
@@ -341,7 +357,7 @@ def refit(garment, body, path=None, params=None, morph_seconds: float = MORPH_SE
         garment: the garment in the rest pose of its recorded body.
         body: the body to simulate it on.
         path: the garment's file, named in errors.
-        params: simulation parameters of the drape (defaults when ``None``).
+        params: simulation parameters of the drape (:func:`fit_drape_params` when ``None``).
 
     Returns:
         ``(garment on body's rest pose, info)``: ``info`` is ``None`` when nothing was done, else it has the
@@ -364,7 +380,7 @@ def refit(garment, body, path=None, params=None, morph_seconds: float = MORPH_SE
                              "body's --shape", path)
         return garment, None
     verts, stats = drape(garment.verts, garment.faces, garment.pinned, body, AnnyShape(**garment.body_shape),
-                         params=params, morph_seconds=morph_seconds, settle_seconds=settle_seconds)
+                         params=fit_drape_params(params), morph_seconds=morph_seconds, settle_seconds=settle_seconds)
     info = {"from_shape": garment.body_shape, "to_shape": target, "inside_before_percent": round(before, 2),
             "inside_after_percent": round(inside_percent(verts, sdf), 2), "drape": stats}
     return dataclasses.replace(garment, verts=verts.astype(np.float32), body_shape=target,
