@@ -22,8 +22,11 @@ Per case (``<kind>-<seed>/<body>/...``):
   rigid motion (Kabsch) that best maps one onto the other is the mean distance between the two, vertex to vertex:
   what the trip did to the garment that coming back did not undo. Beside it: ``round_trip_vs_one_drape_mm``
   (against the control's first drape, the figure before), ``control_moved_mm`` (how far the second drape alone
-  moves the control: a garment still settling) and ``reference_noise_mm`` (the control run again from the
-  placement moved by 10 micrometres of noise: the drapes' own spread);
+  moves the control: a garment still settling), ``reference_noise_mm`` (the control run again from the
+  placement moved by 10 micrometres of noise: the drapes' own spread) and ``round_trip_surface_mm`` (the two as
+  surfaces: the mean vertex-to-surface distance both ways, blind to cloth sliding along itself, such as a fold
+  settled a few centimetres from where the control's did). Every drape of the trip uses the fit's settings
+  (:func:`loosefit.garment.body_fit.fit_drape_params`);
 * ``kept_mm``: the fitted garment itself (on the default body) against the control's first drape, after the same rigid
   motion. It also counts what the new body changes by right (sleeves drawn for longer arms hang differently
   on shorter ones, a waistband cut for a narrower waist is stretched to this one): reported, no floor.
@@ -280,9 +283,6 @@ def main() -> None:
     ap.add_argument("--workdir", default="/tmp/garment-fit")
     ap.add_argument("--at-rest", type=float, default=0.0,
                     help="seconds each garment is first draped on its own body before it is written (0: as made)")
-    ap.add_argument("--rereference", action="store_true",
-                    help="only the references of the cases already in the JSON: from the source and fitted files "
-                         "in --workdir, drape them again (the round trip and its control), and update those keys")
     ap.add_argument("--sim", action="append", default=[], metavar="KEY=VALUE",
                     help="simulation setting of the fit's drapes and of their references (SimParams; the garment's "
                          "own drape at rest keeps the defaults)")
@@ -304,11 +304,6 @@ def main() -> None:
     results["at_rest_s"] = args.at_rest
     results["sim"] = args.sim
     cases = [(k, int(s), b) for s in args.seeds.split(",") for k in args.kinds.split(",") for b in args.bodies.split(",")]
-    if args.rereference:
-        for kind, seed, name in cases:
-            rereference(results, f"{kind}-{seed}/{name}", workdir / f"{kind}-{seed}-{name}", body, params)
-            finish(args.name, results)
-        return
     if "refusals" not in results:
         k, s, b = cases[0]
         results["refusals"] = refusals(k, s, b, BODIES[b], body, args.edge_length, workdir)
@@ -323,27 +318,6 @@ def main() -> None:
         results["cases"][key] = run_case(kind, seed, name, BODIES[name], body, args.edge_length, workdir,
                                          "cm" if i % 2 == 0 else "mm", render, args.at_rest, params)
         finish(args.name, results)
-
-
-def rereference(results: dict, key: str, stem: Path, body, params=None) -> None:
-    """The references of one case already measured (``results["cases"][key]``) drawn again from its files:
-    ``STEM.obj`` (the source, as written) and ``STEM-fitted.obj`` (the fitted garment and its sidecar). The
-    previous round trip is kept as ``round_trip_mm_before``."""
-    from loosefit.garment import Garment
-    from loosefit.garment.obj_io import read_obj
-    from loosefit.garment.placement import to_z_up
-
-    row = results["cases"].get(key)
-    if row is None or row.get("round_trip_mm") is None or "round_trip_surface_mm" in row:
-        return
-    print(f"== {key} (references)", flush=True)
-    file_verts, _ = read_obj(stem.with_suffix(".obj"))
-    g = Garment.load(stem.parent / f"{stem.name}-fitted.obj")
-    scale = {"cm": 100.0, "mm": 1000.0}[row["unit"]]
-    placed = to_z_up(np.asarray(file_verts, np.float64) / scale, g.params["up"]) + np.asarray(g.params["offset"])
-    row["round_trip_mm_before"] = row["round_trip_mm"]
-    row.update(settled_reference(g.verts, placed, g.faces, body, row["shape"], params))
-    row["passed"] = passed(row)
 
 
 def passed(row: dict) -> bool:
