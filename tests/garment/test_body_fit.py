@@ -8,7 +8,7 @@ import pytest
 
 from loosefit.errors import InputError
 from loosefit.garment import import_garment, make_garment
-from loosefit.garment.body_fit import Search, carry, refit
+from loosefit.garment.body_fit import FIT_COLLISION_QUALITY, Search, carry, fit_drape_params, refit
 from loosefit.garment.garment import Garment, shape_record
 from loosefit.garment.fitting import push_out_bounded, outward
 from loosefit.garment.landmarks import measure_body
@@ -59,6 +59,18 @@ def test_a_garment_made_for_a_taller_body_is_fitted(tmp_path, body, tall_shirt):
     ratio = np.linalg.norm(g.verts[e[:, 0]] - g.verts[e[:, 1]], axis=1) / np.linalg.norm(
         shirt.verts[e[:, 0]] - shirt.verts[e[:, 1]], axis=1)
     assert np.abs(ratio - 1).mean() < 0.03, np.abs(ratio - 1).mean()
+
+
+def test_the_fits_drape_differs_from_a_simulation_only_in_its_collision_iterations():
+    """A fit's drape (by default) is the simulation's defaults with more collision iterations a step (a body growing
+    into a tight panel: ``benchmarks/garment_fit.py``); settings a caller gives are used as they are."""
+    from loosefit.sim.params import SimParams
+
+    default, fit = SimParams(), fit_drape_params()
+    assert fit.collision_quality == FIT_COLLISION_QUALITY > default.collision_quality
+    assert dataclasses.replace(fit, collision_quality=default.collision_quality) == default
+    mine = SimParams(friction=0.3)
+    assert fit_drape_params(mine) is mine
 
 
 def test_refusals_before_any_simulation(tmp_path, body, skirt_m):
