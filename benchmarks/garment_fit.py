@@ -48,35 +48,11 @@ too large (in millimetres; 100 times too small in centimetres is the right size 
 (faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming the
 file, before any simulation.
 
-Measured with the templates as made (seed 0, 3 cm edges, ``garment-fit.json``; round trip against the control's
-first drape only, as before the control): all 12 land with no vertex over 2 mm inside the body (the direct
-placement refused 2); edge lengths change 0.8-3 %; the round trip is within 10 mm in 8 of 12, not for the dresses
-(23.8-27.5 mm): their long skirts were still falling in from the templates' flare (a second drape moves the
-reference another 22.5 mm). The shape found is a body the garment fits, not always the one it was cut on (height,
-weight and gender 0.11 from the true ones on average). The three refusals come in under a second.
-
-Measured with the garments first draped at rest on their own bodies (``--at-rest 3``, as a garment tool's file
-holds them; ``garment-fit-at-rest-s0.json``, ``-s1``, ``-s2``: one seed each, the 36 cases): 34 land, every one
-with 0 % of its vertices inside the body; the round trip against the control is within 10 mm in 30 of the 34
-(skirts 1.1-12.8 mm, long shirts 1.5-8.2, dresses 2.9-12.9, jumpsuits 1.9-15.6), beside a reference noise of
-0.04-9.0 mm (the sleeveless jumpsuit of seed 1: 9.0). Not met: three bodies of height 0.1 (the short body's dress
-and skirt, 12.9 and 12.8 mm) and the jumpsuits made on the tall-slim body (10.6 mm, and 15.6 mm for seed 1, whose
-control alone moves 19 mm in its second drape); an earlier run, before the floor term, gave 7.4 mm for the seed-0
-jumpsuit on the same found shape, so a few millimetres of these figures may not be reproducible. Refused, cleanly, after the fit's drape: the short body's
-jumpsuit (seed 1) and dress (seed 2), 7 and 17 vertices left 24-28 mm inside the body as it grows (a 2 s morph
-instead of 1 s did not help the dress). Three fixes made these cases land or measurable: the weld no longer merges
-two vertices of a fold resting on itself (0.17 mm apart in the short body's dress; it dropped a face;
-:func:`loosefit.garment.seam_repair.weld`); the up axis comes from the longest flat boundary loop (a sleeveless
-jumpsuit's top opening misread its file as Z-up; :func:`loosefit.garment.placement.detect_up`); and the shape
-search keeps a garment above the floor on its own body (that jumpsuit was found at height 0.0, made at 0.8, its
-legs through the floor; now 0.65). The dress of ``--render`` (``garment-fit-at-rest-s0-dress-0-tall-slim.png``,
-looked at): on the shoulders, to the ankles, nothing through the body.
-
-Earlier runs, before the control: the dresses at rest (``garment-fit-dress-at-rest.json``: 13.0 and 10.6 mm against
-the first drape) and with ten times the air drag in every drape (``garment-fit-dress-drag3.json``: 13.3 and 8.6 mm).
+What was measured, and how it changed: ``benchmarks/README.md`` (garments made for other bodies).
 
 Run: nice -n 5 .venv/bin/python benchmarks/garment_fit.py [--kinds skirt,dress] [--bodies tall-slim,heavy,short]
          [--seeds 0] [--edge-length 0.03] [--render dress-0/tall-slim] [--name garment-fit] [--sim air_drag=3]
+         [--at-rest 3] [--workdir /tmp/garment-fit]
 (writes benchmarks/results/<name>.json after every case and resumes from it; the render to
 benchmarks/results/<name>-<kind>-<seed>-<body>.png)
 """
