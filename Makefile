@@ -27,7 +27,7 @@ $(CHROMIUM):
 	$(SUDO) apt-get update
 	DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y chromium
 
-# Two test processes (one test module each at a time, so module fixtures are built once): 650 s for the whole suite on
+# Two test processes (one test module each at a time, so module fixtures are built once): 676 s for the whole suite on
 # two idle cores (benchmarks/test_suite_timing.py -> benchmarks/results/test-suite-timing.json).
 test: $(STAMP) $(CHROMIUM)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadscope tests
