@@ -76,6 +76,8 @@ def test_inside_by_winding_number_on_two_overlapping_spheres(sphere, backend):
     assert np.array_equal(both.inside(points[::-1], backend=backend), inside[::-1])
     assert both.query([[0.15, 0.0, 0.0]])[0] > 0.04 and both.inside([[0.15, 0.0, 0.0]], backend=backend)[0]
     assert both.inside(np.zeros((0, 3)), backend=backend).shape == (0,)
+    with pytest.raises(InputError, match="winding number backend"):
+        both.inside(points, backend="cuda")
 
 
 def test_bad_input():
