@@ -97,18 +97,23 @@ def main() -> None:
     body = AnnyBody(AnnyShape.parse(None))  # loosefit animate's body without --shape
     specs = args.motion or DEFAULT_MOTIONS + ([str(DEFAULT_BVH)] if DEFAULT_BVH.is_file() else [])
     motions = load_motions(specs, body, args.joint_map)
+    proxy = body.collision_proxy()
+    # each motion posed once for every run: the proxy (inside_body_report's measure) and the full body (what a
+    # viewer sees)
+    posed = {label: ((proxy.pose(m).verts, proxy.faces), (body.pose(m).verts, body.faces))
+             for label, m in motions.items()}
     rows = []
     for spec in args.run:
         name, run, garment = parse_run(spec)
         for label, motion in motions.items():
             animator, raw, fixed, t_model, t_coll = animate_as_cli(run, garment, body, motion)
             T = len(raw)
-            # inside_body_report's measure (the proxy, 5 mm) on every frame
-            before, after = _per_frame(raw, body, motion), _per_frame(fixed, body, motion)
-            full = _per_frame(fixed, body, motion, proxy=False)  # what a viewer sees: the full-resolution body
+            on_proxy, on_full = posed[label]
+            before, after = _per_frame(raw, *on_proxy), _per_frame(fixed, *on_proxy)
+            full = _per_frame(fixed, *on_full)
             # between the vertices: edge midpoints and triangle centroids (a limb through a triangle)
-            surface = _per_frame(surface_samples(fixed, animator.faces), body, motion, proxy=False)
-            surface_none = _per_frame(surface_samples(raw, animator.faces), body, motion, proxy=False)
+            surface = _per_frame(surface_samples(fixed, animator.faces), *on_full)
+            surface_none = _per_frame(surface_samples(raw, animator.faces), *on_full)
             moved = np.linalg.norm(fixed - raw, axis=-1)
             row = {
                 "run": name, "run_dir": str(run), "method": animator.method, "motion": label, "frames": T,
@@ -131,22 +136,21 @@ def main() -> None:
                 "floor_met": bool(after.mean() <= 1.0),
             }
             rows.append(row)
-            print(f"{name:10s} {label:22s} inside>5mm {row['inside_5mm_percent_mean']:5.2f} % (worst "
-                  f"{row['inside_5mm_percent_worst']:5.2f} %), none {row['none_inside_5mm_percent_mean']:5.2f} % (worst "
-                  f"{row['none_inside_5mm_percent_worst']:5.2f} %), full body {row['full_body_inside_5mm_percent_mean']:5.2f} % "
-                  f"(worst {row['full_body_inside_5mm_percent_worst']:5.2f} %), surface {row['surface_inside_5mm_percent_mean']:5.2f} % "
-                  f"(worst {row['surface_inside_5mm_percent_worst']:5.2f} %, none {row['none_surface_inside_5mm_percent_mean']:5.2f}); {row['fps_exact']:.0f} fps with, "
+            pct = lambda key: f"{row[key + '_mean']:5.2f} % (worst {row[key + '_worst']:5.2f} %)"  # noqa: E731
+            print(f"{name:10s} {label:22s} inside>5mm {pct('inside_5mm_percent')}, "
+                  f"none {pct('none_inside_5mm_percent')}, full body {pct('full_body_inside_5mm_percent')}, "
+                  f"between vertices {pct('surface_inside_5mm_percent')}, "
+                  f"none {pct('none_surface_inside_5mm_percent')}; {row['fps_exact']:.0f} fps with, "
                   f"{row['fps_none']:.0f} without; handling {row['collision_ms_per_frame']:.1f} ms/frame", flush=True)
     save_results(args.out, {"depth_m": 0.005, "floor_percent": 1.0, "torch_threads": 1, "rows": rows})
 
 
-def _per_frame(verts, body, motion, proxy: bool = True) -> np.ndarray:
-    """Percent of vertices more than 5 mm inside the body's collision proxy (what the handling corrects
-    against and ``loosefit animate`` reports), or inside the full-resolution body, per frame ``(T,)``."""
+def _per_frame(verts, posed: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Percent of ``verts (T, N, 3)`` more than 5 mm inside the posed body ``posed (T, Vb, 3)``, per frame
+    ``(T,)``."""
     from loosefit.metrics.collision import REPORT_DEPTH, collision_ratio_per_frame
 
-    mesh = body.collision_proxy() if proxy else body
-    return collision_ratio_per_frame(verts, mesh.pose(motion).verts, mesh.faces, REPORT_DEPTH)
+    return collision_ratio_per_frame(verts, posed, faces, REPORT_DEPTH)
 
 
 if __name__ == "__main__":

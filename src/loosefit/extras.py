@@ -13,6 +13,7 @@ when one is missing.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 from types import ModuleType
@@ -57,3 +58,17 @@ def require(module: str, what: str) -> ModuleType:
         return importlib.import_module(module)
     except ImportError as e:
         raise _missing(module, what, e) from None
+
+
+@functools.lru_cache(maxsize=None)
+def warp_kernels(module: str, *names: str) -> tuple | None:
+    """``(warp, kernel, ...)``: Warp and the kernels ``names`` of loosefit's ``module`` (which imports Warp),
+    compiled on first use and then cached on disk by Warp; ``None`` when Warp cannot be imported, so that the
+    caller takes its NumPy or libigl path."""
+    try:
+        import warp as wp
+
+        kernels = importlib.import_module(module)
+    except Exception:  # not installed or broken
+        return None
+    return (wp, *(getattr(kernels, name) for name in names))

@@ -10,8 +10,9 @@ bring it onto the body without changing its cut:
    :data:`SEARCH_SAMPLES` points): :func:`~loosefit.garment.placement.fit_score` over the garment's top
    :data:`SEARCH_BAND` (how uneven the gap is there, plus the penalties for cloth more than 3 mm inside the
    body), plus :data:`GAP_WEIGHT` times the mean gap at the top 4 cm, plus :data:`FLOOR_WEIGHT` times the
-   garment's mean depth below the floor, plus :data:`PRIOR` metres per unit of shape distance from the target. The evenness is what tells the body apart: a strapless top cut for a thin
-   Anny (height 0.45, weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away
+   garment's mean depth below the floor, plus :data:`PRIOR` metres per unit of shape distance from the
+   target. The evenness is what tells the body apart: a strapless top cut for a thin Anny (height 0.45,
+   weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away
    in a key (over its top 10 cm). The band reaches past a strap dress's or a shirt's shoulders to the bust,
    a skirt's waistband to the hips: on the 12 garments of ``benchmarks/garment_fit.py`` the height, weight and
    gender found are 0.11 from the true ones on average with 25 cm, 0.16 with 10 cm (a long shirt cut for a
@@ -324,8 +325,7 @@ def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = No
         check(placed, measure_body(body, fit.shape))
     target_sdf = measure_body(body).sdf
     verts, stats = drape(placed, faces, pinned, body, fit.shape, params=fit_drape_params(params),
-                         morph_seconds=search.morph_seconds,
-                         settle_seconds=search.settle_seconds)
+                         morph_seconds=search.morph_seconds, settle_seconds=search.settle_seconds)
     info = {
         "shape": {k: round(getattr(fit.shape, k), 3) for k in SEARCH_KEYS},
         "objective": round(fit.objective, 5),

@@ -54,12 +54,12 @@ reference, used when Warp cannot load).
 
 from __future__ import annotations
 
-import functools
 
 import numpy as np
 import torch
 
 from loosefit.errors import InputError
+from loosefit.extras import warp_kernels
 
 #: The two plane axes of each ray axis.
 _PLANE = ((1, 2), (0, 2), (0, 1))
@@ -70,19 +70,6 @@ STEEP = 20.0
 #: below ``-FACING_TOLERANCE`` times the sum of the two products it is the difference of (far above the float64
 #: rounding of that difference).
 FACING_TOLERANCE = 1e-9
-
-
-@functools.lru_cache(maxsize=1)
-def _warp_kernels():
-    """``(warp, rasterize, query)`` (``None`` when Warp cannot be imported); compiled on first use, then cached
-    on disk by Warp."""
-    try:
-        import warp as wp
-
-        from loosefit.geometry._ray_cull_warp import query, rasterize
-    except Exception:  # not installed or broken: the NumPy path
-        return None
-    return wp, rasterize, query
 
 
 class AxisRayCuller:
@@ -110,7 +97,7 @@ class AxisRayCuller:
             raise InputError(f"cull cell must be positive metres, got {cell}")
         if backend not in ("auto", "warp", "numpy"):
             raise InputError(f"cull backend must be 'auto', 'warp' or 'numpy', got {backend!r}")
-        kernels = None if backend == "numpy" else _warp_kernels()
+        kernels = None if backend == "numpy" else warp_kernels("loosefit.geometry._ray_cull_warp", "rasterize", "query")
         if backend == "warp" and kernels is None:
             raise InputError("the Warp cull backend needs warp (pip install warp-lang)")
         self.backend = "numpy" if kernels is None else "warp"

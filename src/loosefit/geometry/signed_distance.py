@@ -13,24 +13,11 @@ mesh; libigl's when Warp does not load).
 
 from __future__ import annotations
 
-import functools
-
 import igl
 import numpy as np
 
 from loosefit.errors import InputError
-
-
-@functools.lru_cache(maxsize=1)
-def _winding_kernel():
-    """``(warp, kernel)``, or None when Warp cannot be imported (then libigl answers)."""
-    try:
-        import warp as wp
-
-        from loosefit.geometry._winding_warp import winding_inside
-    except Exception:  # not installed or broken
-        return None
-    return wp, winding_inside
+from loosefit.extras import warp_kernels
 
 
 class BodySDF:
@@ -91,7 +78,7 @@ class BodySDF:
         if backend not in ("auto", "warp", "igl"):
             raise InputError(f"winding number backend must be 'auto', 'warp' or 'igl', got {backend!r}")
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        kernel = None if backend == "igl" else _winding_kernel()
+        kernel = None if backend == "igl" else warp_kernels("loosefit.geometry._winding_warp", "winding_inside")
         if backend == "warp" and kernel is None:
             raise InputError("the Warp winding number needs warp (pip install warp-lang)")
         if len(p) == 0:

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.geometry.laplacian import edges
 from loosefit.geometry.signed_distance import BodySDF, PosedBodySDF, posed_body_sdfs  # noqa: F401 - PosedBodySDF re-exported
 
 DEFAULT_TOLERANCE = 1e-3
@@ -74,8 +75,6 @@ def surface_samples(garment_verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Points on the garment's surface between its vertices: every edge's midpoint and every triangle's centroid,
     ``(..., E + F, 3)`` for ``garment_verts (..., V, 3)``. A limb can pass between vertices that are all outside it
     (a triangle spanning the limb); measured at these points, the collision ratio sees it."""
-    from loosefit.geometry.laplacian import edges
-
     v = np.asarray(garment_verts, np.float64)
     f = np.asarray(faces, np.int64)
     e = edges(f)
