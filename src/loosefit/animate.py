@@ -19,7 +19,7 @@ import torch
 from loosefit.config import load_config
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
-from loosefit.models.motion_features import FeatureStream, heading_frames, motion_features, to_world
+from loosefit.models.motion_features import ROOT_FEATURES, FeatureStream, heading_frames, motion_features, to_world
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
 from loosefit.motion_range import range_warnings
@@ -126,6 +126,8 @@ class Animator:
         model.eval()
         self.model = model.to(self.device)
         self.threads = threads
+        # the root features with the motion's history, where the model reads them (runs trained with them)
+        self.history = getattr(model, "root_features", ROOT_FEATURES) > ROOT_FEATURES
 
     @property
     def method(self) -> str:
@@ -159,7 +161,7 @@ class Animator:
         """
         for m in motions:
             self._check(m)
-        feats = [motion_features(m) for m in motions]
+        feats = [motion_features(m, self.history) for m in motions]
         T = max(m.num_frames for m in motions)
 
         def padded(key):
@@ -196,7 +198,7 @@ class AnimationStream:
 
     def __init__(self, animator: Animator):
         self.animator = animator
-        self.features = FeatureStream()
+        self.features = FeatureStream(animator.history)
         self.state = None
 
     def step(self, rotations: np.ndarray, translation: np.ndarray) -> np.ndarray:

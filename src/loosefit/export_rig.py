@@ -49,7 +49,7 @@ def predict_bones(animator: Animator, motion: Motion) -> tuple[np.ndarray, np.nd
     model = animator.model
     if not hasattr(model, "skin_weights") or not hasattr(model, "bone_rest"):
         raise InputError(f"{animator.method} has no virtual bones: export-rig needs a virtualbones or jointnet run")
-    feats = motion_features(motion)
+    feats = motion_features(motion, animator.history)
     root, joints = torch.from_numpy(feats["root"])[None], torch.from_numpy(feats["joints"])[None]
     rotations, translations, state = [], [], None
     with torch_threads(animator.threads), torch.no_grad():

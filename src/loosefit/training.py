@@ -109,12 +109,13 @@ def train_model(
                                    **(carve if trained else {"val_split": "none"}))
     if train_fraction is not None:
         validation = train_on_fraction(store, validation, train_fraction)
+    history = getattr(cfg.model, "root_history", True)  # the model reads as many root features as its data has
     train_data = GarmentSequences(store, garment, "train", sim_params=sim_params, bones=cls.needs_rig,
-                                  names=validation.train)
+                                  names=validation.train, history=history)
     val_data = None
     if validation.val:
         val_data = GarmentSequences(store, garment, None, sim_params=sim_params, bones=False, body=False,
-                                    names=validation.val)
+                                    names=validation.val, history=history)
     model = cls.from_data(train_data, cfg.model)
     meta = {"method": method, "garment": garment, "data": str(Path(data).resolve()), "sizes": model.sizes(),
             "sim_params": sim_params, "train_sequences": [s.name for s in train_data.sequences],

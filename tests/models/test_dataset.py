@@ -4,7 +4,7 @@ import numpy as np
 import torch
 
 from loosefit.models.dataset import WindowDataset
-from loosefit.models.motion_features import to_world
+from loosefit.models.motion_features import HISTORY_ROOT_FEATURES, to_world
 from loosefit.rig.prepare import load_rig
 from loosefit.rig.virtual_bones import skin_bones
 
@@ -14,7 +14,7 @@ def test_canonical_data_round_trips_to_the_store(tiny_train):
     for s in tiny_train.sequences:
         world = store.sequence(s.name).verts[:]
         assert np.abs(to_world(s.verts, s.frame_rot, s.frame_origin) - world).max() < 1e-5
-        assert s.root.shape == (s.num_frames, 11) and s.joints.shape == (s.num_frames, 30, 6)
+        assert s.root.shape == (s.num_frames, HISTORY_ROOT_FEATURES) and s.joints.shape == (s.num_frames, 30, 6)
         # Nearest proxy vertex really is the nearest (brute force on one frame).
         d = np.linalg.norm(s.verts[5][:, None] - s.body[5][None], axis=-1)
         assert (d.argmin(1) == s.body_nearest[5]).mean() > 0.999

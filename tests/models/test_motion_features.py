@@ -7,6 +7,9 @@ import torch
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix
 from loosefit.models.motion_features import (
+    HISTORY_FRAMES,
+    HISTORY_ROOT_FEATURES,
+    ROOT_FEATURES,
     FeatureStream,
     heading_frames,
     motion_features,
@@ -35,12 +38,37 @@ def random_motion(T=20, J=5, seed=0):
     return Motion(rot, trans, rig="test")
 
 
-def test_features_are_invariant_to_heading_and_position():
+@pytest.mark.parametrize("history", [False, True])
+def test_features_are_invariant_to_heading_and_position(history):
     m = random_motion()
-    a = motion_features(m)
-    b = motion_features(turned(m, 1.3, [2.0, -1.0, 0.0]))
+    a = motion_features(m, history)
+    b = motion_features(turned(m, 1.3, [2.0, -1.0, 0.0]), history)
+    assert a["root"].shape[1] == (HISTORY_ROOT_FEATURES if history else ROOT_FEATURES)
     for key in a:
         assert np.abs(a[key] - b[key]).max() < 1e-5
+
+
+def test_history_is_the_weighted_sum_of_the_past():
+    """Each average against its closed form ``sum_k (1 - a) a^(t-k) x_k`` (the heading change; the world
+    displacement turned into frame t's heading frame), and a steady turn's average against ``w (1 - a^t)``."""
+    m = random_motion(T=40, seed=4)
+    plain, f = motion_features(m)["root"], motion_features(m, history=True)["root"]
+    assert np.array_equal(f[:, :ROOT_FEATURES], plain)
+    rot, _ = heading_frames(m)
+    disp = np.diff(m.translation, axis=0, prepend=m.translation[:1])
+    for i, tau in enumerate(HISTORY_FRAMES):
+        a = np.exp(-1 / tau)
+        for t in (0, 7, 39):
+            w = (1 - a) * a ** (t - np.arange(t + 1))
+            assert abs(f[t, ROOT_FEATURES + 3 * i] - w @ plain[: t + 1, 4]) < 1e-5
+            world = np.concatenate([w @ disp[: t + 1, :2], [0.0]])
+            assert np.abs(f[t, ROOT_FEATURES + 3 * i + 1:ROOT_FEATURES + 3 * i + 3] - (rot[t].T @ world)[:2]).max() < 1e-6
+    T, rate = 60, 0.2
+    rot = np.zeros((T, 2, 3))
+    rot[:, 0, 2] = rate * np.arange(T)
+    steady = motion_features(Motion(rot, np.tile([0.0, 0.0, 0.9], (T, 1)), rig="test"), history=True)["root"]
+    a = np.exp(-1 / HISTORY_FRAMES[-1])
+    assert np.allclose(steady[:, -3], rate * (1 - a ** np.arange(T)), atol=1e-6)  # frame 0 turns by nothing
 
 
 def test_canonical_round_trip_and_invariance():
@@ -70,11 +98,12 @@ def test_heading_of_a_turn_in_place_and_its_rate():
     assert f[0, 4] == 0 and np.allclose(f[:, 1:4], 0, atol=1e-7) and np.allclose(f[:, 0], 0.9)
 
 
-def test_stream_equals_batch():
+@pytest.mark.parametrize("history", [False, True])
+def test_stream_equals_batch(history):
     m = random_motion(seed=3)
-    batch = motion_features(m)
+    batch = motion_features(m, history)
     rot, origin = heading_frames(m)
-    stream = FeatureStream()
+    stream = FeatureStream(history)
     for t in range(m.num_frames):
         root, joints, (r, o) = stream.step(m.rotations[t], m.translation[t])
         assert np.abs(root - batch["root"][t]).max() < 1e-5

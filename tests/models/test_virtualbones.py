@@ -9,7 +9,9 @@ import pytest
 import torch
 
 from loosefit.config import load_config
+from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences, WindowDataset
+from loosefit.models.motion_features import HISTORY_ROOT_FEATURES, ROOT_FEATURES
 from loosefit.models.virtualbones import Config, VirtualBones, VirtualBonesConfig
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig, seed_everything, train
@@ -149,6 +151,23 @@ def test_sizes_follow_the_data(tiny_train, second_store):
     assert torch.equal(rebuilt(*x)["verts"], b(*x)["verts"])
 
 
+def test_runs_from_before_the_history_read_eleven_root_features(tiny_train):
+    """A run recorded before the history features (no ``root_features`` in its sizes) reads the first 11 of the
+    features it is given, so it animates as it did; a model given fewer than it reads is refused."""
+    model = _model(tiny_train)
+    assert model.sizes()["root_features"] == HISTORY_ROOT_FEATURES
+    old = _perturbed(VirtualBones({k: v for k, v in model.sizes().items() if k != "root_features"}, TINY))
+    seq = tiny_train.sequences[0]
+    root, joints = torch.from_numpy(seq.root)[None, :6], torch.from_numpy(seq.joints)[None, :6]
+    assert root.shape[-1] == HISTORY_ROOT_FEATURES
+    with torch.no_grad():
+        assert torch.equal(old(root, joints)["verts"], old(root[..., :ROOT_FEATURES], joints)["verts"])
+        with pytest.raises(InputError, match="reads 20 root features, got 11"):
+            model(root[..., :ROOT_FEATURES], joints)
+    plain = GarmentSequences(tiny_train.store, tiny_train.garment_name, "train", body=False, history=False)
+    assert _model(plain).sizes()["root_features"] == ROOT_FEATURES
+
+
 def test_streaming_equals_batched(tiny_test, tiny_train):
     model = _model(tiny_train)
     with torch.no_grad():  # move the networks off their near-rest start
@@ -270,7 +289,8 @@ def test_every_motion_feature_moves_the_bones_and_only_later_frames(tiny_train):
     seq = tiny_train.sequences[0]
     root, joints = torch.from_numpy(seq.root)[None, :8], torch.from_numpy(seq.joints)[None, :8]
     groups = {"height": (slice(0, 1), None), "displacement": (slice(1, 3), None), "heading": (slice(3, 5), None),
-              "tilt": (slice(5, 11), None), "first joint": (None, 0), "last joint": (None, joints.shape[2] - 1)}
+              "tilt": (slice(5, 11), None), "history": (slice(11, 20), None), "first joint": (None, 0),
+              "last joint": (None, joints.shape[2] - 1)}
     with torch.no_grad():
         base = model(root, joints)
         for name, (cols, joint) in groups.items():

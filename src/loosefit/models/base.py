@@ -4,11 +4,13 @@ protocol (:mod:`loosefit.train.protocol`) and the canonical-frame prediction int
 A model predicts *canonical* garment vertices (heading frame, :mod:`loosefit.models.motion_features`)
 from normalised motion features, frame by frame with a recurrent state::
 
-    out = model(root (B, T, 11), joints (B, T, J-1, 6), state=None)
+    out = model(root (B, T, R), joints (B, T, J-1, 6), state=None)
     out["verts"]  (B, T, V, 3) canonical vertices, metres;  out["state"]  the recurrent state after frame T-1
 
 so that running ``T`` frames at once or one frame at a time (passing the state along) gives the same
-vertices. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
+vertices. ``R`` is 11, or 20 with the motion's history (:mod:`loosefit.models.motion_features`); a model reads
+the first :attr:`GarmentModel.root_features` of them, as many as it was trained with, so that it can be given
+either. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
 checkpoint plus :meth:`GarmentModel.sizes` rebuild it without the dataset.
 """
 
@@ -19,7 +21,9 @@ from typing import Any, ClassVar
 import torch
 from torch import nn
 
+from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
+from loosefit.models.motion_features import ROOT_FEATURES
 from loosefit.rig.virtual_bones import skin_bones, sparse_weights
 from loosefit.train.losses import frame_mask, masked_errors_mm
 
@@ -32,7 +36,8 @@ class GarmentModel(nn.Module):
     :meth:`stage_parameters`, :meth:`init_from_data`.
 
     ``sizes`` (JSON-able dict) holds at least ``num_verts`` (V), ``num_joints`` (J, root included) and
-    ``num_faces`` (F); methods add theirs (``num_bones``...). Never hard-code them.
+    ``num_faces`` (F), and ``root_features`` (11 or 20; runs made before it existed read 11); methods add theirs
+    (``num_bones``...). Never hard-code them.
     """
 
     method: ClassVar[str] = ""
@@ -45,8 +50,9 @@ class GarmentModel(nn.Module):
         self._sizes = dict(sizes)
         self.config = config
         J, V, F = sizes["num_joints"], sizes["num_verts"], sizes["num_faces"]
-        self.register_buffer("root_mean", torch.zeros(11))
-        self.register_buffer("root_std", torch.ones(11))
+        self.root_features = int(sizes.get("root_features", ROOT_FEATURES))
+        self.register_buffer("root_mean", torch.zeros(self.root_features))
+        self.register_buffer("root_std", torch.ones(self.root_features))
         self.register_buffer("joints_mean", torch.zeros(J - 1, 6))
         self.register_buffer("joints_std", torch.ones(J - 1, 6))
         self.register_buffer("faces", torch.zeros(F, 3, dtype=torch.long))
@@ -59,7 +65,7 @@ class GarmentModel(nn.Module):
         """The sizes of ``data``; subclasses add their own (call ``super()``)."""
         first = data.sequences[0]
         return {"num_verts": int(first.verts.shape[1]), "num_joints": int(first.joints.shape[1] + 1),
-                "num_faces": int(len(data.faces))}
+                "num_faces": int(len(data.faces)), "root_features": int(first.root.shape[1])}
 
     @classmethod
     def from_data(cls, data: GarmentSequences, config) -> "GarmentModel":
@@ -73,8 +79,9 @@ class GarmentModel(nn.Module):
         stats = data.feature_stats()
         with torch.no_grad():
             for key in ("root", "joints"):
-                getattr(self, f"{key}_mean").copy_(torch.from_numpy(stats[key][0]))
-                getattr(self, f"{key}_std").copy_(torch.from_numpy(stats[key][1]))
+                size = getattr(self, f"{key}_mean").shape[0]
+                getattr(self, f"{key}_mean").copy_(torch.from_numpy(stats[key][0][:size]))
+                getattr(self, f"{key}_std").copy_(torch.from_numpy(stats[key][1][:size]))
             self.faces.copy_(torch.from_numpy(data.faces))
             self.template.copy_(torch.from_numpy(data.garment.verts))
 
@@ -84,7 +91,11 @@ class GarmentModel(nn.Module):
     # ------------------------------------------------------------------ prediction
 
     def normalise(self, root: torch.Tensor, joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Standardised features: ``root (B,T,11)``, ``joints (B,T,J-1,6)``."""
+        """Standardised features: ``root (B,T,R)`` -> its first :attr:`root_features`, ``joints (B,T,J-1,6)``."""
+        if root.shape[-1] < self.root_features:
+            raise InputError(f"{self.method} reads {self.root_features} root features, got {root.shape[-1]}: "
+                             "compute them with motion_features(..., history=True)")
+        root = root[..., : self.root_features]
         return (root - self.root_mean) / self.root_std, (joints - self.joints_mean) / self.joints_std
 
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None) -> dict:

@@ -42,7 +42,7 @@ class SequenceData:
 
     Attributes:
         name, motion_name, body_name: store names. sim_params: the simulation parameters (JSON).
-        motion: the :class:`Motion` (world). root ``(T, 11)``, joints ``(T, J-1, 6)``: motion features.
+        motion: the :class:`Motion` (world). root ``(T, 11)`` or ``(T, 20)``, joints ``(T, J-1, 6)``: motion features.
         frame_rot ``(T, 3, 3)`` float64, frame_origin ``(T, 3)`` float64: heading frames.
         verts ``(T, V, 3)``: canonical simulated garment. lf ``(T, V, 3)``: its low-frequency part.
         bone_rot ``(T, B, 3, 3)``, bone_trans ``(T, B, 3)``: canonical virtual-bone transforms, or None.
@@ -89,10 +89,14 @@ class GarmentSequences:
         bones: load the rig's bone transforms (training sequences of a prepared store).
         body: load the canonical collision proxy of the posed body.
         names: restrict to these sequence names.
+        history: root features with the motion's history (``root (T, 20)``, :func:`motion_features`); the
+            per-garment models read as many of them as they were trained with.
     """
 
     def __init__(self, store, garment: str, split: str | None = "train", sim_params: dict | None = None,
-                 bones: bool = True, body: bool = True, names: list[str] | None = None, smoothing: str | None = None):
+                 bones: bool = True, body: bool = True, names: list[str] | None = None, smoothing: str | None = None,
+                 history: bool = True):
+        self.history = history
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         if garment not in self.store.garment_names():
             raise InputError(f"no garment {garment!r} in the store (has {self.store.garment_names()})", self.store.path)
@@ -124,7 +128,7 @@ class GarmentSequences:
         world = np.asarray(seq.verts[:], np.float32)
         verts = to_canonical(world, rot, origin)
         lf = frequency_split(verts, self.faces, self.smoothing, fixed=self.fixed)[0].astype(np.float32)
-        feats = motion_features(motion)
+        feats = motion_features(motion, self.history)
         bone_rot = bone_trans = None
         if bones:
             from loosefit.rig.prepare import load_bone_transforms
@@ -141,7 +145,7 @@ class GarmentSequences:
                             rot, origin, verts, lf, bone_rot, bone_trans, body_c, body_n, nearest)
 
     def feature_stats(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Mean and std of ``root (11,)`` and ``joints (J-1, 6)`` over all frames.
+        """Mean and std of ``root (11,)`` (``(20,)`` with history) and ``joints (J-1, 6)`` over all frames.
 
         The std is floored (:data:`STD_FLOOR`): joints that barely move in the training motions (hands,
         toes) would otherwise turn any new motion into huge normalised inputs.

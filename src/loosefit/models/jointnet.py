@@ -101,6 +101,9 @@ class JointNetConfig:
         loss_frames: frames of each training window (after the burn-in) that the losses see, drawn at
             random each step (:meth:`GarmentModel.loss_frames`); 0 for all. Not in the paper: on a CPU
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
+        root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
+            recent turning and velocity, averaged over 0.2-1 s; ours, not in the paper). Measured on the demo's
+            held-out spin (``benchmarks/README.md``, "Motion history").
     """
 
     joints: Optional[list[str]] = None
@@ -117,6 +120,7 @@ class JointNetConfig:
     lambda_norm: float = 0.05
     lambda_sparse: float = 1e-5
     loss_frames: int = 0
+    root_history: bool = True
 
     def __post_init__(self):
         sizes = [self.gru_hidden, self.features, self.psd_shapes, *self.bone_mlp, *self.psd_mlp]
@@ -302,7 +306,7 @@ class JointNet(GarmentModel):
         self.joint_names = [names[j] for j in self.selected]
         self.register_buffer("neighbours", torch.from_numpy(neighbour_table(self.selected, parents)), persistent=False)
         G, K, H = len(self.selected), config.features, config.gru_hidden
-        input_size = 11 + 6 * self.neighbours.shape[1]
+        input_size = self.root_features + 6 * self.neighbours.shape[1]
 
         self.gru = JointGRU(G, input_size, H)
         bound = 1.0 / math.sqrt(H)
@@ -375,7 +379,8 @@ class JointNet(GarmentModel):
         return torch.cat([features, prior.expand(features.shape[:-1] + prior.shape[-1:])], -1)
 
     def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
-        """Raw features -> ``(N, T, J_s, 11 + 6 * (2 + C))`` per-joint GRU inputs (standardised)."""
+        """Raw features -> ``(N, T, J_s, R + 6 * (2 + C))`` per-joint GRU inputs (standardised; ``R`` =
+        :attr:`root_features`)."""
         root, joints = self.normalise(root, joints)
         pad = joints.new_zeros(joints.shape[:2] + (1, 6))
         table = torch.cat([root[:, :, None, 5:11], joints, pad], 2)  # (N, T, J + 1, 6): rows as in neighbour_table

@@ -14,6 +14,17 @@ The per-frame motion features (all in the heading frame of that frame) are:
   heading (6D, 6). Frame 0 has zero displacement and heading change (the simulator starts from rest).
 - ``joints`` ``(T, J-1, 6)``: the local rotation of every non-root joint, 6D (continuous, unlike axis-angle).
 
+With ``history=True`` (the per-garment methods, ours; not in the papers) ``root`` is ``(T, 20)``: the 11 above,
+then for each time constant ``tau`` of :data:`HISTORY_FRAMES` the exponential moving average of the heading
+change (rad per frame, 1) and of the horizontal root displacement (m per frame, 2), the latter averaged in the
+world and expressed in frame ``t``'s heading frame::
+
+    m_t = a m_{t-1} + (1 - a) x_t,   a = exp(-1 / tau),   m_{-1} = 0
+
+They say how fast and which way the body has been turning and moving over the last fraction of a second, the
+motion a loose skirt still carries (it lags the body). A recurrent network can learn such filters itself; given
+them, VirtualBones generalised better to a held-out spin (``benchmarks/README.md``, "Motion history").
+
 Streaming use: :class:`FeatureStream` computes the same features one frame at a time.
 """
 
@@ -26,7 +37,11 @@ from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_sixd
 from loosefit.motion.motion import Motion
 
+#: Root features without history, and with it (:data:`HISTORY_FRAMES`: three values per time constant).
 ROOT_FEATURES = 11
+#: Time constants of the history features, in frames (at 30 fps: 0.2, 0.5 and 1 s).
+HISTORY_FRAMES = (6.0, 15.0, 30.0)
+HISTORY_ROOT_FEATURES = ROOT_FEATURES + 3 * len(HISTORY_FRAMES)
 #: The body's forward direction at rest (Anny and every loosefit body face -Y).
 FORWARD = np.array([0.0, -1.0, 0.0])
 
@@ -72,17 +87,20 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
-def motion_features(motion: Motion) -> dict[str, np.ndarray]:
-    """Features of a whole motion: ``root (T, 11)`` and ``joints (T, J-1, 6)`` float32 (see module doc)."""
+def motion_features(motion: Motion, history: bool = False) -> dict[str, np.ndarray]:
+    """Features of a whole motion: ``root (T, 11)`` (``(T, 20)`` with ``history``) and ``joints (T, J-1, 6)``
+    float32 (see module doc)."""
     R = axis_angle_to_matrix(torch.from_numpy(motion.rotations).double())  # (T, J, 3, 3)
-    return _features(R, motion.translation.astype(np.float64))[0]
+    return _features(R, motion.translation.astype(np.float64), history=history)[0]
 
 
-def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, float] | None = None):
+def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, float] | None = None,
+              history: bool | np.ndarray = False):
     """Features of frames with joint rotations ``R (T, J, 3, 3)`` (float64) and root positions ``trans
     (T, 3)``; ``before`` is the root position and heading of the frame before the first (``None``: the
-    first frame is the motion's first, with no displacement). Also returns the frames' heading
-    rotations ``(T, 3, 3)`` and headings ``(T,)``."""
+    first frame is the motion's first, with no displacement). ``history``: False, True (averages from zero) or
+    the averages after the frame before the first, ``(len(HISTORY_FRAMES), 3)`` (heading change, world x, y),
+    updated in place. Also returns the frames' heading rotations ``(T, 3, 3)`` and headings ``(T,)``."""
     root_rot = R[:, 0].numpy()
     psi = heading_angles(root_rot)
     Rh = rot_z(psi)
@@ -90,22 +108,39 @@ def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, floa
     disp = trans - np.concatenate([prev_trans, trans[:-1]])
     dpsi = _wrap(psi - np.concatenate([prev_psi, psi[:-1]]))
     tilt = Rh.transpose(0, 2, 1) @ root_rot  # heading removed: Rz(psi)^T R_root
-    root = np.concatenate(
-        [trans[:, 2:3], (disp[:, None] @ Rh)[:, 0], dpsi[:, None], matrix_to_sixd(torch.from_numpy(tilt)).numpy()], 1
-    )
+    parts = [trans[:, 2:3], (disp[:, None] @ Rh)[:, 0], dpsi[:, None], matrix_to_sixd(torch.from_numpy(tilt)).numpy()]
+    if history is not False:
+        state = np.zeros((len(HISTORY_FRAMES), 3)) if history is True else history
+        parts.append(_history(np.concatenate([dpsi[:, None], disp[:, :2]], 1), Rh, state))
     joints = matrix_to_sixd(R[:, 1:]).numpy()
-    return {"root": root.astype(np.float32), "joints": joints.astype(np.float32)}, Rh, psi
+    return {"root": np.concatenate(parts, 1).astype(np.float32), "joints": joints.astype(np.float32)}, Rh, psi
+
+
+def _history(x: np.ndarray, Rh: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """The history features ``(T, 3 * len(HISTORY_FRAMES))`` of per-frame ``x (T, 3)`` (heading change, world
+    displacement x, y), from the averages ``state`` after the frame before (updated in place): per time constant,
+    the averaged heading change and the averaged displacement turned into each frame's heading frame."""
+    a = np.exp(-1.0 / np.asarray(HISTORY_FRAMES))[:, None]  # (K, 1)
+    out = np.empty((len(x), len(a), 3))
+    for t in range(len(x)):
+        state *= a
+        state += (1.0 - a) * x[t]
+        out[t, :, 0] = state[:, 0]
+        out[t, :, 1:] = state[:, 1:] @ Rh[t, :2, :2]  # world -> heading frame: v R (R^T v)
+    return out.reshape(len(x), -1)
 
 
 class FeatureStream:
-    """Motion features one frame at a time, equal to :func:`motion_features` on the whole motion.
+    """Motion features one frame at a time, equal to :func:`motion_features` (with the same ``history``) on
+    the whole motion.
 
-    ``step(rotations (J, 3), translation (3,))`` returns ``root (11,)``, ``joints (J-1, 6)`` and the frame's
-    heading frame ``(rot (3, 3), origin (3,))``.
+    ``step(rotations (J, 3), translation (3,))`` returns ``root (11,)`` (``(20,)`` with ``history``),
+    ``joints (J-1, 6)`` and the frame's heading frame ``(rot (3, 3), origin (3,))``.
     """
 
-    def __init__(self):
+    def __init__(self, history: bool = False):
         self._before: tuple[np.ndarray, float] | None = None  # the previous frame's root position and heading
+        self._history = np.zeros((len(HISTORY_FRAMES), 3)) if history else False  # the averages so far
 
     def step(self, rotations: np.ndarray, translation: np.ndarray):
         rotations = np.asarray(rotations, np.float32)
@@ -113,7 +148,7 @@ class FeatureStream:
         if not (np.isfinite(rotations).all() and np.isfinite(trans).all()):
             raise InputError("motion frame contains NaN or infinite values")
         R = axis_angle_to_matrix(torch.from_numpy(rotations[None]).double())
-        feats, Rh, psi = _features(R, trans, self._before)
+        feats, Rh, psi = _features(R, trans, self._before, self._history)
         self._before = (trans[0], float(psi[0]))
         origin = trans[0].copy()
         origin[2] = 0.0

@@ -117,6 +117,9 @@ class VirtualBonesConfig:
             straps). ``"residual"``: the offsets against the simulation's own high-frequency part
             ``G - G_LF`` (Sec. 4.1's split). Measured on the bench skirt (80 bones, CPU preset): the same
             held-out RMSE either way, within 0.2 mm per test motion.
+        root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
+            recent turning and velocity, averaged over 0.2-1 s; ours, not in the paper). Measured on the demo's
+            held-out spin (``benchmarks/README.md``, "Motion history").
     """
 
     lf_hidden: int = 600
@@ -131,6 +134,7 @@ class VirtualBonesConfig:
     bone_weight: float = 0.0
     hf_loss_frames: int = 0
     hf_target: str = "simulation"
+    root_history: bool = True
 
     def __post_init__(self):
         sizes = (self.lf_hidden, self.hf_hidden, self.global_channels, *self.edge_channels, *self.head_hidden)
@@ -167,7 +171,7 @@ class Config:
 class VirtualBones(GarmentModel):
     """The VirtualBones motion network of one garment (see the module docstring).
 
-    ``forward(root (N,T,11), joints (N,T,J-1,6), state)`` returns ``verts`` and ``lf`` ``(N,T,V,3)``
+    ``forward(root (N,T,R), joints (N,T,J-1,6), state)`` returns ``verts`` and ``lf`` ``(N,T,V,3)``
     canonical metres, ``bones`` = (rotations ``(N,T,B,3,3)``, translations ``(N,T,B,3)``) mapping rest
     mesh points ``p`` to ``R p + T``, and ``state`` = (low-frequency GRU state, high-frequency GRU state).
     """
@@ -190,7 +194,7 @@ class VirtualBones(GarmentModel):
         self.register_buffer("neighbours", torch.zeros(V, sizes["max_degree"], dtype=torch.long))
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D))
         c = config
-        self.low = GRUHead(11 + 6 * (J - 1), c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
+        self.low = GRUHead(self.root_features + 6 * (J - 1), c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
         self.high_gru = GRUHead(BONE_OUTPUTS * B, c.hf_hidden, c.global_rank or V * c.global_channels)
         self.global_out = nn.Linear(c.global_rank, V * c.global_channels) if c.global_rank else nn.Identity()
         widths = (3, *c.edge_channels)
@@ -246,7 +250,7 @@ class VirtualBones(GarmentModel):
     # ------------------------------------------------------------------ prediction
 
     def _inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
-        """Normalised features ``(N, T, 11 + 6(J-1))``."""
+        """Normalised features ``(N, T, R + 6(J-1))``, ``R`` = :attr:`root_features`."""
         root, joints = self.normalise(root, joints)
         return torch.cat([root, joints.flatten(-2)], -1)
 
