@@ -35,8 +35,10 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 #: (benchmarks/README.md, "The demo's training"; held-out spin): VirtualBones at rate 2e-3 scores 63.8 and 63.0 mm
 #: over two seeds against 72.6, 64.4 and 70.5 at 1e-3, and then needs only 150 low-frequency epochs; its
 #: high-frequency loss on 30 random frames of a window costs nothing (72.55 against 72.51 mm) and makes that stage
-#: 2.6x faster. The shipped settings over three seeds: VirtualBones 60.9-64.2 mm, JointNet 57.2-63.0, body-LBS 132.4
-#: (demo-seeds.json). Not taken: GRUs of 256 units, 85.7 mm; batches of 8, 92.2 mm.
+#: 2.6x faster. These settings over three seeds: VirtualBones 60.9-64.2 mm, JointNet 57.2-63.0, body-LBS 132.4
+#: (demo-seeds-no-history.json); with the motion history among the root features (model.root_history, the default)
+#: VirtualBones 51.1-58.7 mm, JointNet 56.2-58.6 (demo-seeds.json). Not taken: GRUs of 256 units, 85.7 mm; batches
+#: of 8, 92.2 mm.
 WHOLE_SEQUENCES = ["data.window=90", "data.stride=90", "data.burn_in=0", "train.batch_size=4", "train.progress=false"]
 DEMO_TRAINING = {
     "body-lbs": [],

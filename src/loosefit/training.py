@@ -221,7 +221,8 @@ def _check_same_data(path: Path, meta: dict) -> None:
     changed = [k for k in SAME_DATA_KEYS if k in before and before[k] != meta.get(k)]
     if changed:
         raise StaleRunError(f"the run was trained on other data ({', '.join(changed)} differ: the store was "
-                            "simulated or prepared again); train into a new folder or delete this run", path.parent)
+                            "simulated or prepared again, or the run predates a change of the model's inputs); "
+                            "train into a new folder or delete this run", path.parent)
 
 
 def _save_fixed(model, run: RunDir) -> None:

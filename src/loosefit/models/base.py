@@ -79,9 +79,8 @@ class GarmentModel(nn.Module):
         stats = data.feature_stats()
         with torch.no_grad():
             for key in ("root", "joints"):
-                size = getattr(self, f"{key}_mean").shape[0]
-                getattr(self, f"{key}_mean").copy_(torch.from_numpy(stats[key][0][:size]))
-                getattr(self, f"{key}_std").copy_(torch.from_numpy(stats[key][1][:size]))
+                getattr(self, f"{key}_mean").copy_(torch.from_numpy(stats[key][0]))
+                getattr(self, f"{key}_std").copy_(torch.from_numpy(stats[key][1]))
             self.faces.copy_(torch.from_numpy(data.faces))
             self.template.copy_(torch.from_numpy(data.garment.verts))
 
