@@ -399,8 +399,9 @@ class JointNet(GarmentModel):
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None, psd: bool = True,
                 frames: torch.Tensor | None = None) -> dict:
         """Raw features ``root (N, T, R)`` (the first :attr:`root_features` read), ``joints (N, T, J-1, 6)`` and the
-        GRU state ``(N, J_s, H)`` (None: zeros, the start of a motion) -> ``{"verts": (N, T, V, 3) canonical, "bones": (rotations (N, T, B,
-        3, 3), translations (N, T, B, 3)), "association": (B, J_s), "displacement": (N, T, V, 3) PSD
+        GRU state ``(N, J_s, H)`` (None: zeros, the start of a motion) -> ``{"verts": (N, T, V, 3) canonical,
+        "bones": (rotations (N, T, B, 3, 3), translations (N, T, B, 3)), "association": (B, J_s), "displacement":
+        (N, T, V, 3) PSD
         offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state": (N, J_s, H)}``.
         With ``frames`` (``(T',)`` indices) the outputs hold those frames only; the GRUs run over all ``T``."""
         hidden, state = self.gru(self.joint_inputs(root, joints), state)
