@@ -62,7 +62,8 @@ def test_history_is_the_weighted_sum_of_the_past():
             w = (1 - a) * a ** (t - np.arange(t + 1))
             assert abs(f[t, ROOT_FEATURES + 3 * i] - w @ plain[: t + 1, 4]) < 1e-5
             world = np.concatenate([w @ disp[: t + 1, :2], [0.0]])
-            assert np.abs(f[t, ROOT_FEATURES + 3 * i + 1:ROOT_FEATURES + 3 * i + 3] - (rot[t].T @ world)[:2]).max() < 1e-6
+            moved = f[t, ROOT_FEATURES + 3 * i + 1:ROOT_FEATURES + 3 * i + 3]
+            assert np.abs(moved - (rot[t].T @ world)[:2]).max() < 1e-6
     T, rate = 60, 0.2
     rot = np.zeros((T, 2, 3))
     rot[:, 0, 2] = rate * np.arange(T)
