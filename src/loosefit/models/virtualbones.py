@@ -6,17 +6,18 @@ the high-frequency detail. Everything happens in the canonical heading frame
 (:mod:`loosefit.models.motion_features`); shapes below for a batch of ``N`` windows of ``T`` frames,
 ``V`` vertices, ``B`` bones, ``J`` body joints.
 
-Low-frequency module (Sec. 4.2): a GRU and a linear layer map the normalised motion features (root
-height, root displacement and heading change since the previous frame, root tilt, joint rotations; with
-``root_history``, not in the paper, also their recent averages) to each bone's rotation, a 6D residual
-on the identity (the rest transform), and position, the place its rest centroid ``c_j`` moves to as an
-offset from that bone's mean position over the training frames in units of the pooled standard deviation.
-The translation follows: ``T_j = c'_j - R_j c_j`` (a rotation error then does not move the bone). This output parameterisation is loosefit's: the paper
-says only that the module gives the bones' motions. Linear blend skinning of the rig's rest mesh with
-the SSDR weights gives the canonical low-frequency mesh. Loss (VirtualBones Eq. 2): mean vertex distance to the
-low-frequency target plus ``laplacian_weight`` times the mean distance between the uniform-Laplacian
-coordinates of the two meshes; optionally ``bone_weight`` times the mean squared difference between
-the network's normalised outputs and those of the SSDR bone transforms (not in the paper: off by default).
+Low-frequency module (Sec. 4.2): a GRU and a linear layer map the normalised motion features (root height,
+root displacement and heading change since the previous frame, root tilt, joint rotations; with
+``root_history``, not in the paper, also their recent averages) to each bone's rotation, a 6D residual on the
+identity (the rest transform), and position, the place its rest centroid ``c_j`` moves to as an offset from
+that bone's mean position over the training frames in units of the pooled standard deviation. The translation
+follows: ``T_j = c'_j - R_j c_j`` (a rotation error then does not move the bone). This output parameterisation
+is loosefit's: the paper says only that the module gives the bones' motions. Linear blend skinning of the
+rig's rest mesh with the SSDR weights gives the canonical low-frequency mesh. Loss (VirtualBones Eq. 2): mean
+vertex distance to the low-frequency target plus ``laplacian_weight`` times the mean distance between the
+uniform-Laplacian coordinates of the two meshes; optionally ``bone_weight`` times the mean squared difference
+between the network's normalised outputs and those of the SSDR bone transforms (not in the paper: off by
+default).
 
 High-frequency module (Sec. 4.3): a GRU over the predicted bone motions (the low-frequency module's
 normalised outputs) and a linear layer give a global feature for every vertex; EdgeConv layers over
