@@ -54,7 +54,6 @@ reference, used when Warp cannot load).
 
 from __future__ import annotations
 
-
 import numpy as np
 import torch
 

@@ -37,10 +37,11 @@ from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_sixd
 from loosefit.motion.motion import Motion
 
-#: Root features without history, and with it (:data:`HISTORY_FRAMES`: three values per time constant).
+#: Root features without history.
 ROOT_FEATURES = 11
 #: Time constants of the history features, in frames (at 30 fps: 0.2, 0.5 and 1 s).
 HISTORY_FRAMES = (6.0, 15.0, 30.0)
+#: Root features with history: three values per time constant.
 HISTORY_ROOT_FEATURES = ROOT_FEATURES + 3 * len(HISTORY_FRAMES)
 #: The body's forward direction at rest (Anny and every loosefit body face -Y).
 FORWARD = np.array([0.0, -1.0, 0.0])
@@ -91,15 +92,20 @@ def motion_features(motion: Motion, history: bool = False) -> dict[str, np.ndarr
     """Features of a whole motion: ``root (T, 11)`` (``(T, 20)`` with ``history``) and ``joints (T, J-1, 6)``
     float32 (see module doc)."""
     R = axis_angle_to_matrix(torch.from_numpy(motion.rotations).double())  # (T, J, 3, 3)
-    return _features(R, motion.translation.astype(np.float64), history=history)[0]
+    return _features(R, motion.translation.astype(np.float64), history=_history_start() if history else None)[0]
+
+
+def _history_start() -> np.ndarray:
+    """The moving averages before a motion's first frame: ``(len(HISTORY_FRAMES), 3)`` zeros."""
+    return np.zeros((len(HISTORY_FRAMES), 3))
 
 
 def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, float] | None = None,
-              history: bool | np.ndarray = False):
+              history: np.ndarray | None = None):
     """Features of frames with joint rotations ``R (T, J, 3, 3)`` (float64) and root positions ``trans
     (T, 3)``; ``before`` is the root position and heading of the frame before the first (``None``: the
-    first frame is the motion's first, with no displacement). ``history``: False, True (averages from zero) or
-    the averages after the frame before the first, ``(len(HISTORY_FRAMES), 3)`` (heading change, world x, y),
+    first frame is the motion's first, with no displacement). ``history``: None (no history features) or the
+    moving averages after the frame before the first, ``(len(HISTORY_FRAMES), 3)`` (heading change, world x, y),
     updated in place. Also returns the frames' heading rotations ``(T, 3, 3)`` and headings ``(T,)``."""
     root_rot = R[:, 0].numpy()
     psi = heading_angles(root_rot)
@@ -109,9 +115,8 @@ def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, floa
     dpsi = _wrap(psi - np.concatenate([prev_psi, psi[:-1]]))
     tilt = Rh.transpose(0, 2, 1) @ root_rot  # heading removed: Rz(psi)^T R_root
     parts = [trans[:, 2:3], (disp[:, None] @ Rh)[:, 0], dpsi[:, None], matrix_to_sixd(torch.from_numpy(tilt)).numpy()]
-    if history is not False:
-        state = np.zeros((len(HISTORY_FRAMES), 3)) if history is True else history
-        parts.append(_history(np.concatenate([dpsi[:, None], disp[:, :2]], 1), Rh, state))
+    if history is not None:
+        parts.append(_history(np.concatenate([dpsi[:, None], disp[:, :2]], 1), Rh, history))
     joints = matrix_to_sixd(R[:, 1:]).numpy()
     return {"root": np.concatenate(parts, 1).astype(np.float32), "joints": joints.astype(np.float32)}, Rh, psi
 
@@ -140,7 +145,7 @@ class FeatureStream:
 
     def __init__(self, history: bool = False):
         self._before: tuple[np.ndarray, float] | None = None  # the previous frame's root position and heading
-        self._history = np.zeros((len(HISTORY_FRAMES), 3)) if history else False  # the averages so far
+        self._history = _history_start() if history else None  # the averages so far
 
     def step(self, rotations: np.ndarray, translation: np.ndarray):
         rotations = np.asarray(rotations, np.float32)
