@@ -19,7 +19,7 @@ import torch
 from loosefit.config import load_config
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
-from loosefit.models.motion_features import ROOT_FEATURES, FeatureStream, heading_frames, motion_features, to_world
+from loosefit.models.motion_features import FeatureStream, heading_frames, motion_features, to_world
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
 from loosefit.motion_range import range_warnings
@@ -126,8 +126,8 @@ class Animator:
         model.eval()
         self.model = model.to(self.device)
         self.threads = threads
-        # the root features with the motion's history, where the model reads them (runs trained with them)
-        self.history = getattr(model, "root_features", ROOT_FEATURES) > ROOT_FEATURES
+        # the motion history's time constants among the root features, where the model reads them
+        self.history = tuple(getattr(model, "history_frames", ()))
 
     @property
     def method(self) -> str:

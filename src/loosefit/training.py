@@ -26,6 +26,7 @@ from loosefit.config import load_config, save_config
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
+from loosefit.models.motion_features import HISTORY_FRAMES
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion_range import META_KEY as MOTION_RANGE, store_motion_range
 from loosefit.paths import atomic_path
@@ -109,7 +110,7 @@ def train_model(
                                    **(carve if trained else {"val_split": "none"}))
     if train_fraction is not None:
         validation = train_on_fraction(store, validation, train_fraction)
-    history = getattr(cfg.model, "root_history", True)  # the model reads as many root features as its data has
+    history = _history_frames(cfg.model)  # the model reads as many root features as its data has
     train_data = GarmentSequences(store, garment, "train", sim_params=sim_params, bones=cls.needs_rig,
                                   names=validation.train, history=history)
     val_data = None
@@ -127,6 +128,14 @@ def train_model(
         return None
     return train(model, cfg.data.dataset(train_data), cfg.data.dataset(val_data) if val_data else None,
                  cfg.train, run.path, resume=resume)
+
+
+def _history_frames(model_config) -> tuple[float, ...]:
+    """The time constants (frames) of the motion history a per-garment model reads; () for none. A method
+    without the settings (body-LBS) takes the default history (it reads what it is given)."""
+    if not getattr(model_config, "root_history", True):
+        return ()
+    return tuple(getattr(model_config, "history_frames", HISTORY_FRAMES))
 
 
 def _uses(store: DatasetStore, garment: str | None, sim_params: dict | None):

@@ -8,11 +8,12 @@ from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix
 from loosefit.models.motion_features import (
     HISTORY_FRAMES,
-    HISTORY_ROOT_FEATURES,
     ROOT_FEATURES,
     FeatureStream,
+    check_history,
     heading_frames,
     motion_features,
+    root_feature_count,
     to_canonical,
     to_world,
 )
@@ -38,12 +39,15 @@ def random_motion(T=20, J=5, seed=0):
     return Motion(rot, trans, rig="test")
 
 
-@pytest.mark.parametrize("history", [False, True])
+HISTORIES = [(), HISTORY_FRAMES, (2.5, 60.0)]
+
+
+@pytest.mark.parametrize("history", HISTORIES)
 def test_features_are_invariant_to_heading_and_position(history):
     m = random_motion()
     a = motion_features(m, history)
     b = motion_features(turned(m, 1.3, [2.0, -1.0, 0.0]), history)
-    assert a["root"].shape[1] == (HISTORY_ROOT_FEATURES if history else ROOT_FEATURES)
+    assert a["root"].shape[1] == root_feature_count(history) == ROOT_FEATURES + 3 * len(history)
     for key in a:
         assert np.abs(a[key] - b[key]).max() < 1e-5
 
@@ -52,11 +56,13 @@ def test_history_is_the_weighted_sum_of_the_past():
     """Each average against its closed form ``sum_k (1 - a) a^(t-k) x_k`` (the heading change; the world
     displacement turned into frame t's heading frame), and a steady turn's average against ``w (1 - a^t)``."""
     m = random_motion(T=40, seed=4)
-    plain, f = motion_features(m)["root"], motion_features(m, history=True)["root"]
+    frames = (*HISTORY_FRAMES, 60.0)
+    plain, f = motion_features(m)["root"], motion_features(m, history=frames)["root"]
     assert np.array_equal(f[:, :ROOT_FEATURES], plain)
+    assert np.array_equal(motion_features(m, HISTORY_FRAMES)["root"], f[:, :root_feature_count(HISTORY_FRAMES)])
     rot, _ = heading_frames(m)
     disp = np.diff(m.translation, axis=0, prepend=m.translation[:1])
-    for i, tau in enumerate(HISTORY_FRAMES):
+    for i, tau in enumerate(frames):
         a = np.exp(-1 / tau)
         for t in (0, 7, 39):
             w = (1 - a) * a ** (t - np.arange(t + 1))
@@ -67,9 +73,18 @@ def test_history_is_the_weighted_sum_of_the_past():
     T, rate = 60, 0.2
     rot = np.zeros((T, 2, 3))
     rot[:, 0, 2] = rate * np.arange(T)
-    steady = motion_features(Motion(rot, np.tile([0.0, 0.0, 0.9], (T, 1)), rig="test"), history=True)["root"]
-    a = np.exp(-1 / HISTORY_FRAMES[-1])
+    steady = motion_features(Motion(rot, np.tile([0.0, 0.0, 0.9], (T, 1)), rig="test"), history=frames)["root"]
+    a = np.exp(-1 / frames[-1])
     assert np.allclose(steady[:, -3], rate * (1 - a ** np.arange(T)), atol=1e-6)  # frame 0 turns by nothing
+
+
+@pytest.mark.parametrize("bad", [(0.5,), (6.0, float("nan")), (-6.0,), (float("inf"),)])
+def test_history_time_constants_below_a_frame_or_not_finite_are_refused(bad):
+    assert check_history([6, 15]) == (6.0, 15.0)
+    with pytest.raises(InputError, match="at least 1 frame"):
+        motion_features(random_motion(), bad)
+    with pytest.raises(InputError, match="at least 1 frame"):
+        FeatureStream(bad)
 
 
 def test_canonical_round_trip_and_invariance():
@@ -99,7 +114,7 @@ def test_heading_of_a_turn_in_place_and_its_rate():
     assert f[0, 4] == 0 and np.allclose(f[:, 1:4], 0, atol=1e-7) and np.allclose(f[:, 0], 0.9)
 
 
-@pytest.mark.parametrize("history", [False, True])
+@pytest.mark.parametrize("history", HISTORIES)
 def test_stream_equals_batch(history):
     m = random_motion(seed=3)
     batch = motion_features(m, history)

@@ -8,9 +8,10 @@ from normalised motion features, frame by frame with a recurrent state::
     out["verts"]  (B, T, V, 3) canonical vertices, metres;  out["state"]  the recurrent state after frame T-1
 
 so that running ``T`` frames at once or one frame at a time (passing the state along) gives the same
-vertices. ``R`` is 11, or 20 with the motion's history (:mod:`loosefit.models.motion_features`); a model reads
-the first :attr:`GarmentModel.root_features` of them, as many as it was trained with, so that it can be given
-either. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
+vertices. ``R`` is 11, or ``11 + 3 K`` with the motion's history over ``K`` time constants
+(:mod:`loosefit.models.motion_features`; the model's :attr:`GarmentModel.history_frames`); a model reads the first
+:attr:`GarmentModel.root_features` of them, as many as it was trained with, so that a model without history can be
+given either. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
 checkpoint plus :meth:`GarmentModel.sizes` rebuild it without the dataset.
 """
 
@@ -23,7 +24,7 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
-from loosefit.models.motion_features import ROOT_FEATURES
+from loosefit.models.motion_features import HISTORY_FRAMES, ROOT_FEATURES, check_history, root_feature_count
 from loosefit.rig.virtual_bones import skin_bones, sparse_weights
 from loosefit.train.losses import frame_mask, masked_errors_mm
 
@@ -36,8 +37,9 @@ class GarmentModel(nn.Module):
     :meth:`stage_parameters`, :meth:`init_from_data`.
 
     ``sizes`` (JSON-able dict) holds at least ``num_verts`` (V), ``num_joints`` (J, root included) and
-    ``num_faces`` (F), and ``root_features`` (11 or 20; runs made before it existed read 11); methods add theirs
-    (``num_bones``...). Never hard-code them.
+    ``num_faces`` (F), ``root_features`` (R; runs made before it existed read 11) and ``history_frames`` (the
+    time constants of the history among them, frames; runs made before it existed read none for 11 root features
+    and :data:`HISTORY_FRAMES` for 20); methods add theirs (``num_bones``...). Never hard-code them.
     """
 
     method: ClassVar[str] = ""
@@ -51,6 +53,12 @@ class GarmentModel(nn.Module):
         self.config = config
         J, V, F = sizes["num_joints"], sizes["num_verts"], sizes["num_faces"]
         self.root_features = int(sizes.get("root_features", ROOT_FEATURES))
+        #: the time constants (frames) of the motion history among the root features, () for none
+        self.history_frames = check_history(
+            sizes.get("history_frames", HISTORY_FRAMES if self.root_features > ROOT_FEATURES else ()))
+        if root_feature_count(self.history_frames) != self.root_features:
+            raise InputError(f"{self.method}: {self.root_features} root features do not match the history's time "
+                             f"constants {list(self.history_frames)} (sizes {sizes})")
         self.register_buffer("root_mean", torch.zeros(self.root_features))
         self.register_buffer("root_std", torch.ones(self.root_features))
         self.register_buffer("joints_mean", torch.zeros(J - 1, 6))
@@ -65,7 +73,8 @@ class GarmentModel(nn.Module):
         """The sizes of ``data``; subclasses add their own (call ``super()``)."""
         first = data.sequences[0]
         return {"num_verts": int(first.verts.shape[1]), "num_joints": int(first.joints.shape[1] + 1),
-                "num_faces": int(len(data.faces)), "root_features": int(first.root.shape[1])}
+                "num_faces": int(len(data.faces)), "root_features": int(first.root.shape[1]),
+                "history_frames": list(data.history)}
 
     @classmethod
     def from_data(cls, data: GarmentSequences, config) -> "GarmentModel":
@@ -93,7 +102,7 @@ class GarmentModel(nn.Module):
         """Standardised features: ``root (B,T,R)`` -> its first :attr:`root_features`, ``joints (B,T,J-1,6)``."""
         if root.shape[-1] < self.root_features:
             raise InputError(f"{self.method} reads {self.root_features} root features, got {root.shape[-1]}: "
-                             "compute them with motion_features(..., history=True)")
+                             f"compute them with motion_features(..., history={list(self.history_frames)})")
         root = root[..., : self.root_features]
         return (root - self.root_mean) / self.root_std, (joints - self.joints_mean) / self.joints_std
 

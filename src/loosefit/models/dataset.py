@@ -14,6 +14,7 @@ through time: the first ``burn_in`` frames of a window only warm up the recurren
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +27,7 @@ from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.smoothing import frequency_split
-from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+from loosefit.models.motion_features import HISTORY_FRAMES, check_history, heading_frames, motion_features, to_canonical
 from loosefit.motion.motion import Motion
 
 
@@ -42,7 +43,8 @@ class SequenceData:
 
     Attributes:
         name, motion_name, body_name: store names. sim_params: the simulation parameters (JSON).
-        motion: the :class:`Motion` (world). root ``(T, 11)`` or ``(T, 20)``, joints ``(T, J-1, 6)``: motion features.
+        motion: the :class:`Motion` (world). root ``(T, 11 + 3 K)`` (K history time constants,
+        :func:`motion_features`), joints ``(T, J-1, 6)``: motion features.
         frame_rot ``(T, 3, 3)`` float64, frame_origin ``(T, 3)`` float64: heading frames.
         verts ``(T, V, 3)``: canonical simulated garment. lf ``(T, V, 3)``: its low-frequency part.
         bone_rot ``(T, B, 3, 3)``, bone_trans ``(T, B, 3)``: canonical virtual-bone transforms, or None.
@@ -89,14 +91,14 @@ class GarmentSequences:
         bones: load the rig's bone transforms (training sequences of a prepared store).
         body: load the canonical collision proxy of the posed body.
         names: restrict to these sequence names.
-        history: root features with the motion's history (``root (T, 20)``, :func:`motion_features`); the
-            per-garment models read as many of them as they were trained with.
+        history: the time constants (frames) of the motion's history among the root features (``root (T, 11 +
+            3 K)``, :func:`motion_features`); () for none.
     """
 
     def __init__(self, store, garment: str, split: str | None = "train", sim_params: dict | None = None,
                  bones: bool = True, body: bool = True, names: list[str] | None = None, smoothing: str | None = None,
-                 history: bool = True):
-        self.history = history
+                 history: Sequence[float] = HISTORY_FRAMES):
+        self.history = check_history(history)
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         if garment not in self.store.garment_names():
             raise InputError(f"no garment {garment!r} in the store (has {self.store.garment_names()})", self.store.path)
@@ -145,7 +147,7 @@ class GarmentSequences:
                             rot, origin, verts, lf, bone_rot, bone_trans, body_c, body_n, nearest)
 
     def feature_stats(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Mean and std of ``root (11,)`` (``(20,)`` with history) and ``joints (J-1, 6)`` over all frames.
+        """Mean and std of ``root (R,)`` (R root features, with the history) and ``joints (J-1, 6)`` over all frames.
 
         The std is floored (:data:`STD_FLOOR`): joints that barely move in the training motions (hands,
         toes) would otherwise turn any new motion into huge normalised inputs.

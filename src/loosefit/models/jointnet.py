@@ -57,6 +57,7 @@ from loosefit.models.base import GarmentModel
 from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
+from loosefit.models.motion_features import HISTORY_FRAMES, check_history
 from loosefit.models.layers.gru_bptt import by_hand, gru_layers
 from loosefit.models.layers.mlp import MLP
 from loosefit.rig.prepare import load_rig
@@ -102,8 +103,9 @@ class JointNetConfig:
             random each step (:meth:`GarmentModel.loss_frames`); 0 for all. Not in the paper: on a CPU
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
         root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
-            recent turning and velocity, averaged over 0.2-1 s; ours, not in the paper). Measured on the demo's
-            held-out spin (``benchmarks/README.md``, "Motion history").
+            recent turning and velocity, exponential moving averages; ours, not in the paper). Measured on the
+            demo's held-out spin (``benchmarks/README.md``, "Motion history").
+        history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
     """
 
     joints: Optional[list[str]] = None
@@ -121,8 +123,10 @@ class JointNetConfig:
     lambda_sparse: float = 1e-5
     loss_frames: int = 0
     root_history: bool = True
+    history_frames: tuple[float, ...] = HISTORY_FRAMES
 
     def __post_init__(self):
+        check_history(self.history_frames)
         sizes = [self.gru_hidden, self.features, self.psd_shapes, *self.bone_mlp, *self.psd_mlp]
         if min(sizes) < 1:
             raise InputError(f"JointNet layer sizes must be >= 1, got {sizes}")

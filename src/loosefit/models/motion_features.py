@@ -14,10 +14,11 @@ The per-frame motion features (all in the heading frame of that frame) are:
   heading (6D, 6). Frame 0 has zero displacement and heading change (the simulator starts from rest).
 - ``joints`` ``(T, J-1, 6)``: the local rotation of every non-root joint, 6D (continuous, unlike axis-angle).
 
-With ``history=True`` (the per-garment methods, ours; not in the papers) ``root`` is ``(T, 20)``: the 11 above,
-then for each time constant ``tau`` of :data:`HISTORY_FRAMES` the exponential moving average of the heading
-change (rad per frame, 1) and of the horizontal root displacement (m per frame, 2), the latter averaged in the
-world and expressed in frame ``t``'s heading frame::
+With ``history`` time constants (the per-garment methods, ours; not in the papers; by default
+:data:`HISTORY_FRAMES`) ``root`` is ``(T, 11 + 3 K)`` for ``K`` of them (``(T, 20)`` for the default three): the 11
+above, then for each time constant ``tau`` (frames) the exponential moving average of the heading change (rad
+per frame, 1) and of the horizontal root displacement (m per frame, 2), the latter averaged in the world and
+expressed in frame ``t``'s heading frame::
 
     m_t = a m_{t-1} + (1 - a) x_t,   a = exp(-1 / tau),   m_{-1} = 0
 
@@ -30,6 +31,8 @@ Streaming use: :class:`FeatureStream` computes the same features one frame at a 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import torch
 
@@ -39,10 +42,25 @@ from loosefit.motion.motion import Motion
 
 #: Root features without history.
 ROOT_FEATURES = 11
-#: Time constants of the history features, in frames (at 30 fps: 0.2, 0.5 and 1 s).
+#: The default time constants of the history features, in frames (at 30 fps: 0.2, 0.5 and 1 s).
 HISTORY_FRAMES = (6.0, 15.0, 30.0)
-#: Root features with history: three values per time constant.
+#: Root features with the default history: three values per time constant.
 HISTORY_ROOT_FEATURES = ROOT_FEATURES + 3 * len(HISTORY_FRAMES)
+
+
+def root_feature_count(history: Sequence[float] = ()) -> int:
+    """How many root features :func:`motion_features` gives with time constants ``history`` (frames)."""
+    return ROOT_FEATURES + 3 * len(history)
+
+
+def check_history(history: Sequence[float]) -> tuple[float, ...]:
+    """Time constants ``history`` (frames) as a tuple of floats; each must be a finite number of at least one
+    frame (a shorter average is the current frame's value)."""
+    frames = tuple(float(tau) for tau in history)
+    bad = [tau for tau in frames if not (np.isfinite(tau) and tau >= 1.0)]
+    if bad:
+        raise InputError(f"history time constants must be finite and at least 1 frame, got {list(frames)}")
+    return frames
 #: The body's forward direction at rest (Anny and every loosefit body face -Y).
 FORWARD = np.array([0.0, -1.0, 0.0])
 
@@ -88,25 +106,34 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
-def motion_features(motion: Motion, history: bool = False) -> dict[str, np.ndarray]:
-    """Features of a whole motion: ``root (T, 11)`` (``(T, 20)`` with ``history``) and ``joints (T, J-1, 6)``
-    float32 (see module doc)."""
+def motion_features(motion: Motion, history: Sequence[float] = ()) -> dict[str, np.ndarray]:
+    """Features of a whole motion: ``root (T, 11 + 3 K)`` for ``K`` time constants ``history`` (frames; none:
+    ``(T, 11)``) and ``joints (T, J-1, 6)`` float32 (see module doc)."""
     R = axis_angle_to_matrix(torch.from_numpy(motion.rotations).double())  # (T, J, 3, 3)
-    return _features(R, motion.translation.astype(np.float64), history=_history_start() if history else None)[0]
+    return _features(R, motion.translation.astype(np.float64), history=_History.start(history))[0]
 
 
-def _history_start() -> np.ndarray:
-    """The moving averages before a motion's first frame: ``(len(HISTORY_FRAMES), 3)`` zeros."""
-    return np.zeros((len(HISTORY_FRAMES), 3))
+class _History:
+    """The moving averages of the history features: decay ``a (K, 1)`` per time constant and the averages
+    ``state (K, 3)`` (heading change, world x, y) after the last frame seen."""
+
+    def __init__(self, frames: tuple[float, ...]):
+        self.a = np.exp(-1.0 / np.asarray(frames, np.float64))[:, None]
+        self.state = np.zeros((len(frames), 3))  # zero before a motion's first frame
+
+    @classmethod
+    def start(cls, history: Sequence[float]) -> "_History | None":
+        """The averages before a motion's first frame, or None without time constants."""
+        frames = check_history(history)
+        return cls(frames) if frames else None
 
 
 def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, float] | None = None,
-              history: np.ndarray | None = None):
+              history: _History | None = None):
     """Features of frames with joint rotations ``R (T, J, 3, 3)`` (float64) and root positions ``trans
     (T, 3)``; ``before`` is the root position and heading of the frame before the first (``None``: the
     first frame is the motion's first, with no displacement). ``history``: None (no history features) or the
-    moving averages after the frame before the first, ``(len(HISTORY_FRAMES), 3)`` (heading change, world x, y),
-    updated in place. Also returns the frames' heading rotations ``(T, 3, 3)`` and headings ``(T,)``."""
+    moving averages after the frame before the first, updated in place. Also returns the frames' heading rotations ``(T, 3, 3)`` and headings ``(T,)``."""
     root_rot = R[:, 0].numpy()
     psi = heading_angles(root_rot)
     Rh = rot_z(psi)
@@ -121,11 +148,11 @@ def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, floa
     return {"root": np.concatenate(parts, 1).astype(np.float32), "joints": joints.astype(np.float32)}, Rh, psi
 
 
-def _history(x: np.ndarray, Rh: np.ndarray, state: np.ndarray) -> np.ndarray:
-    """The history features ``(T, 3 * len(HISTORY_FRAMES))`` of per-frame ``x (T, 3)`` (heading change, world
-    displacement x, y), from the averages ``state`` after the frame before (updated in place): per time constant,
-    the averaged heading change and the averaged displacement turned into each frame's heading frame."""
-    a = np.exp(-1.0 / np.asarray(HISTORY_FRAMES))[:, None]  # (K, 1)
+def _history(x: np.ndarray, Rh: np.ndarray, history: _History) -> np.ndarray:
+    """The history features ``(T, 3 K)`` of per-frame ``x (T, 3)`` (heading change, world displacement x, y),
+    from the averages after the frame before (updated in place): per time constant, the averaged heading change
+    and the averaged displacement turned into each frame's heading frame."""
+    a, state = history.a, history.state
     out = np.empty((len(x), len(a), 3))
     for t in range(len(x)):
         state *= a
@@ -139,13 +166,13 @@ class FeatureStream:
     """Motion features one frame at a time, equal to :func:`motion_features` (with the same ``history``) on
     the whole motion.
 
-    ``step(rotations (J, 3), translation (3,))`` returns ``root (11,)`` (``(20,)`` with ``history``),
-    ``joints (J-1, 6)`` and the frame's heading frame ``(rot (3, 3), origin (3,))``.
+    ``step(rotations (J, 3), translation (3,))`` returns ``root (11 + 3 K,)`` for ``K`` time constants
+    ``history``, ``joints (J-1, 6)`` and the frame's heading frame ``(rot (3, 3), origin (3,))``.
     """
 
-    def __init__(self, history: bool = False):
+    def __init__(self, history: Sequence[float] = ()):
         self._before: tuple[np.ndarray, float] | None = None  # the previous frame's root position and heading
-        self._history = _history_start() if history else None  # the averages so far
+        self._history = _History.start(history)  # the averages so far
 
     def step(self, rotations: np.ndarray, translation: np.ndarray):
         rotations = np.asarray(rotations, np.float32)

@@ -55,6 +55,7 @@ from loosefit.geometry.rotations import matrix_to_sixd, sixd_to_matrix
 from loosefit.models.base import GarmentModel
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
+from loosefit.models.motion_features import HISTORY_FRAMES, check_history
 from loosefit.models.ensemble import EnsembleConfig
 from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
 from loosefit.models.layers.gru import GRUHead
@@ -119,8 +120,9 @@ class VirtualBonesConfig:
             ``G - G_LF`` (Sec. 4.1's split). Measured on the bench skirt (80 bones, CPU preset): the same
             held-out RMSE either way, within 0.2 mm per test motion.
         root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
-            recent turning and velocity, averaged over 0.2-1 s; ours, not in the paper). Measured on the demo's
-            held-out spin (``benchmarks/README.md``, "Motion history").
+            recent turning and velocity, exponential moving averages; ours, not in the paper). Measured on the
+            demo's held-out spin (``benchmarks/README.md``, "Motion history").
+        history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
     """
 
     lf_hidden: int = 600
@@ -136,8 +138,10 @@ class VirtualBonesConfig:
     hf_loss_frames: int = 0
     hf_target: str = "simulation"
     root_history: bool = True
+    history_frames: tuple[float, ...] = HISTORY_FRAMES
 
     def __post_init__(self):
+        check_history(self.history_frames)
         sizes = (self.lf_hidden, self.hf_hidden, self.global_channels, *self.edge_channels, *self.head_hidden)
         if min(sizes) < 1 or not self.edge_channels or self.global_rank < 0:
             raise InputError(f"layer sizes must be >= 1 (global_rank >= 0) and edge_channels non-empty, got {self}")
