@@ -61,6 +61,8 @@ def check_history(history: Sequence[float]) -> tuple[float, ...]:
     if bad:
         raise InputError(f"history time constants must be finite and at least 1 frame, got {list(frames)}")
     return frames
+
+
 #: The body's forward direction at rest (Anny and every loosefit body face -Y).
 FORWARD = np.array([0.0, -1.0, 0.0])
 
@@ -133,7 +135,8 @@ def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, floa
     """Features of frames with joint rotations ``R (T, J, 3, 3)`` (float64) and root positions ``trans
     (T, 3)``; ``before`` is the root position and heading of the frame before the first (``None``: the
     first frame is the motion's first, with no displacement). ``history``: None (no history features) or the
-    moving averages after the frame before the first, updated in place. Also returns the frames' heading rotations ``(T, 3, 3)`` and headings ``(T,)``."""
+    moving averages after the frame before the first, updated in place. Also returns the frames' heading
+    rotations ``(T, 3, 3)`` and headings ``(T,)``."""
     root_rot = R[:, 0].numpy()
     psi = heading_angles(root_rot)
     Rh = rot_z(psi)
