@@ -48,7 +48,7 @@ def motion(tiny_store):
 def _jointnet_low_frequency(run, motion):
     """JointNet's garment without its pose-space deformation: the bones' skinning of the rig, in the world."""
     model = Animator(run).model
-    feats = motion_features(motion, model.history_frames)
+    feats = motion_features(motion, model.history)
     with torch.no_grad():
         out = model(torch.from_numpy(feats["root"])[None], torch.from_numpy(feats["joints"])[None], psd=False)
     return to_world(out["verts"][0].numpy(), *heading_frames(motion)).astype(np.float64)

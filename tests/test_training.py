@@ -10,6 +10,7 @@ import torch
 
 from loosefit.animate import Animator
 from loosefit.errors import InputError
+from loosefit.models.motion_features import MotionHistory
 from loosefit.rig.prepare import prepare
 from loosefit.training import METHOD_CONFIG, MODEL_META, StaleRunError, train_model
 
@@ -19,10 +20,12 @@ SMALL_JOINTNET = ["model.gru_hidden=16", "model.features=16", "model.bone_mlp=[3
 
 
 def test_train_writes_a_self_contained_run(tiny_store, tmp_path, caplog):
-    """The tiny store has no val split: the run trains without validation, says so, and keeps no best.pt."""
+    """The tiny store has no val split: the run trains without validation, says so, and keeps no best.pt. The
+    motion history set in the config travels with the run."""
     run = tmp_path / "jn"
+    history = ["model.history_frames=[4, 60]", "model.history_vertical=true"]
     with caplog.at_level(logging.WARNING, logger="loosefit.train.validation"):
-        result = train_model("jointnet", tiny_store, "skirt+average", run, overrides=SMALL_JOINTNET)
+        result = train_model("jointnet", tiny_store, "skirt+average", run, overrides=SMALL_JOINTNET + history)
     assert "training without validation" in caplog.text
     meta = json.loads((run / MODEL_META).read_text())
     assert meta["method"] == "jointnet" and meta["sizes"]["num_verts"] > 100
@@ -31,7 +34,9 @@ def test_train_writes_a_self_contained_run(tiny_store, tmp_path, caplog):
     assert (run / METHOD_CONFIG).exists() and (run / "checkpoints" / "last.pt").exists()
     assert result.val_metrics == {} and not (run / "checkpoints" / "best.pt").exists()
     # The run folder alone rebuilds the model (no dataset needed); "best" falls back to the last checkpoint.
-    assert Animator(run).faces.shape[1] == 3
+    animator = Animator(run)
+    assert animator.faces.shape[1] == 3
+    assert animator.history == MotionHistory((4.0, 60.0), vertical=True) and meta["sizes"]["root_features"] == 11 + 8
 
 
 def _weights(model):

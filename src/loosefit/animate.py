@@ -126,8 +126,8 @@ class Animator:
         model.eval()
         self.model = model.to(self.device)
         self.threads = threads
-        # the motion history's time constants among the root features, where the model reads them
-        self.history = tuple(getattr(model, "history_frames", ()))
+        # the motion history among the root features, where the model reads one
+        self.history = getattr(model, "history", None)
 
     @property
     def method(self) -> str:

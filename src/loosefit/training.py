@@ -26,7 +26,7 @@ from loosefit.config import load_config, save_config
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
-from loosefit.models.motion_features import HISTORY_FRAMES
+from loosefit.models.motion_features import HISTORY_FRAMES, MotionHistory
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion_range import META_KEY as MOTION_RANGE, store_motion_range
 from loosefit.paths import atomic_path
@@ -110,7 +110,7 @@ def train_model(
                                    **(carve if trained else {"val_split": "none"}))
     if train_fraction is not None:
         validation = train_on_fraction(store, validation, train_fraction)
-    history = _history_frames(cfg.model)  # the model reads as many root features as its data has
+    history = _motion_history(cfg.model)  # the model reads as many root features as its data has
     train_data = GarmentSequences(store, garment, "train", sim_params=sim_params, bones=cls.needs_rig,
                                   names=validation.train, history=history)
     val_data = None
@@ -130,12 +130,13 @@ def train_model(
                  cfg.train, run.path, resume=resume)
 
 
-def _history_frames(model_config) -> tuple[float, ...]:
-    """The time constants (frames) of the motion history a per-garment model reads; () for none. A method
-    without the settings (body-LBS) takes the default history (it reads what it is given)."""
+def _motion_history(model_config) -> MotionHistory | None:
+    """The motion history a per-garment model reads (None: none). A method without the settings (body-LBS)
+    takes the default history (it reads what it is given)."""
     if not getattr(model_config, "root_history", True):
-        return ()
-    return tuple(getattr(model_config, "history_frames", HISTORY_FRAMES))
+        return None
+    return MotionHistory(tuple(getattr(model_config, "history_frames", HISTORY_FRAMES)),
+                         getattr(model_config, "history_vertical", False))
 
 
 def _uses(store: DatasetStore, garment: str | None, sim_params: dict | None):

@@ -8,12 +8,13 @@ from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix
 from loosefit.models.motion_features import (
     HISTORY_FRAMES,
+    HISTORY_ROOT_FEATURES,
     ROOT_FEATURES,
     FeatureStream,
+    MotionHistory,
     check_history,
     heading_frames,
     motion_features,
-    root_feature_count,
     to_canonical,
     to_world,
 )
@@ -39,7 +40,7 @@ def random_motion(T=20, J=5, seed=0):
     return Motion(rot, trans, rig="test")
 
 
-HISTORIES = [(), HISTORY_FRAMES, (2.5, 60.0)]
+HISTORIES = [None, MotionHistory(), MotionHistory((2.5, 60.0)), MotionHistory(HISTORY_FRAMES, vertical=True)]
 
 
 @pytest.mark.parametrize("history", HISTORIES)
@@ -47,44 +48,52 @@ def test_features_are_invariant_to_heading_and_position(history):
     m = random_motion()
     a = motion_features(m, history)
     b = motion_features(turned(m, 1.3, [2.0, -1.0, 0.0]), history)
-    assert a["root"].shape[1] == root_feature_count(history) == ROOT_FEATURES + 3 * len(history)
+    count = ROOT_FEATURES if history is None else ROOT_FEATURES + (4 if history.vertical else 3) * len(history.frames)
+    assert a["root"].shape[1] == count == (history.root_features if history else ROOT_FEATURES)
     for key in a:
         assert np.abs(a[key] - b[key]).max() < 1e-5
 
 
 def test_history_is_the_weighted_sum_of_the_past():
     """Each average against its closed form ``sum_k (1 - a) a^(t-k) x_k`` (the heading change; the world
-    displacement turned into frame t's heading frame), and a steady turn's average against ``w (1 - a^t)``."""
+    horizontal displacement turned into frame t's heading frame; the vertical displacement), and a steady turn's
+    average against ``w (1 - a^t)``."""
     m = random_motion(T=40, seed=4)
-    frames = (*HISTORY_FRAMES, 60.0)
-    plain, f = motion_features(m)["root"], motion_features(m, history=frames)["root"]
+    history = MotionHistory((*HISTORY_FRAMES, 60.0), vertical=True)
+    plain, f = motion_features(m)["root"], motion_features(m, history)["root"]
     assert np.array_equal(f[:, :ROOT_FEATURES], plain)
-    assert np.array_equal(motion_features(m, HISTORY_FRAMES)["root"], f[:, :root_feature_count(HISTORY_FRAMES)])
+    default = motion_features(m, MotionHistory())["root"]
+    assert default.shape[1] == HISTORY_ROOT_FEATURES
     rot, _ = heading_frames(m)
     disp = np.diff(m.translation, axis=0, prepend=m.translation[:1])
-    for i, tau in enumerate(frames):
+    for i, tau in enumerate(history.frames):
         a = np.exp(-1 / tau)
+        k = ROOT_FEATURES + 4 * i
         for t in (0, 7, 39):
             w = (1 - a) * a ** (t - np.arange(t + 1))
-            assert abs(f[t, ROOT_FEATURES + 3 * i] - w @ plain[: t + 1, 4]) < 1e-5
+            assert abs(f[t, k] - w @ plain[: t + 1, 4]) < 1e-5
             world = np.concatenate([w @ disp[: t + 1, :2], [0.0]])
-            moved = f[t, ROOT_FEATURES + 3 * i + 1:ROOT_FEATURES + 3 * i + 3]
-            assert np.abs(moved - (rot[t].T @ world)[:2]).max() < 1e-6
+            assert np.abs(f[t, k + 1:k + 3] - (rot[t].T @ world)[:2]).max() < 1e-6
+            assert abs(f[t, k + 3] - w @ disp[: t + 1, 2]) < 1e-6
+            if i < len(HISTORY_FRAMES):  # without the vertical: the same averages, three to a time constant
+                j = ROOT_FEATURES + 3 * i
+                assert np.abs(default[t, j:j + 3] - f[t, k:k + 3]).max() < 1e-6
     T, rate = 60, 0.2
     rot = np.zeros((T, 2, 3))
     rot[:, 0, 2] = rate * np.arange(T)
-    steady = motion_features(Motion(rot, np.tile([0.0, 0.0, 0.9], (T, 1)), rig="test"), history=frames)["root"]
-    a = np.exp(-1 / frames[-1])
-    assert np.allclose(steady[:, -3], rate * (1 - a ** np.arange(T)), atol=1e-6)  # frame 0 turns by nothing
+    steady = motion_features(Motion(rot, np.tile([0.0, 0.0, 0.9], (T, 1)), rig="test"), history)["root"]
+    a = np.exp(-1 / history.frames[-1])
+    assert np.allclose(steady[:, -4], rate * (1 - a ** np.arange(T)), atol=1e-6)  # frame 0 turns by nothing
+    assert np.allclose(steady[:, -1], 0.0)  # no rise or fall
 
 
 @pytest.mark.parametrize("bad", [(0.5,), (6.0, float("nan")), (-6.0,), (float("inf"),)])
 def test_history_time_constants_below_a_frame_or_not_finite_are_refused(bad):
-    assert check_history([6, 15]) == (6.0, 15.0)
+    assert check_history([6, 15]) == (6.0, 15.0) == MotionHistory([6, 15]).frames
     with pytest.raises(InputError, match="at least 1 frame"):
-        motion_features(random_motion(), bad)
-    with pytest.raises(InputError, match="at least 1 frame"):
-        FeatureStream(bad)
+        MotionHistory(bad)
+    with pytest.raises(InputError, match="at least one time constant"):
+        MotionHistory(())
 
 
 def test_canonical_round_trip_and_invariance():

@@ -11,7 +11,7 @@ import torch
 from loosefit.config import load_config
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences, WindowDataset
-from loosefit.models.motion_features import HISTORY_FRAMES, HISTORY_ROOT_FEATURES, ROOT_FEATURES
+from loosefit.models.motion_features import HISTORY_FRAMES, HISTORY_ROOT_FEATURES, ROOT_FEATURES, MotionHistory
 from loosefit.models.virtualbones import Config, VirtualBones, VirtualBonesConfig
 from loosefit.rig.prepare import load_rig
 from loosefit.train import StageConfig, TrainConfig, seed_everything, train
@@ -156,7 +156,7 @@ def test_runs_from_before_the_history_read_eleven_root_features(tiny_train):
     features it is given, so it animates as it did; a model given fewer than it reads is refused."""
     model = _model(tiny_train)
     assert model.sizes()["root_features"] == HISTORY_ROOT_FEATURES
-    old_sizes = {k: v for k, v in model.sizes().items() if k not in ("root_features", "history_frames")}
+    old_sizes = {k: v for k, v in model.sizes().items() if k != "root_features" and not k.startswith("history_")}
     old = _perturbed(VirtualBones(old_sizes, TINY))
     seq = tiny_train.sequences[0]
     root, joints = torch.from_numpy(seq.root)[None, :6], torch.from_numpy(seq.joints)[None, :6]
@@ -165,26 +165,26 @@ def test_runs_from_before_the_history_read_eleven_root_features(tiny_train):
         assert torch.equal(old(root, joints)["verts"], old(root[..., :ROOT_FEATURES], joints)["verts"])
         with pytest.raises(InputError, match="reads 20 root features, got 11"):
             model(root[..., :ROOT_FEATURES], joints)
-    plain = GarmentSequences(tiny_train.store, tiny_train.garment_name, "train", body=False, history=())
-    assert _model(plain).sizes()["root_features"] == ROOT_FEATURES
+    plain = GarmentSequences(tiny_train.store, tiny_train.garment_name, "train", body=False, history=None)
+    assert _model(plain).sizes()["root_features"] == ROOT_FEATURES and _model(plain).history is None
 
 
-def test_the_history_time_constants_travel_with_the_model(tiny_train):
-    """A model records the time constants of its data's history, and its animator computes its features with
-    them; a run recorded before they were (20 root features, no ``history_frames``) reads the default three; sizes
-    whose count and time constants disagree are refused."""
+def test_the_motion_history_travels_with_the_model(tiny_train):
+    """A model records its data's motion history, and its animator computes its features with it; a run recorded
+    before the history was a setting (20 root features, neither ``history_frames`` nor ``history_vertical``)
+    reads the default history; sizes whose count and history disagree are refused."""
     from loosefit.animate import Animator
 
-    frames = (4.0, 60.0)
-    data = GarmentSequences(tiny_train.store, tiny_train.garment_name, "train", body=False, history=frames)
+    history = MotionHistory((4.0, 60.0), vertical=True)
+    data = GarmentSequences(tiny_train.store, tiny_train.garment_name, "train", body=False, history=history)
     model = _model(data)
-    assert model.sizes()["history_frames"] == list(frames) and model.history_frames == frames
-    assert model.root_features == ROOT_FEATURES + 6 == data.sequences[0].root.shape[1]
-    assert Animator.from_model(model).history == frames
-    old = {k: v for k, v in _model(tiny_train).sizes().items() if k != "history_frames"}
-    assert VirtualBones(old, TINY).history_frames == HISTORY_FRAMES
+    assert model.sizes()["history_frames"] == [4.0, 60.0] and model.sizes()["history_vertical"] is True
+    assert model.history == history and Animator.from_model(model).history == history
+    assert model.root_features == ROOT_FEATURES + 8 == data.sequences[0].root.shape[1]
+    old = {k: v for k, v in _model(tiny_train).sizes().items() if not k.startswith("history_")}
+    assert VirtualBones(old, TINY).history == MotionHistory(HISTORY_FRAMES)
     with pytest.raises(InputError, match="do not match"):
-        VirtualBones({**old, "history_frames": list(frames)}, TINY)
+        VirtualBones({**old, "history_vertical": True}, TINY)
 
 
 def test_streaming_equals_batched(tiny_test, tiny_train):

@@ -8,10 +8,9 @@ from normalised motion features, frame by frame with a recurrent state::
     out["verts"]  (B, T, V, 3) canonical vertices, metres;  out["state"]  the recurrent state after frame T-1
 
 so that running ``T`` frames at once or one frame at a time (passing the state along) gives the same
-vertices. ``R`` is 11, or ``11 + 3 K`` with the motion's history over ``K`` time constants
-(:mod:`loosefit.models.motion_features`; the model's :attr:`GarmentModel.history_frames`); a model reads the first
-:attr:`GarmentModel.root_features` of them, as many as it was trained with, so that a model without history can be
-given either. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
+vertices. ``R`` is 11, or more with the motion's history (:class:`~loosefit.models.motion_features.MotionHistory`,
+the model's :attr:`GarmentModel.history`); a model reads the first :attr:`GarmentModel.root_features` of them, as
+many as it was trained with, so that a model without history can be given either. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
 checkpoint plus :meth:`GarmentModel.sizes` rebuild it without the dataset.
 """
 
@@ -24,9 +23,19 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
-from loosefit.models.motion_features import HISTORY_FRAMES, ROOT_FEATURES, check_history, root_feature_count
+from loosefit.models.motion_features import HISTORY_FRAMES, ROOT_FEATURES, MotionHistory
 from loosefit.rig.virtual_bones import skin_bones, sparse_weights
 from loosefit.train.losses import frame_mask, masked_errors_mm
+
+
+def _history_of(sizes: dict, root_features: int, method: str) -> MotionHistory | None:
+    """The motion history that ``sizes`` record (see :class:`GarmentModel`), checked against ``root_features``."""
+    frames = sizes.get("history_frames", HISTORY_FRAMES if root_features > ROOT_FEATURES else ())
+    history = MotionHistory(tuple(frames), bool(sizes.get("history_vertical", False))) if len(frames) else None
+    if (history.root_features if history else ROOT_FEATURES) != root_features:
+        raise InputError(f"{method}: {root_features} root features do not match the motion history {history} "
+                         f"(sizes {sizes})")
+    return history
 
 
 class GarmentModel(nn.Module):
@@ -37,9 +46,10 @@ class GarmentModel(nn.Module):
     :meth:`stage_parameters`, :meth:`init_from_data`.
 
     ``sizes`` (JSON-able dict) holds at least ``num_verts`` (V), ``num_joints`` (J, root included) and
-    ``num_faces`` (F), ``root_features`` (R; runs made before it existed read 11) and ``history_frames`` (the
-    time constants of the history among them, frames; runs made before it existed read none for 11 root features
-    and :data:`HISTORY_FRAMES` for 20); methods add theirs (``num_bones``...). Never hard-code them.
+    ``num_faces`` (F), ``root_features`` (R; runs made before it existed read 11), and the motion history among
+    them: ``history_frames`` (its time constants, frames; [] for none; runs made before it existed read none for
+    11 root features and :data:`HISTORY_FRAMES` for 20) and ``history_vertical`` (runs before it: false); methods
+    add theirs (``num_bones``...). Never hard-code them.
     """
 
     method: ClassVar[str] = ""
@@ -53,12 +63,8 @@ class GarmentModel(nn.Module):
         self.config = config
         J, V, F = sizes["num_joints"], sizes["num_verts"], sizes["num_faces"]
         self.root_features = int(sizes.get("root_features", ROOT_FEATURES))
-        #: the time constants (frames) of the motion history among the root features, () for none
-        self.history_frames = check_history(
-            sizes.get("history_frames", HISTORY_FRAMES if self.root_features > ROOT_FEATURES else ()))
-        if root_feature_count(self.history_frames) != self.root_features:
-            raise InputError(f"{self.method}: {self.root_features} root features do not match the history's time "
-                             f"constants {list(self.history_frames)} (sizes {sizes})")
+        #: the motion history among the root features (None: none)
+        self.history = _history_of(sizes, self.root_features, self.method)
         self.register_buffer("root_mean", torch.zeros(self.root_features))
         self.register_buffer("root_std", torch.ones(self.root_features))
         self.register_buffer("joints_mean", torch.zeros(J - 1, 6))
@@ -74,7 +80,8 @@ class GarmentModel(nn.Module):
         first = data.sequences[0]
         return {"num_verts": int(first.verts.shape[1]), "num_joints": int(first.joints.shape[1] + 1),
                 "num_faces": int(len(data.faces)), "root_features": int(first.root.shape[1]),
-                "history_frames": list(data.history)}
+                "history_frames": list(data.history.frames) if data.history else [],
+                "history_vertical": bool(data.history and data.history.vertical)}
 
     @classmethod
     def from_data(cls, data: GarmentSequences, config) -> "GarmentModel":
@@ -102,7 +109,7 @@ class GarmentModel(nn.Module):
         """Standardised features: ``root (B,T,R)`` -> its first :attr:`root_features`, ``joints (B,T,J-1,6)``."""
         if root.shape[-1] < self.root_features:
             raise InputError(f"{self.method} reads {self.root_features} root features, got {root.shape[-1]}: "
-                             f"compute them with motion_features(..., history={list(self.history_frames)})")
+                             f"compute them with motion_features(..., {self.history})")
         root = root[..., : self.root_features]
         return (root - self.root_mean) / self.root_std, (joints - self.joints_mean) / self.joints_std
 

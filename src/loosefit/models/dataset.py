@@ -14,7 +14,6 @@ through time: the first ``burn_in`` frames of a window only warm up the recurren
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,7 +26,7 @@ from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.smoothing import frequency_split
-from loosefit.models.motion_features import HISTORY_FRAMES, check_history, heading_frames, motion_features, to_canonical
+from loosefit.models.motion_features import MotionHistory, heading_frames, motion_features, to_canonical
 from loosefit.motion.motion import Motion
 
 
@@ -43,8 +42,8 @@ class SequenceData:
 
     Attributes:
         name, motion_name, body_name: store names. sim_params: the simulation parameters (JSON).
-        motion: the :class:`Motion` (world). root ``(T, 11 + 3 K)`` (K history time constants,
-        :func:`motion_features`), joints ``(T, J-1, 6)``: motion features.
+        motion: the :class:`Motion` (world). root ``(T, R)`` (R = 11, or more with a
+        :class:`MotionHistory`; :func:`motion_features`), joints ``(T, J-1, 6)``: motion features.
         frame_rot ``(T, 3, 3)`` float64, frame_origin ``(T, 3)`` float64: heading frames.
         verts ``(T, V, 3)``: canonical simulated garment. lf ``(T, V, 3)``: its low-frequency part.
         bone_rot ``(T, B, 3, 3)``, bone_trans ``(T, B, 3)``: canonical virtual-bone transforms, or None.
@@ -91,14 +90,13 @@ class GarmentSequences:
         bones: load the rig's bone transforms (training sequences of a prepared store).
         body: load the canonical collision proxy of the posed body.
         names: restrict to these sequence names.
-        history: the time constants (frames) of the motion's history among the root features (``root (T, 11 +
-            3 K)``, :func:`motion_features`); () for none.
+        history: the motion's history among the root features (:class:`MotionHistory`; None: none).
     """
 
     def __init__(self, store, garment: str, split: str | None = "train", sim_params: dict | None = None,
                  bones: bool = True, body: bool = True, names: list[str] | None = None, smoothing: str | None = None,
-                 history: Sequence[float] = HISTORY_FRAMES):
-        self.history = check_history(history)
+                 history: MotionHistory | None = MotionHistory()):
+        self.history = history
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         if garment not in self.store.garment_names():
             raise InputError(f"no garment {garment!r} in the store (has {self.store.garment_names()})", self.store.path)

@@ -14,16 +14,16 @@ The per-frame motion features (all in the heading frame of that frame) are:
   heading (6D, 6). Frame 0 has zero displacement and heading change (the simulator starts from rest).
 - ``joints`` ``(T, J-1, 6)``: the local rotation of every non-root joint, 6D (continuous, unlike axis-angle).
 
-With ``history`` time constants (the per-garment methods, ours; not in the papers; by default
-:data:`HISTORY_FRAMES`) ``root`` is ``(T, 11 + 3 K)`` for ``K`` of them (``(T, 20)`` for the default three): the 11
-above, then for each time constant ``tau`` (frames) the exponential moving average of the heading change (rad
-per frame, 1) and of the horizontal root displacement (m per frame, 2), the latter averaged in the world and
-expressed in frame ``t``'s heading frame::
+With a :class:`MotionHistory` (the per-garment methods, ours; not in the papers) ``root`` is ``(T, 11 + C K)`` for
+``K`` time constants (frames; by default :data:`HISTORY_FRAMES`, ``(T, 20)``): the 11 above, then for each time
+constant ``tau`` the exponential moving average of the heading change (rad per frame, 1) and of the horizontal
+root displacement (m per frame, 2), the latter averaged in the world and expressed in frame ``t``'s heading
+frame, and with ``vertical`` also of the vertical root displacement (m per frame, 1; ``C`` = 4, else 3)::
 
     m_t = a m_{t-1} + (1 - a) x_t,   a = exp(-1 / tau),   m_{-1} = 0
 
-They say how fast and which way the body has been turning and moving over the last fraction of a second, the
-motion a loose skirt still carries (it lags the body). A recurrent network can learn such filters itself; given
+They say how fast and which way the body has been turning and moving over the last fraction of a second (and,
+with ``vertical``, rising or falling), the motion a loose skirt still carries (it lags the body). A recurrent network can learn such filters itself; given
 them, VirtualBones generalised better to a held-out spin (``benchmarks/README.md``, "Motion history").
 
 Streaming use: :class:`FeatureStream` computes the same features one frame at a time.
@@ -32,6 +32,7 @@ Streaming use: :class:`FeatureStream` computes the same features one frame at a 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -48,11 +49,6 @@ HISTORY_FRAMES = (6.0, 15.0, 30.0)
 HISTORY_ROOT_FEATURES = ROOT_FEATURES + 3 * len(HISTORY_FRAMES)
 
 
-def root_feature_count(history: Sequence[float] = ()) -> int:
-    """How many root features :func:`motion_features` gives with time constants ``history`` (frames)."""
-    return ROOT_FEATURES + 3 * len(history)
-
-
 def check_history(history: Sequence[float]) -> tuple[float, ...]:
     """Time constants ``history`` (frames) as a tuple of floats; each must be a finite number of at least one
     frame (a shorter average is the current frame's value)."""
@@ -61,6 +57,31 @@ def check_history(history: Sequence[float]) -> tuple[float, ...]:
     if bad:
         raise InputError(f"history time constants must be finite and at least 1 frame, got {list(frames)}")
     return frames
+
+
+@dataclass(frozen=True)
+class MotionHistory:
+    """The motion history among the root features (module doc): the moving averages' time constants ``frames``
+    (frames, at least one) and whether the vertical root displacement is averaged too (``vertical``)."""
+
+    frames: tuple[float, ...] = HISTORY_FRAMES
+    vertical: bool = False
+
+    def __post_init__(self):
+        frames = check_history(self.frames)
+        if not frames:
+            raise InputError("a motion history needs at least one time constant (no history: None)")
+        object.__setattr__(self, "frames", frames)
+
+    @property
+    def channels(self) -> int:
+        """Averaged values per time constant: heading change, horizontal displacement (2), vertical (1)."""
+        return 4 if self.vertical else 3
+
+    @property
+    def root_features(self) -> int:
+        """How many root features :func:`motion_features` gives with this history."""
+        return ROOT_FEATURES + self.channels * len(self.frames)
 
 
 #: The body's forward direction at rest (Anny and every loosefit body face -Y).
@@ -108,30 +129,29 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
-def motion_features(motion: Motion, history: Sequence[float] = ()) -> dict[str, np.ndarray]:
-    """Features of a whole motion: ``root (T, 11 + 3 K)`` for ``K`` time constants ``history`` (frames; none:
-    ``(T, 11)``) and ``joints (T, J-1, 6)`` float32 (see module doc)."""
+def motion_features(motion: Motion, history: MotionHistory | None = None) -> dict[str, np.ndarray]:
+    """Features of a whole motion: ``root (T, R)`` (``R`` = 11, or ``history.root_features``) and ``joints
+    (T, J-1, 6)`` float32 (see module doc)."""
     R = axis_angle_to_matrix(torch.from_numpy(motion.rotations).double())  # (T, J, 3, 3)
-    return _features(R, motion.translation.astype(np.float64), history=_History.start(history))[0]
+    return _features(R, motion.translation.astype(np.float64), history=_Averages.start(history))[0]
 
 
-class _History:
-    """The moving averages of the history features: decay ``a (K, 1)`` per time constant and the averages
-    ``state (K, 3)`` (heading change, world x, y) after the last frame seen."""
+class _Averages:
+    """The moving averages of a :class:`MotionHistory`: decay ``a (K, 1)`` per time constant and the averages
+    ``state (K, C)`` (heading change, world x, y and, with ``vertical``, z) after the last frame seen."""
 
-    def __init__(self, frames: tuple[float, ...]):
-        self.a = np.exp(-1.0 / np.asarray(frames, np.float64))[:, None]
-        self.state = np.zeros((len(frames), 3))  # zero before a motion's first frame
+    def __init__(self, history: MotionHistory):
+        self.a = np.exp(-1.0 / np.asarray(history.frames, np.float64))[:, None]
+        self.state = np.zeros((len(history.frames), history.channels))  # zero before a motion's first frame
 
     @classmethod
-    def start(cls, history: Sequence[float]) -> "_History | None":
-        """The averages before a motion's first frame, or None without time constants."""
-        frames = check_history(history)
-        return cls(frames) if frames else None
+    def start(cls, history: MotionHistory | None) -> "_Averages | None":
+        """The averages before a motion's first frame, or None without history."""
+        return None if history is None else cls(history)
 
 
 def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, float] | None = None,
-              history: _History | None = None):
+              history: _Averages | None = None):
     """Features of frames with joint rotations ``R (T, J, 3, 3)`` (float64) and root positions ``trans
     (T, 3)``; ``before`` is the root position and heading of the frame before the first (``None``: the
     first frame is the motion's first, with no displacement). ``history``: None (no history features) or the
@@ -146,22 +166,24 @@ def _features(R: torch.Tensor, trans: np.ndarray, before: tuple[np.ndarray, floa
     tilt = Rh.transpose(0, 2, 1) @ root_rot  # heading removed: Rz(psi)^T R_root
     parts = [trans[:, 2:3], (disp[:, None] @ Rh)[:, 0], dpsi[:, None], matrix_to_sixd(torch.from_numpy(tilt)).numpy()]
     if history is not None:
-        parts.append(_history(np.concatenate([dpsi[:, None], disp[:, :2]], 1), Rh, history))
+        x = np.concatenate([dpsi[:, None], disp], 1)[:, : history.state.shape[1]]  # the vertical with 4 channels
+        parts.append(_history(x, Rh, history))
     joints = matrix_to_sixd(R[:, 1:]).numpy()
     return {"root": np.concatenate(parts, 1).astype(np.float32), "joints": joints.astype(np.float32)}, Rh, psi
 
 
-def _history(x: np.ndarray, Rh: np.ndarray, history: _History) -> np.ndarray:
-    """The history features ``(T, 3 K)`` of per-frame ``x (T, 3)`` (heading change, world displacement x, y),
-    from the averages after the frame before (updated in place): per time constant, the averaged heading change
-    and the averaged displacement turned into each frame's heading frame."""
-    a, state = history.a, history.state
-    out = np.empty((len(x), len(a), 3))
+def _history(x: np.ndarray, Rh: np.ndarray, averages: _Averages) -> np.ndarray:
+    """The history features ``(T, C K)`` of per-frame ``x (T, C)`` (heading change, world displacement x, y and
+    with ``C`` = 4 z), from the averages after the frame before (updated in place): per time constant, the averaged
+    heading change, the averaged horizontal displacement turned into each frame's heading frame, and the averaged
+    vertical displacement (the same in every heading frame)."""
+    a, state = averages.a, averages.state
+    out = np.empty((len(x), len(a), state.shape[1]))
     for t in range(len(x)):
         state *= a
         state += (1.0 - a) * x[t]
-        out[t, :, 0] = state[:, 0]
-        out[t, :, 1:] = state[:, 1:] @ Rh[t, :2, :2]  # world -> heading frame: v R (R^T v)
+        out[t] = state
+        out[t, :, 1:3] = state[:, 1:3] @ Rh[t, :2, :2]  # world -> heading frame: v R (R^T v)
     return out.reshape(len(x), -1)
 
 
@@ -169,13 +191,13 @@ class FeatureStream:
     """Motion features one frame at a time, equal to :func:`motion_features` (with the same ``history``) on
     the whole motion.
 
-    ``step(rotations (J, 3), translation (3,))`` returns ``root (11 + 3 K,)`` for ``K`` time constants
-    ``history``, ``joints (J-1, 6)`` and the frame's heading frame ``(rot (3, 3), origin (3,))``.
+    ``step(rotations (J, 3), translation (3,))`` returns ``root (R,)`` (``R`` = 11, or ``history.root_features``),
+    ``joints (J-1, 6)`` and the frame's heading frame ``(rot (3, 3), origin (3,))``.
     """
 
-    def __init__(self, history: Sequence[float] = ()):
+    def __init__(self, history: MotionHistory | None = None):
         self._before: tuple[np.ndarray, float] | None = None  # the previous frame's root position and heading
-        self._history = _History.start(history)  # the averages so far
+        self._history = _Averages.start(history)  # the averages so far
 
     def step(self, rotations: np.ndarray, translation: np.ndarray):
         rotations = np.asarray(rotations, np.float32)

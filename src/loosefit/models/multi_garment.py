@@ -150,7 +150,7 @@ class MultiGarmentData:
         self.sequences: list[GarmentSequences] = []
         self.graphs: list[GarmentGraph] = []
         for g in names:
-            data = GarmentSequences(self.store, g, split, bones=False, body=body, history=())
+            data = GarmentSequences(self.store, g, split, bones=False, body=body, history=None)
             bodies = {s.body_name for s in data.sequences}
             if len(bodies) != 1:
                 raise InputError(f"garment {g!r} is simulated on several bodies {sorted(bodies)}", self.store.path)

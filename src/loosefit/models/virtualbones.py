@@ -123,6 +123,7 @@ class VirtualBonesConfig:
             recent turning and velocity, exponential moving averages; ours, not in the paper). Measured on the
             demo's held-out spin (``benchmarks/README.md``, "Motion history").
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
+        history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
     """
 
     lf_hidden: int = 600
@@ -139,6 +140,7 @@ class VirtualBonesConfig:
     hf_target: str = "simulation"
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
+    history_vertical: bool = False
 
     def __post_init__(self):
         check_history(self.history_frames)
