@@ -10,8 +10,9 @@ from normalised motion features, frame by frame with a recurrent state::
 so that running ``T`` frames at once or one frame at a time (passing the state along) gives the same
 vertices. ``R`` is 11, or more with the motion's history (:class:`~loosefit.models.motion_features.MotionHistory`,
 the model's :attr:`GarmentModel.history`); a model reads the first :attr:`GarmentModel.root_features` of them, as
-many as it was trained with, so that a model without history can be given either. Everything a model needs at run time (rig, normalisation statistics, faces) is a buffer, so a
-checkpoint plus :meth:`GarmentModel.sizes` rebuild it without the dataset.
+many as it was trained with, so that a model without history can be given either. Everything a model needs at
+run time (rig, normalisation statistics, faces) is a buffer, so a checkpoint plus :meth:`GarmentModel.sizes`
+rebuild it without the dataset.
 """
 
 from __future__ import annotations
