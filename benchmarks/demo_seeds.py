@@ -3,12 +3,14 @@
 Trains the demo's methods (:data:`loosefit.demo.DEMO_TRAINING`, the settings ``make demo`` ships) on a demo store
 with ``train.seed`` set to each of ``--seeds`` (every other setting unchanged), two runs at a time on one thread
 each, and scores each run on the store's held-out spin as the demo does: RMSE against the simulation, against the
-mean of its reference runs, and the floor. Per method, also the mean and standard deviation over the seeds, and the
-RMSE of the seeds' averaged prediction. ``--set`` changes a setting of every run after the demo's (a variant of its
-training: ``--set train.lr=1e-3``), named by ``--tag``. Runs resume (``--runs``: ``<method>-<tag>-seed<k>`` folders).
+mean of its reference runs, and the floor (both None for a sequence without reference runs). Per method, also the
+mean and standard deviation over the seeds, and the RMSE of the seeds' averaged prediction. ``--data`` may be
+another store of the demo's garment (such as ``configs/datasets/memory.yaml``'s) and ``--sequence`` another of its
+held-out sequences (by default the first); the same runs score each sequence in turn. ``--set`` changes a setting
+of every run after the demo's (a variant of its training: ``--set train.lr=1e-3``), named by ``--tag``. Runs resume (``--runs``: ``<method>-<tag>-seed<k>`` folders).
 
 Run: .venv/bin/python benchmarks/demo_seeds.py --data demo_out/demo.zarr --runs RUNS [--methods virtualbones,jointnet]
-         [--seeds 0,1,2] [--set KEY=VALUE ...] [--tag demo] [--name demo-seeds]
+         [--seeds 0,1,2] [--set KEY=VALUE ...] [--tag demo] [--sequence NAME] [--name demo-seeds]
 (writes benchmarks/results/<name>.json)
 """
 
@@ -45,6 +47,7 @@ def main() -> None:
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--set", action="append", default=[], help="a setting of every run (KEY=VALUE), after the demo's")
     ap.add_argument("--tag", default="demo", help="names the runs of this variant")
+    ap.add_argument("--sequence", help="the held-out sequence scored (default: the store's first)")
     ap.add_argument("--name", default="demo-seeds")
     a = ap.parse_args()
     from loosefit.animate import Animator
@@ -53,7 +56,10 @@ def main() -> None:
     from loosefit.metrics.reference import floor_m, mean_run
 
     store = DatasetStore.open(a.data)
-    seq = store.sequence(store.sequence_names(split="test")[0])
+    held_out = store.sequence_names(split="test")
+    if a.sequence is not None and a.sequence not in held_out:
+        raise SystemExit(f"{a.data}: no held-out sequence {a.sequence!r} (has {held_out})")
+    seq = store.sequence(a.sequence or held_out[0])
     methods, seeds = a.methods.split(","), [int(s) for s in a.seeds.split(",")]
     runs = {(m, s): Path(a.runs) / f"{m}-{a.tag}-seed{s}" for m in methods for s in seeds}
     context = multiprocessing.get_context("spawn")
@@ -63,13 +69,14 @@ def main() -> None:
 
     gt, motion = np.asarray(seq.verts[:]), store.motion(seq.motion)
     runs_and_refs = [gt, *store.references(seq.name)]
-    mean = mean_run(runs_and_refs)
+    mean = mean_run(runs_and_refs) if len(runs_and_refs) > 1 else None  # no reference runs: no mean, no floor
     results = {"data": str(Path(a.data).resolve()), "sequence": seq.name, "changes": a.set,
-               "floor_mm": floor_m(runs_and_refs, mean) * 1e3,
+               "floor_mm": floor_m(runs_and_refs, mean) * 1e3 if mean is not None else None,
                "references": len(runs_and_refs) - 1, "methods": {}}
     for m in methods:
         predictions = {s: Animator(runs[m, s]).animate(motion) for s in seeds}
-        rows = {str(s): {"rmse_mm": rmse_mm(p, gt), "rmse_vs_mean_mm": rmse_mm(p, mean),
+        rows = {str(s): {"rmse_mm": rmse_mm(p, gt),
+                         "rmse_vs_mean_mm": rmse_mm(p, mean) if mean is not None else None,
                          "train_s_this_call": round(seconds[m, s], 1)} for s, p in predictions.items()}
         rmse = [r["rmse_mm"] for r in rows.values()]
         averaged = np.mean(list(predictions.values()), 0)
