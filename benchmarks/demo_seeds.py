@@ -7,7 +7,8 @@ mean of its reference runs, and the floor (both None for a sequence without refe
 mean and standard deviation over the seeds, and the RMSE of the seeds' averaged prediction. ``--data`` may be
 another store of the demo's garment (such as ``configs/datasets/memory.yaml``'s) and ``--sequence`` another of its
 held-out sequences (by default the first); the same runs score each sequence in turn. ``--set`` changes a setting
-of every run after the demo's (a variant of its training: ``--set train.lr=1e-3``), named by ``--tag``. Runs resume (``--runs``: ``<method>-<tag>-seed<k>`` folders).
+of every run after the demo's (a variant of its training: ``--set train.lr=1e-3``), named by ``--tag``. Runs resume
+(``--runs``: ``<method>-<tag>-seed<k>`` folders).
 
 Run: .venv/bin/python benchmarks/demo_seeds.py --data demo_out/demo.zarr --runs RUNS [--methods virtualbones,jointnet]
          [--seeds 0,1,2] [--set KEY=VALUE ...] [--tag demo] [--sequence NAME] [--name demo-seeds]
