@@ -55,3 +55,31 @@ def test_windows_cover_each_sequence_with_burn_in(tiny_train):
     for i, st in starts.items():
         n = tiny_train.sequences[i].num_frames
         assert st[0] == 0 and st[-1] == n - 24  # the first and last frames are both covered
+
+
+def test_mirrored_sequences_are_the_mirror_image_in_the_heading_frame(tiny_store, tmp_path):
+    """The heading frame of a mirrored motion is the mirror of the motion's, so a mirrored sequence's canonical
+    garment is the canonical garment mirrored (read through the same correspondence), and its turning is reversed.
+    Mirrored sequences come after the originals; bone transforms need a store prepared with ``mirror``."""
+    import shutil
+
+    import pytest
+
+    from loosefit.data.mirror import GarmentMirror
+    from loosefit.errors import InputError
+    from loosefit.models.dataset import GarmentSequences
+    from loosefit.rig.prepare import prepare
+
+    with pytest.raises(InputError, match="mirror=true"):
+        GarmentSequences(tiny_store, "skirt+average", "train", body=False, mirror=True)
+    path = tmp_path / "mirrored.zarr"
+    shutil.copytree(tiny_store, path)
+    prepare(path, bones=8, mirror=True, progress=False)
+    data = GarmentSequences(path, "skirt+average", "train", mirror=True)
+    half = len(data.sequences) // 2
+    mirror = GarmentMirror.build(data.garment.verts, data.faces)
+    for original, image in zip(data.sequences[:half], data.sequences[half:]):
+        assert image.name == original.name + "=mirrored" and image.bone_rot.shape == original.bone_rot.shape
+        np.testing.assert_allclose(image.verts, mirror(original.verts), atol=2e-5)
+        np.testing.assert_allclose(image.root[:, 4], -original.root[:, 4], atol=1e-5)  # heading change
+        np.testing.assert_allclose(image.body[:, :, 0].mean(), -original.body[:, :, 0].mean(), atol=2e-3)

@@ -170,3 +170,30 @@ def test_settings_are_a_typed_config_with_one_bone_default():
         prepare_settings({"bone": 3})
     with pytest.raises(InputError, match="'influences': expected an integer"):
         prepare_settings({"influences": "many"})
+
+
+def test_mirror_rigs_the_mirrored_training_sequences(dataset, prepared, tmp_path, body):
+    """With ``mirror``, each training sequence's mirror joins the rig: its bone transforms skin its low-frequency
+    frames with the error the summary reports over all frames, the statistics count both, test data stays out. A
+    rig prepared without it names the setting when asked for a mirror."""
+    from loosefit.data.mirror import GarmentMirror
+
+    with pytest.raises(InputError, match="mirror=true"):
+        load_bone_transforms(DatasetStore.open(prepared[0]), "skirt", "skirt-spin=mirrored")
+    path = tmp_path / "data.zarr"
+    shutil.copytree(dataset, path)
+    summary = prepare(path, body=body, mirror=True, **SETTINGS)
+    store = DatasetStore.open(path)
+    rig, garment = load_rig(store, "skirt"), store.garment("skirt")
+    mirror = GarmentMirror.build(garment.verts, garment.faces)
+    sq = n = 0.0
+    for name in ("skirt-spin", "skirt-walk"):
+        frames = store.sequence(name).verts[:]
+        for frames, key in ((frames, name), (mirror(frames), name + "=mirrored")):
+            low = frequency_split(frames, garment.faces, fixed=garment.pinned)[0]
+            sq += ((rig.skin(*load_bone_transforms(store, "skirt", key)) - low) ** 2).sum()
+            n += low.shape[0] * low.shape[1]
+    assert np.sqrt(sq / n) * 1e3 == pytest.approx(summary["garments"]["skirt"]["rmse_lf_mm"], rel=1e-4)
+    assert read_stats(store, "skirt")["garment_verts"].count == 2 * 75 * rig.num_verts
+    with pytest.raises(InputError, match="not a training sequence"):
+        load_bone_transforms(store, "skirt", "skirt-jump=mirrored")

@@ -22,6 +22,9 @@ import numpy as np
 from loosefit.errors import InputError
 from loosefit.motion.mirror import REFLECTION
 
+#: The name of a sequence's mirror: ``<sequence>=mirrored`` (for its bone transforms in a prepared store).
+MIRRORED = "=mirrored"
+
 
 @dataclass(frozen=True)
 class GarmentMirror:
@@ -59,3 +62,25 @@ class GarmentMirror:
         corners = frames[..., self.faces[self.face], :]  # (..., V, 3 corners, 3)
         points = np.einsum("vk,...vkd->...vd", self.bary, corners.astype(np.float64))
         return (points @ REFLECTION).astype(np.float32)
+
+
+class MirroredSequence:
+    """A stored sequence's mirror, read through a :class:`GarmentMirror` as it is read (``name``, ``num_frames``
+    and ``verts`` indexed like the stored array: ``verts[a:b]``, ``verts.oindex[frames]``)."""
+
+    def __init__(self, sequence, mirror: GarmentMirror):
+        self.name = sequence.name + MIRRORED
+        self.num_frames = sequence.num_frames
+        self.verts = _MirroredFrames(sequence.verts, mirror)
+
+
+class _MirroredFrames:
+    def __init__(self, frames, mirror: GarmentMirror):
+        self._frames, self._mirror = frames, mirror
+
+    def __getitem__(self, key) -> np.ndarray:
+        return self._mirror(np.asarray(self._frames[key]))
+
+    @property
+    def oindex(self) -> "_MirroredFrames":
+        return _MirroredFrames(self._frames.oindex, self._mirror)

@@ -91,11 +91,14 @@ class GarmentSequences:
         body: load the canonical collision proxy of the posed body.
         names: restrict to these sequence names.
         history: the motion's history among the root features (:class:`MotionHistory`; None: none).
+        mirror: also hold the left-right mirror of every sequence (:mod:`loosefit.data.mirror`: the motion mirrored,
+            the simulated garment read back through the garment's mirror correspondence), named
+            ``<sequence>=mirrored``; with ``bones``, the store must be prepared with ``mirror``.
     """
 
     def __init__(self, store, garment: str, split: str | None = "train", sim_params: dict | None = None,
                  bones: bool = True, body: bool = True, names: list[str] | None = None, smoothing: str | None = None,
-                 history: MotionHistory | None = MotionHistory()):
+                 history: MotionHistory | None = MotionHistory(), mirror: bool = False):
         self.history = history
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         if garment not in self.store.garment_names():
@@ -120,12 +123,25 @@ class GarmentSequences:
         if not selected:
             raise InputError(f"no {split or 'usable'} sequences of garment {garment!r} match", self.store.path)
         self.sequences = [self._load(n, bones, body) for n in selected]
+        if mirror:
+            from loosefit.data.mirror import GarmentMirror
 
-    def _load(self, name: str, bones: bool, body: bool) -> SequenceData:
+            self._mirror = GarmentMirror.build(self.garment.verts, self.faces)
+            self.sequences += [self._load(n, bones, body, mirrored=True) for n in selected]
+
+    def _load(self, name: str, bones: bool, body: bool, mirrored: bool = False) -> SequenceData:
+        from loosefit.data.mirror import MIRRORED
+        from loosefit.motion.mirror import joint_partners, mirror_motion
+
         seq = self.store.sequence(name)
         motion = self.store.motion(seq.motion)
-        rot, origin = heading_frames(motion)
         world = np.asarray(seq.verts[:], np.float32)
+        shape = AnnyShape.from_array(self.store.body(seq.body))
+        proxy = AnnyBody(shape, resolution="low") if body or mirrored else None
+        if mirrored:
+            motion = mirror_motion(motion, joint_partners(proxy.joint_names, proxy.rest_joints()))
+            world, name = self._mirror(world), name + MIRRORED
+        rot, origin = heading_frames(motion)
         verts = to_canonical(world, rot, origin)
         lf = frequency_split(verts, self.faces, self.smoothing, fixed=self.fixed)[0].astype(np.float32)
         feats = motion_features(motion, self.history)
@@ -136,13 +152,13 @@ class GarmentSequences:
             bone_rot, bone_trans = canonical_bones(*load_bone_transforms(self.store, self.garment_name, name), rot, origin)
         body_c = body_n = nearest = None
         if body:
-            proxy = AnnyBody(AnnyShape.from_array(self.store.body(seq.body)), resolution="low")
             posed = proxy.pose(motion)
             body_c = to_canonical(posed.verts, rot, origin)
             body_n = vertex_normals(body_c, proxy.faces).astype(np.float32)
             nearest = np.stack([cKDTree(b).query(v)[1] for b, v in zip(body_c, verts)]).astype(np.int64)
-        return SequenceData(name, seq.motion, seq.body, seq.sim_params, motion, feats["root"], feats["joints"],
-                            rot, origin, verts, lf, bone_rot, bone_trans, body_c, body_n, nearest)
+        return SequenceData(name, seq.motion + (MIRRORED if mirrored else ""), seq.body, seq.sim_params, motion,
+                            feats["root"], feats["joints"], rot, origin, verts, lf, bone_rot, bone_trans, body_c,
+                            body_n, nearest)
 
     def feature_stats(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Mean and std of ``root (R,)`` (R root features, with the history) and ``joints (J-1, 6)`` over all frames.

@@ -46,9 +46,12 @@ class MemoryWindowConfig(WindowConfig):
             truncated back-propagation through time (:class:`StreamWindows`): consecutive windows of
             ``window`` frames, each starting from the state the previous window of its sequence ended in,
             so the memory reaches back to the sequence's start; ``stride`` and ``burn_in`` are not used.
+        mirror: train on the left-right mirror of every training sequence too (``GarmentSequences``' ``mirror``;
+            the store prepared with the setting ``mirror``). Never validation or test sequences.
     """
 
     carry_state: bool = False
+    mirror: bool = False
 
     def __post_init__(self):
         if not self.carry_state:

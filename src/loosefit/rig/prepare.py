@@ -20,6 +20,7 @@ What it writes (``<g>`` a garment, ``<s>`` a training sequence)::
                                  full meshes, all training frames), seconds, fit_seconds, solver
         rest_verts (V,3), weight_indices (V,K), weight_values (V,K), bone_rest_positions (B,3)
         frames/<s>/rotations (T,B,3,3) float32, frames/<s>/translations (T,B,3) float32
+        frames/<s>=mirrored/...  the same for the sequence's left-right mirror (setting ``mirror``)
         stats/                   bone_rotation (B,3) axis-angle, bone_translation (B,3),
                                  garment_verts (3,), lf_verts (3,), hf_offset (3,), hf_offset_vertex (V,3)
     garments/<g>/descriptor/     spectral (z,) float32; attrs: status, settings
@@ -89,6 +90,9 @@ class PrepareSettings:
         fit_factors: factors of the fit attribute.
         seed: seeds the descriptor's first sample and the fit attribute's vertex selection.
         threads: OpenMP threads of the SSDR solver (1 is fastest on shared 2-core machines).
+        mirror: rig the left-right mirror of every training sequence too (:mod:`loosefit.data.mirror`): its
+            frames join the weight solve and its bone transforms are stored as ``frames/<s>=mirrored``, for
+            training with ``data.mirror``.
     """
 
     bones: int = DEFAULT_BONES
@@ -104,11 +108,13 @@ class PrepareSettings:
     fit_factors: int = DEFAULT_FACTORS
     seed: int = 0
     threads: int = DEFAULT_THREADS
+    mirror: bool = False
 
     def rig(self) -> dict:
-        """The settings a rig depends on."""
+        """The settings a rig depends on (``mirror`` only when set: rigs prepared before it existed stay done)."""
         keys = ("bones", "influences", "iterations", "transform_iterations", "max_solve_frames", "trans_affine")
-        return {k: getattr(self, k) for k in (*keys, "smoothing", "keep_pinned")}
+        rig = {k: getattr(self, k) for k in (*keys, "smoothing", "keep_pinned")}
+        return {**rig, "mirror": True} if self.mirror else rig
 
     def descriptor(self) -> dict:
         """The settings a spectral descriptor depends on."""
@@ -245,6 +251,11 @@ def _prepare_rig(
     fixed = garment.pinned if s.keep_pinned else None
     rest_lf = frequency_split(garment.verts, faces, s.smoothing, fixed=fixed)[0]
     seqs = [store.sequence(n) for n in names]
+    if s.mirror:
+        from loosefit.data.mirror import GarmentMirror, MirroredSequence
+
+        mirror = GarmentMirror.build(garment.verts, faces)
+        seqs += [MirroredSequence(q, mirror) for q in seqs]
     lengths = [q.num_frames for q in seqs]
     picks = [solve_frames(n, k) for n, k in zip(lengths, _solve_counts(lengths, s.max_solve_frames))]
     sample = np.concatenate([frequency_split(q.verts.oindex[p], faces, s.smoothing, fixed=fixed)[0]
@@ -418,12 +429,19 @@ def load_rig(store, garment: str) -> VirtualBoneRig:
 
 
 def load_bone_transforms(store, garment: str, sequence: str) -> tuple[np.ndarray, np.ndarray]:
-    """``rotations (T, B, 3, 3)`` and ``translations (T, B, 3)`` float32 of a training sequence's frames."""
+    """``rotations (T, B, 3, 3)`` and ``translations (T, B, 3)`` float32 of a training sequence's frames (or of its
+    mirror's, ``<sequence>=mirrored``, in a store prepared with ``mirror``)."""
     store = _open(store)
     group = f"garments/{garment}/rig"
     attrs = _require_done(store, group, f"the rig of garment {garment!r}")
-    if sequence not in attrs["sequences"]:
-        raise InputError(f"sequence {sequence!r} is not a training sequence of garment {garment!r}", store.path)
+    from loosefit.data.mirror import MIRRORED
+
+    base = sequence.removesuffix(MIRRORED)
+    if base not in attrs["sequences"]:
+        raise InputError(f"sequence {base!r} is not a training sequence of garment {garment!r}", store.path)
+    if base != sequence and not attrs.get("settings", {}).get("mirror", False):
+        raise InputError(f"the rig of garment {garment!r} has no mirrored sequences: prepare the store with the "
+                         "setting mirror=true to train on them", store.path)
     frames = f"{group}/frames/{sequence}"
     return store.read_array(frames, "rotations"), store.read_array(frames, "translations")
 
