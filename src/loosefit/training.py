@@ -23,6 +23,7 @@ import json
 from pathlib import Path
 
 from loosefit.config import load_config, save_config
+from loosefit.data.mirror import MIRRORED
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
@@ -114,14 +115,14 @@ def train_model(
     train_data = GarmentSequences(store, garment, "train", sim_params=sim_params, bones=cls.needs_rig,
                                   names=validation.train, history=history,
                                   mirror=getattr(getattr(cfg, "data", None), "mirror", False))
-    stored = set(store.sequence_names())  # recorded: the stored sequences (their mirrors train too, not recorded)
     val_data = None
     if validation.val:
         val_data = GarmentSequences(store, garment, None, sim_params=sim_params, bones=False, body=False,
                                     names=validation.val, history=history)
     model = cls.from_data(train_data, cfg.model)
     meta = {"method": method, "garment": garment, "data": str(Path(data).resolve()), "sizes": model.sizes(),
-            "sim_params": sim_params, "train_sequences": [s.name for s in train_data.sequences if s.name in stored],
+            "sim_params": sim_params,  # train_sequences: the stored ones (their mirrors, if any, train too)
+            "train_sequences": [s.name for s in train_data.sequences if not s.name.endswith(MIRRORED)],
             "val_sequences": [s.name for s in val_data.sequences] if val_data else [],
             "validation": validation.to_json(), "rig": train_data.rig_settings}
     _write_run(run, meta, cfg, resume, motion_range=trained)  # body-lbs follows any motion

@@ -22,11 +22,13 @@ from scipy.spatial import cKDTree
 from torch.utils.data import Dataset
 
 from loosefit.body import AnnyBody, AnnyShape
+from loosefit.data.mirror import MIRRORED, GarmentMirror
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.smoothing import frequency_split
 from loosefit.models.motion_features import MotionHistory, heading_frames, motion_features, to_canonical
+from loosefit.motion.mirror import joint_partners, mirror_motion
 from loosefit.motion.motion import Motion
 
 
@@ -124,15 +126,10 @@ class GarmentSequences:
             raise InputError(f"no {split or 'usable'} sequences of garment {garment!r} match", self.store.path)
         self.sequences = [self._load(n, bones, body) for n in selected]
         if mirror:
-            from loosefit.data.mirror import GarmentMirror
-
             self._mirror = GarmentMirror.build(self.garment.verts, self.faces)
             self.sequences += [self._load(n, bones, body, mirrored=True) for n in selected]
 
     def _load(self, name: str, bones: bool, body: bool, mirrored: bool = False) -> SequenceData:
-        from loosefit.data.mirror import MIRRORED
-        from loosefit.motion.mirror import joint_partners, mirror_motion
-
         seq = self.store.sequence(name)
         motion = self.store.motion(seq.motion)
         world = np.asarray(seq.verts[:], np.float32)

@@ -47,6 +47,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from loosefit.config import config_from_dict
+from loosefit.data.mirror import MIRRORED, GarmentMirror, MirroredSequence
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_axis_angle
@@ -252,8 +253,6 @@ def _prepare_rig(
     rest_lf = frequency_split(garment.verts, faces, s.smoothing, fixed=fixed)[0]
     seqs = [store.sequence(n) for n in names]
     if s.mirror:
-        from loosefit.data.mirror import GarmentMirror, MirroredSequence
-
         mirror = GarmentMirror.build(garment.verts, faces)
         seqs += [MirroredSequence(q, mirror) for q in seqs]
     lengths = [q.num_frames for q in seqs]
@@ -434,8 +433,6 @@ def load_bone_transforms(store, garment: str, sequence: str) -> tuple[np.ndarray
     store = _open(store)
     group = f"garments/{garment}/rig"
     attrs = _require_done(store, group, f"the rig of garment {garment!r}")
-    from loosefit.data.mirror import MIRRORED
-
     base = sequence.removesuffix(MIRRORED)
     if base not in attrs["sequences"]:
         raise InputError(f"sequence {base!r} is not a training sequence of garment {garment!r}", store.path)
