@@ -40,7 +40,7 @@ as they are, for a GPU); ``--set`` overrides come after the preset's.
 
 Run: .venv/bin/python benchmarks/accuracy.py --data DATA.zarr --runs RUNS [--garments skirt+average,...]
          [--set virtualbones:train.stages.low.epochs=2 ...] [--simparams DATA2.zarr] [--bones 80] [--name accuracy]
-         [--val-fraction 0.2]
+         [--val-fraction 0.2] [--mirror]
      (``--data`` may be left out with ``--simparams``: the ensemble alone)
 (writes benchmarks/results/<name>.json)
 """
@@ -404,6 +404,8 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], help="METHOD:section.key=value config override (repeatable)")
     parser.add_argument("--simparams", default=None, help="a simulated configs/datasets/simparams.yaml dataset")
     parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones per garment when preparing")
+    parser.add_argument("--mirror", action="store_true", help="prepare and train VirtualBones and JointNet on the "
+                        "left-right mirror of every training sequence too (loosefit.data.mirror)")
     parser.add_argument("--perturb-joint", default="LeftArm", help="the joint perturbed in the robustness test")
     parser.add_argument("--perturb-degrees", default="30,45", help="range of the perturbation angle, degrees")
     parser.add_argument("--name", default="accuracy", help="results name: benchmarks/results/<name>.json")
@@ -416,20 +418,23 @@ def main() -> None:
     if args.data is None and args.simparams is None:
         parser.error("give --data, --simparams or both")
     sets = parse_sets(args.set, args.preset)
+    if args.mirror:
+        for method in ("virtualbones", "jointnet"):
+            sets[method].append("data.mirror=true")
     degrees = tuple(float(d) for d in args.perturb_degrees.split(","))
     if len(degrees) != 2 or not 0 <= degrees[0] <= degrees[1]:
         parser.error("--perturb-degrees takes LOW,HIGH with 0 <= LOW <= HIGH")
     runs = Path(args.runs)
     started = time.perf_counter()
     results: dict = {"load_average_at_start": os.getloadavg(), "runs": str(runs.resolve()), "preset": args.preset,
-                     "overrides": sets,
+                     "overrides": sets, "mirror": args.mirror,
                      "checkpoint": "best by validation on val or carved training motions, never test motions "
                                    "(last for a run without validation)"}
     results["garments"], targets = {}, []
     if args.data is not None:
         data = Path(args.data)
         results["data"] = str(data.resolve())
-        results["prepare"] = prepare(data, bones=args.bones)
+        results["prepare"] = prepare(data, bones=args.bones, **({"mirror": True} if args.mirror else {}))
         store = DatasetStore.open(data)
         garments = args.garments.split(",") if args.garments else garments_with_test(store)
         missing = sorted(set(garments) - set(garments_with_test(store)))
