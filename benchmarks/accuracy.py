@@ -324,9 +324,8 @@ def garment_targets(garment: str, kind: str, result: dict) -> list[dict]:
               row["rmse_vs_mean_mm"] <= VS_MEAN_OVER_FLOOR * row["floor_mm"])
         for row in result["metrics"]["virtualbones"]["sequences"] if row.get("floor_mm")
     ]
-    vb_mm = m["virtualbones"]["rmse_mm"]
-    absolute = [entry(f"VirtualBones RMSE (mm) on a {kind}", vb_mm, VB_RMSE_MM[kind], vb_mm <= VB_RMSE_MM[kind])
-                ] if kind in VB_RMSE_MM else []
+    vb_mm, limit = m["virtualbones"]["rmse_mm"], VB_RMSE_MM.get(kind)
+    absolute = [] if limit is None else [entry(f"VirtualBones RMSE (mm) on a {kind}", vb_mm, limit, vb_mm <= limit)]
     return absolute + per_motion + [
         entry("VirtualBones RMSE / body-LBS RMSE", vb_lbs, VB_OVER_LBS, vb_lbs <= VB_OVER_LBS),
         entry("VirtualBones RMSE / its low-frequency RMSE (high-frequency module lowers RMSE)", hf_rmse, 1.0, hf_rmse < 1.0),
@@ -442,14 +441,14 @@ def main() -> None:
     runs = Path(args.runs)
     started = time.perf_counter()
     results: dict = {"load_average_at_start": os.getloadavg(), "runs": str(runs.resolve()), "preset": args.preset,
-                     "overrides": sets, "mirror": args.mirror,
+                     "overrides": sets,
                      "checkpoint": "best by validation on val or carved training motions, never test motions "
                                    "(last for a run without validation)"}
     results["garments"], targets = {}, []
     if args.data is not None:
         data = Path(args.data)
         results["data"] = str(data.resolve())
-        results["prepare"] = prepare(data, bones=args.bones, **({"mirror": True} if args.mirror else {}))
+        results["prepare"] = prepare(data, bones=args.bones, mirror=args.mirror)
         store = DatasetStore.open(data)
         garments = args.garments.split(",") if args.garments else garments_with_test(store)
         missing = sorted(set(garments) - set(garments_with_test(store)))
