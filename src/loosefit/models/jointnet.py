@@ -97,8 +97,11 @@ class JointNetConfig:
         euler_order: intrinsic axis order of the predicted Euler angles.
         lambda_norm: weight of the normal loss (not in the paper: the normal term is then roughly a
             third of the L1 vertex term, in metres, at a few millimetres of error).
-        lambda_sparse: weight of the L1 norm of ``relu(A)`` (not in the paper; at the initial
-            association, whose rows sum to 1, it costs ``B * 1e-5`` m, 0.8 mm of L1 for 80 bones).
+        lambda_sparse: weight of the L1 norm of ``relu(A)`` (not in the paper). At 1e-3 the arm joints feed
+            almost nothing to the skirt below the knees and an arm nudge moves the hem 0.24x as much as
+            VirtualBones', on every seed; at 1e-5 (the initial association, rows summing to 1, then costs 0.8 mm
+            of L1 for 80 bones) the association stayed dense and that ratio was 0.25x or 0.78x by the seed
+            (``benchmarks/jointnet_sparsity.py``).
         loss_frames: frames of each training window (after the burn-in) that the losses see, drawn at
             random each step (:meth:`GarmentModel.loss_frames`); 0 for all. Not in the paper: on a CPU
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
@@ -121,7 +124,7 @@ class JointNetConfig:
     bone_init: str = "torch"
     euler_order: str = "xyz"
     lambda_norm: float = 0.05
-    lambda_sparse: float = 1e-5
+    lambda_sparse: float = 1e-3
     loss_frames: int = 0
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
