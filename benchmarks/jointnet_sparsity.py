@@ -109,6 +109,7 @@ def main() -> None:
     ap.add_argument("--runs", required=True, help="folder of the runs (resumed)")
     ap.add_argument("--lambdas", default="1e-5,1e-4,3e-4,1e-3")
     ap.add_argument("--seeds", default="0,1")
+    ap.add_argument("--association", choices=("l1", "hoyer"), default="l1", help="JointNet's association penalty")
     ap.add_argument("--name", default="jointnet-sparsity")
     a = ap.parse_args()
     from loosefit.data import DatasetStore
@@ -118,10 +119,12 @@ def main() -> None:
     garment = store.sequence(names[0]).garment
     seeds, lambdas = [int(s) for s in a.seeds.split(",")], a.lambdas.split(",")
     runs = {("virtualbones", "demo", s): [] for s in seeds}
-    runs.update({("jointnet", lam, s): [f"model.lambda_sparse={lam}"] for lam in lambdas for s in seeds})
+    runs.update({("jointnet", lam, s): [f"model.lambda_sparse={lam}", f"model.association={a.association}"]
+                 for lam in lambdas for s in seeds})
+    kind = "sparse" if a.association == "l1" else a.association
 
     def folder(method, tag, seed):
-        return Path(a.runs) / (f"{method}-demo-seed{seed}" if tag == "demo" else f"{method}-sparse{tag}-seed{seed}")
+        return Path(a.runs) / (f"{method}-demo-seed{seed}" if tag == "demo" else f"{method}-{kind}{tag}-seed{seed}")
 
     with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:  # one thread each
         for job in [pool.submit(train, m, s, a.data, garment, str(folder(m, t, s)), tuple(changes))
@@ -131,6 +134,7 @@ def main() -> None:
     vb = {s: score(store, garment, folder("virtualbones", "demo", s), names) for s in seeds}
     vb_change = statistics.fmean(r["change_below_knees_mm"] for r in vb.values())
     results = {"data": str(Path(a.data).resolve()), "garment": garment, "sequences": names, "joint": JOINT,
+               "association": a.association,
                "degrees": list(DEGREES), "virtualbones": {"seeds": {str(s): r for s, r in vb.items()},
                                                           "change_below_knees_mm": vb_change},
                "jointnet": {}}

@@ -276,6 +276,28 @@ def test_overfits_a_tiny_sequence(tiny_train):
     assert rmse["stage1"] < 0.6 * start and rmse["stage2"] < 5.0, (start, rmse)
 
 
+def test_hoyer_association_is_a_weighted_mean_and_its_penalty_is_scale_free(tiny_train):
+    """``association="hoyer"``: rows of ``relu(A)`` normalised to sum 1; the penalty is the rows' L1/L2 - 1
+    (brute force per row), 0 for one joint; scaling ``A`` changes neither the penalty nor the garment."""
+    model = _model(tiny_train, dataclasses.replace(TINY, association="hoyer"))
+    with torch.no_grad():
+        model.association.copy_(torch.randn(model.association.shape))
+        model.association[0] = -1.0  # bone 0 listens to no joint
+        model.association[1] = -1.0
+        model.association[1, 3] = 0.7  # bone 1 listens to one joint
+    A = np.maximum(model.association.detach().numpy(), 0)
+    rows = model.association_matrix().detach().numpy()
+    assert np.allclose(rows[2:].sum(-1), 1, atol=1e-6) and (rows[0] == 0).all() and rows[1, 3] == pytest.approx(1)
+    expected = sum(r.sum() / np.linalg.norm(r) - 1 for r in A if r.any())
+    assert model.sparsity_loss().item() == pytest.approx(expected, rel=1e-5)
+    batch = _batch(tiny_train, 8)
+    before = model(batch["root"], batch["joints"])["verts"]
+    with torch.no_grad():
+        model.association.mul_(3.0)
+    assert model.sparsity_loss().item() == pytest.approx(expected, rel=1e-5)
+    assert torch.allclose(model(batch["root"], batch["joints"])["verts"], before, atol=1e-6)
+
+
 def test_the_shipped_sparsity_weight_prunes_the_association(tiny_train):
     """JointNet Eq. 8 through the ReLU: at the shipped ``lambda_sparse`` entries of ``A`` cross zero and stop
     feeding their bone, so a bone listens to fewer joints than without the term (same seed, same steps)."""

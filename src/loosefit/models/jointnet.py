@@ -102,6 +102,11 @@ class JointNetConfig:
             VirtualBones', on every seed; at 1e-5 (the initial association, rows summing to 1, then costs 0.8 mm
             of L1 for 80 bones) the association stayed dense and that ratio was 0.25x or 0.78x by the seed
             (``benchmarks/jointnet_sparsity.py``).
+        association: ``"l1"`` (the paper): bones read ``relu(A) psi`` and the loss holds ``||relu(A)||_1``;
+            or ``"hoyer"`` (ours): bones read each row of ``relu(A)`` normalised to sum 1 (a weighted mean of
+            joint features, on the same scale however few joints a bone listens to) and the loss holds the
+            rows' ``||r||_1 / ||r||_2 - 1`` (0 for a bone that listens to one joint), which, unlike the L1,
+            cannot be lowered by shrinking ``A`` while the next layers grow.
         loss_frames: frames of each training window (after the burn-in) that the losses see, drawn at
             random each step (:meth:`GarmentModel.loss_frames`); 0 for all. Not in the paper: on a CPU
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
@@ -125,6 +130,7 @@ class JointNetConfig:
     euler_order: str = "xyz"
     lambda_norm: float = 0.05
     lambda_sparse: float = 1e-3
+    association: str = "l1"
     loss_frames: int = 0
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
@@ -145,6 +151,8 @@ class JointNetConfig:
             raise InputError(f"bone_init must be 'zero' or 'torch', got {self.bone_init!r}")
         if not (self.fourier_scale > 0 and self.lambda_norm >= 0 and self.lambda_sparse >= 0 and self.loss_frames >= 0):
             raise InputError("fourier_scale must be > 0, lambda_norm, lambda_sparse and loss_frames >= 0")
+        if self.association not in ("l1", "hoyer"):
+            raise InputError(f"association must be 'l1' or 'hoyer', got {self.association!r}")
 
 
 def _paper_training() -> TrainConfig:
@@ -371,8 +379,12 @@ class JointNet(GarmentModel):
     # ------------------------------------------------------------------ prediction
 
     def association_matrix(self) -> torch.Tensor:
-        """``relu(A)`` ``(B, J_s)``: how much each bone listens to each selected joint (``self.joint_names``)."""
-        return torch.relu(self.association)
+        """``(B, J_s)``: how much each bone listens to each selected joint (``self.joint_names``): ``relu(A)``, or
+        its rows normalised to sum 1 (``association="hoyer"``; a bone with no joint left reads zeros)."""
+        A = torch.relu(self.association)
+        if self.config.association == "hoyer":
+            return A / A.sum(-1, keepdim=True).clamp_min(1e-12)
+        return A
 
     def fourier_features(self) -> torch.Tensor:
         """Garment prior ``(B, K)`` from the bone rest positions (JointNet Eq. 3)."""
@@ -442,8 +454,13 @@ class JointNet(GarmentModel):
         return [p for n, p in self.named_parameters() if not n.startswith(("psd_mlp.", "psd_basis"))]
 
     def sparsity_loss(self) -> torch.Tensor:
-        """``||relu(A)||_1`` (JointNet Eq. 8)."""
-        return self.association_matrix().sum()
+        """``||relu(A)||_1`` (JointNet Eq. 8), or with ``association="hoyer"`` the sum over bones of
+        ``||r||_1 / ||r||_2 - 1`` of each row ``r`` of ``relu(A)`` (0 for a bone with one joint or none)."""
+        A = torch.relu(self.association)
+        if self.config.association == "hoyer":
+            l1, l2 = A.sum(-1), A.norm(dim=-1)
+            return torch.where(l2 > 0, l1 / l2.clamp_min(1e-12) - 1, torch.zeros_like(l1)).sum()
+        return A.sum()
 
     @staticmethod
     def mask(batch: dict) -> torch.Tensor:
