@@ -110,6 +110,7 @@ def main() -> None:
     ap.add_argument("--lambdas", default="1e-5,1e-4,3e-4,1e-3")
     ap.add_argument("--seeds", default="0,1")
     ap.add_argument("--association", choices=("l1", "hoyer"), default="l1", help="JointNet's association penalty")
+    ap.add_argument("--radius", type=float, default=0.0, help="JointNet's association_radius (metres; 0: random start)")
     ap.add_argument("--name", default="jointnet-sparsity")
     a = ap.parse_args()
     from loosefit.data import DatasetStore
@@ -119,9 +120,9 @@ def main() -> None:
     garment = store.sequence(names[0]).garment
     seeds, lambdas = [int(s) for s in a.seeds.split(",")], a.lambdas.split(",")
     runs = {("virtualbones", "demo", s): [] for s in seeds}
-    runs.update({("jointnet", lam, s): [f"model.lambda_sparse={lam}", f"model.association={a.association}"]
-                 for lam in lambdas for s in seeds})
-    kind = "sparse" if a.association == "l1" else a.association
+    runs.update({("jointnet", lam, s): [f"model.lambda_sparse={lam}", f"model.association={a.association}",
+                                        f"model.association_radius={a.radius}"] for lam in lambdas for s in seeds})
+    kind = ("sparse" if a.association == "l1" else a.association) + (f"-r{a.radius:g}-" if a.radius > 0 else "")
 
     def folder(method, tag, seed):
         return Path(a.runs) / (f"{method}-demo-seed{seed}" if tag == "demo" else f"{method}-{kind}{tag}-seed{seed}")
@@ -134,7 +135,7 @@ def main() -> None:
     vb = {s: score(store, garment, folder("virtualbones", "demo", s), names) for s in seeds}
     vb_change = statistics.fmean(r["change_below_knees_mm"] for r in vb.values())
     results = {"data": str(Path(a.data).resolve()), "garment": garment, "sequences": names, "joint": JOINT,
-               "association": a.association,
+               "association": a.association, "association_radius": a.radius,
                "degrees": list(DEGREES), "virtualbones": {"seeds": {str(s): r for s, r in vb.items()},
                                                           "change_below_knees_mm": vb_change},
                "jointnet": {}}

@@ -15,7 +15,8 @@ from loosefit.config import load_config
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
 from loosefit.models.dataset import GarmentSequences, WindowDataset
-from loosefit.models.jointnet import Config, JointGRU, JointNet, JointNetConfig, neighbour_table, select_joints
+from loosefit.models.jointnet import (Config, JointGRU, JointNet, JointNetConfig, nearby_association, neighbour_table,
+                                     select_joints)
 from loosefit.models.streams import MemoryWindowConfig
 from loosefit.train import StageConfig, TrainConfig, seed_everything, train
 from loosefit.train.losses import normal_loss
@@ -296,6 +297,17 @@ def test_hoyer_association_is_a_weighted_mean_and_its_penalty_is_scale_free(tiny
         model.association.mul_(3.0)
     assert model.sparsity_loss().item() == pytest.approx(expected, rel=1e-5)
     assert torch.allclose(model(batch["root"], batch["joints"])["verts"], before, atol=1e-6)
+
+
+def test_nearby_association_is_a_normalised_gaussian_of_the_rest_distance():
+    bones = np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 1.4]], np.float32)
+    joints = np.array([[0.1, 0.0, 0.5], [0.0, 0.0, 0.9], [0.2, 0.0, 1.4]], np.float32)
+    A = nearby_association(bones, joints, radius=0.2)
+    d2 = ((bones[:, None] - joints[None]) ** 2).sum(-1)
+    expected = np.exp(-d2 / 0.08)
+    np.testing.assert_allclose(A, expected / expected.sum(1, keepdims=True), rtol=1e-5)
+    # far from every joint (10 m), a row still sums to 1 instead of underflowing to zeros
+    assert nearby_association(bones + 10.0, joints, radius=0.05).sum(1) == pytest.approx([1.0, 1.0])
 
 
 def test_the_shipped_sparsity_weight_prunes_the_association(tiny_train):

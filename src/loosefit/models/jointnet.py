@@ -107,6 +107,10 @@ class JointNetConfig:
             joint features, on the same scale however few joints a bone listens to) and the loss holds the
             rows' ``||r||_1 / ||r||_2 - 1`` (0 for a bone that listens to one joint), which, unlike the L1,
             cannot be lowered by shrinking ``A`` while the next layers grow.
+        association_radius: 0 (the default): ``A`` starts random, rows summing to 1 on average; > 0 (metres,
+            ours): each row starts as a Gaussian of the rest distance from the bone to each selected joint with
+            that radius, summing to 1, so that a bone first listens to the joints near it and the sparsity term
+            prunes the far ones first (the paper does not say how ``A`` starts).
         loss_frames: frames of each training window (after the burn-in) that the losses see, drawn at
             random each step (:meth:`GarmentModel.loss_frames`); 0 for all. Not in the paper: on a CPU
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
@@ -131,6 +135,7 @@ class JointNetConfig:
     lambda_norm: float = 0.05
     lambda_sparse: float = 1e-3
     association: str = "l1"
+    association_radius: float = 0.0
     loss_frames: int = 0
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
@@ -151,6 +156,8 @@ class JointNetConfig:
             raise InputError(f"bone_init must be 'zero' or 'torch', got {self.bone_init!r}")
         if not (self.fourier_scale > 0 and self.lambda_norm >= 0 and self.lambda_sparse >= 0 and self.loss_frames >= 0):
             raise InputError("fourier_scale must be > 0, lambda_norm, lambda_sparse and loss_frames >= 0")
+        if not self.association_radius >= 0:
+            raise InputError(f"association_radius must be >= 0 metres, got {self.association_radius}")
         if self.association not in ("l1", "hoyer"):
             raise InputError(f"association must be 'l1' or 'hoyer', got {self.association!r}")
 
@@ -190,6 +197,14 @@ def select_joints(names: list[str], config: JointNetConfig) -> list[int]:
     if unknown:
         raise InputError(f"joints {unknown} are not non-root joints of the rig ({names[1:]})")
     return [j for j, n in enumerate(names) if j > 0 and n in config.joints]
+
+
+def nearby_association(bones: np.ndarray, joints: np.ndarray, radius: float) -> np.ndarray:
+    """``(B, J_s)`` initial association: ``exp(-d^2 / (2 radius^2))`` of the rest distance ``d`` from each bone
+    ``bones (B, 3)`` to each joint ``joints (J_s, 3)`` (metres), rows normalised to sum 1."""
+    d2 = ((bones[:, None].astype(np.float64) - joints[None]) ** 2).sum(-1)
+    w = np.exp(-(d2 - d2.min(1, keepdims=True)) / (2 * radius ** 2))  # shifted: no row underflows to zeros
+    return (w / w.sum(1, keepdims=True)).astype(np.float32)
 
 
 def neighbour_table(selected: list[int], parents: list[int]) -> np.ndarray:
@@ -375,6 +390,10 @@ class JointNet(GarmentModel):
             for name, values in (("euler", euler), ("offset", offset)):
                 getattr(self, f"{name}_mean").copy_(torch.from_numpy(values.mean(0)))
                 getattr(self, f"{name}_std").copy_(torch.from_numpy(np.maximum(values.std(0), MIN_OUTPUT_STD)))
+            if self.config.association_radius > 0:
+                self.association.copy_(torch.from_numpy(nearby_association(
+                    rig.bone_rest_positions, training_body(data).rest_joints()[self.selected],
+                    self.config.association_radius)))
 
     # ------------------------------------------------------------------ prediction
 
