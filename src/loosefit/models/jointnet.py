@@ -10,8 +10,9 @@ windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints 
    fixed count). One GRU per joint (hidden 600) and one linear layer per joint (480) give its feature
    ``psi_j (K,)``. The ``J_s`` GRUs run together as one grouped GRU (:class:`JointGRU`).
 2. **Association.** A learnt matrix ``A (B, J_s)`` (``B`` virtual bones) through a ReLU maps joint
-   features to bones: ``relu(A) @ psi``. An L1 penalty keeps it sparse, so a bone listens to few joints
-   (an arm does not swing the hem of a skirt).
+   features to bones: ``relu(A) @ psi`` (JointNet Eq. 2), its rows normalised to sum 1 by default. A sparsity
+   penalty (Eq. 8's L1, or by default the rows' L1/L2) keeps it sparse, so a bone listens to few joints (an arm
+   does not swing the hem of a skirt).
 3. **Garment prior.** Fourier features of each bone's rest position, ``[alpha_m cos(2 pi c_m . p),
    alpha_m sin(2 pi c_m . p)]`` with fixed random frequencies ``c_m`` and learnt ``alpha_m``, are
    concatenated with the bone features, as the paper's Fig. 2 and Sec. 3.2 text have it (``F`` reads
@@ -37,6 +38,10 @@ Departures from the paper, named:
   tilt), its own rotation, its parent's and those of all its selected children, as 6D rotations; the paper
   concatenates the root position, the joint's axis-angle and those of its two skeleton neighbours;
 - the Euler angles and offsets are standardised by the rig's training statistics (the paper does not say);
+- the association (``association="hoyer"``, the default): bones read the rows of ``relu(A)`` normalised to sum 1
+  and the sparsity term is the rows' L1/L2 (the paper: ``relu(A)`` and its L1), and ``A`` starts from the bones'
+  rest distances to the joints (``association_radius``); ``association="l1"``, ``association_radius=0`` is the
+  paper's form;
 - ``L_cloth`` (JointNet Eq. 7) is averaged over vertices and coordinates rather than summed over the mesh, so
   that the loss weights (not in the paper) do not depend on the vertex count.
 """
@@ -97,17 +102,17 @@ class JointNetConfig:
         euler_order: intrinsic axis order of the predicted Euler angles.
         lambda_norm: weight of the normal loss (not in the paper: the normal term is then roughly a
             third of the L1 vertex term, in metres, at a few millimetres of error).
-        lambda_sparse: weight of the L1 norm of ``relu(A)`` (not in the paper). At 1e-3 the arm joints feed
-            almost nothing to the skirt below the knees and an arm nudge moves the hem 0.24x as much as
-            VirtualBones', on every seed; at 1e-5 (the initial association, rows summing to 1, then costs 0.8 mm
-            of L1 for 80 bones) the association stayed dense and that ratio was 0.25x or 0.78x by the seed
-            (``benchmarks/jointnet_sparsity.py``).
+        lambda_sparse: weight of the association's sparsity term (not in the paper). Shipped: 1e-4 with the
+            ``"hoyer"`` term and ``association_radius`` 0.2 m, where an arm nudge moved the skirt below the knees
+            0.06-0.12x as much as VirtualBones' on both seeds tried; the paper's L1 at 1e-5 left the association
+            dense and that ratio a draw of the seed (0.25x or 0.78x), and at 1e-3 it shrank ``A`` so far that on
+            80 bones training lagged (``benchmarks/jointnet_sparsity.py``, ``benchmarks/README.md``).
         association: ``"l1"`` (the paper): bones read ``relu(A) psi`` and the loss holds ``||relu(A)||_1``;
             or ``"hoyer"`` (ours): bones read each row of ``relu(A)`` normalised to sum 1 (a weighted mean of
             joint features, on the same scale however few joints a bone listens to) and the loss holds the
             rows' ``||r||_1 / ||r||_2 - 1`` (0 for a bone that listens to one joint), which, unlike the L1,
             cannot be lowered by shrinking ``A`` while the next layers grow.
-        association_radius: 0 (the default): ``A`` starts random, rows summing to 1 on average; > 0 (metres,
+        association_radius: 0: ``A`` starts random, rows summing to 1 on average; > 0 (metres,
             ours): each row starts as a Gaussian of the rest distance from the bone to each selected joint with
             that radius, summing to 1, so that a bone first listens to the joints near it and the sparsity term
             prunes the far ones first (the paper does not say how ``A`` starts).
@@ -133,9 +138,9 @@ class JointNetConfig:
     bone_init: str = "torch"
     euler_order: str = "xyz"
     lambda_norm: float = 0.05
-    lambda_sparse: float = 1e-3
-    association: str = "l1"
-    association_radius: float = 0.0
+    lambda_sparse: float = 1e-4
+    association: str = "hoyer"
+    association_radius: float = 0.2
     loss_frames: int = 0
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
