@@ -1,4 +1,4 @@
-"""JointNet's association sparsity: the weight of ``||relu(A)||_1`` (JointNet Eq. 6, 8) against its robustness to
+"""JointNet's association sparsity: the weight of its sparsity term (JointNet Eq. 6, 8) against its robustness to
 an irrelevant joint and its held-out accuracy, seed by seed.
 
 For every ``--lambdas`` value and ``--seeds`` seed, JointNet is trained as the demo trains it
@@ -9,15 +9,20 @@ of the store (RMSE against the simulation and against the mean of its reference 
 benchmark's robustness test (``accuracy.py``: the left arm turned by a smooth 30-45 degree offset, the mean
 change of the garment below the knees). The association itself is summarised by
 
-- ``association_l1``: ``||relu(A)||_1`` over all bones and joints;
+- ``association_l1``: the sum of the association bones read over all bones and joints (``||relu(A)||_1``; with
+  ``--association hoyer`` the rows sum to 1, so it counts the bones that listen to any joint);
 - ``nudged_weight_below_knees``: the association weight that the garment below the knees receives from the
   perturbed joint and its two skeleton neighbours (the joints whose GRU inputs the perturbation changes),
   averaged over those vertices through the skinning weights: ``mean_v sum_b W[v, b] relu(A)[b, j]``;
 - ``change_without_nudged_association_mm``: the robustness change with those joints' association columns set
   to zero, so the rest of the change is their joint-specific PSD.
 
+``--association`` and ``--radius`` set the association's form and start (``JointNetConfig.association``,
+``association_radius``) of every JointNet run; the run folders are named after them
+(``jointnet-hoyer-r0.2-1e-4-seed0``).
+
 Run: .venv/bin/python benchmarks/jointnet_sparsity.py --data memory.zarr --runs RUNS [--lambdas 1e-5,1e-4,3e-4,1e-3]
-         [--seeds 0,1] [--name jointnet-sparsity]
+         [--seeds 0,1] [--association l1|hoyer] [--radius 0.2] [--name jointnet-sparsity]
 (writes benchmarks/results/<name>.json)
 """
 
