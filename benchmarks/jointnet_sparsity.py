@@ -15,7 +15,8 @@ change of the garment below the knees). The association itself is summarised by
   perturbed joint and its two skeleton neighbours (the joints whose GRU inputs the perturbation changes),
   averaged over those vertices through the skinning weights: ``mean_v sum_b W[v, b] relu(A)[b, j]``;
 - ``change_without_nudged_association_mm``: the robustness change with those joints' association columns set
-  to zero, so the rest of the change is their joint-specific PSD.
+  to zero, so the rest of the change is their joint-specific PSD (with ``--association hoyer`` the rows are then
+  normalised again over the joints left).
 
 ``--association`` and ``--radius`` set the association's form and start (``JointNetConfig.association``,
 ``association_radius``) of every JointNet run; the run folders are named after them
@@ -58,8 +59,9 @@ def association_summary(model, below: np.ndarray) -> dict:
             "weight_below_knees": float(reach.sum()), "nonzero_fraction": float((A > 0).float().mean())}
 
 
-def score(store, garment: str, run: Path, names: list[str]) -> dict:
-    """Held-out RMSE per sequence (against the simulation and the runs' mean) and the robustness change."""
+def score(store, garment: str, run: Path, names: list[str], below: np.ndarray) -> dict:
+    """Held-out RMSE per sequence (against the simulation and the runs' mean) and the robustness change;
+    ``below (V,)``: the garment vertices below the knees."""
     from accuracy import robustness
     from loosefit.animate import Animator
     from loosefit.metrics.errors import rmse_mm
@@ -77,11 +79,7 @@ def score(store, garment: str, run: Path, names: list[str]) -> dict:
     out["change_below_knees_mm"] = robustness(store, garment, {"m": animator}, names, JOINT, DEGREES)[
         "mean_change_mm"]["m"]
     if animator.method == "jointnet":
-        from accuracy import knee_height, sequence_body
-
         model = animator.model
-        body = sequence_body(store, names[0], store.motion(store.sequence(names[0]).motion).rig)
-        below = store.garment(garment).verts[:, 2] < knee_height(body)
         out.update(association_summary(model, below))
         with_columns = model.association.data.clone()
         model.association.data[:, [model.joint_names.index(n) for n in NUDGED]] = -1.0  # relu -> 0
@@ -137,7 +135,11 @@ def main() -> None:
                     for (m, t, s), changes in runs.items()]:
             job.result()
 
-    vb = {s: score(store, garment, folder("virtualbones", "demo", s), names) for s in seeds}
+    from accuracy import knee_height, sequence_body
+
+    body = sequence_body(store, names[0], store.motion(store.sequence(names[0]).motion).rig)
+    below = store.garment(garment).verts[:, 2] < knee_height(body)
+    vb = {s: score(store, garment, folder("virtualbones", "demo", s), names, below) for s in seeds}
     vb_change = statistics.fmean(r["change_below_knees_mm"] for r in vb.values())
     results = {"data": str(Path(a.data).resolve()), "garment": garment, "sequences": names, "joint": JOINT,
                "association": a.association, "association_radius": a.radius,
@@ -145,7 +147,7 @@ def main() -> None:
                                                           "change_below_knees_mm": vb_change},
                "jointnet": {}}
     for lam in lambdas:
-        rows = {s: score(store, garment, folder("jointnet", lam, s), names) for s in seeds}
+        rows = {s: score(store, garment, folder("jointnet", lam, s), names, below) for s in seeds}
         results["jointnet"][lam] = {"seeds": {str(s): r for s, r in rows.items()},
                                     "summary": summarise(list(rows.values()), vb_change)}
         print(lam, {k: round(v["mean"], 2) for k, v in results["jointnet"][lam]["summary"].items()}, flush=True)

@@ -262,8 +262,8 @@ def test_paper_widths_train_stably_with_the_paper_optimiser(tiny_train, tiny_tes
 
 
 def test_overfits_a_tiny_sequence(tiny_train):
-    """Capacity: the association's L1 is left out, since at the shipped weight it outweighs a few millimetres of
-    vertex error on 8 bones (measured: 6.1 mm after stage 2 with it)."""
+    """Capacity: the association's L1 is left out, since at ``TINY``'s weight (1e-3) it outweighs a few millimetres
+    of vertex error on 8 bones (measured: 6.1 mm after stage 2 with it)."""
     model = _model(tiny_train, dataclasses.replace(TINY, lambda_sparse=0.0))
     batch = _batch(tiny_train, 16)
     start = model.validation_metrics(batch, "stage1")["rmse_mm"]
