@@ -208,18 +208,26 @@ def perturb_joint(motion: Motion, joint: int, degrees: tuple[float, float], seed
     return dataclasses.replace(motion, rotations=rotations, name=f"{motion.name}+perturbed")
 
 
+def below_knees(store: DatasetStore, garment: str, name: str) -> tuple[AnnyBody, float, np.ndarray]:
+    """The body of sequence ``name``, its knee height (m) and the rest vertices of ``garment`` below it ``(V,)``.
+
+    Raises:
+        InputError: no vertex of the garment is below the knees.
+    """
+    body = sequence_body(store, name, store.motion(store.sequence(name).motion).rig)
+    knee = knee_height(body)
+    below = store.garment(garment).verts[:, 2] < knee
+    if not below.any():
+        raise InputError(f"garment {garment!r} has no vertex below the knees (z < {knee:.3f} m)", store.path)
+    return body, knee, below
+
+
 def robustness(store: DatasetStore, garment: str, animators: dict, names: list[str], joint: str,
                degrees: tuple[float, float]) -> dict:
     """Mean displacement (mm) of the garment below the knees caused by perturbing ``joint``, per method."""
-    rest = store.garment(garment).verts
-    first = store.sequence(names[0])
-    body = sequence_body(store, names[0], store.motion(first.motion).rig)
+    body, knee, below = below_knees(store, garment, names[0])
     if joint not in body.joint_names:
         raise InputError(f"--perturb-joint {joint!r} is not a joint of the body rig ({body.joint_names})")
-    knee = knee_height(body)
-    below = rest[:, 2] < knee
-    if not below.any():
-        raise InputError(f"garment {garment!r} has no vertex below the knees (z < {knee:.3f} m)", store.path)
     change = {m: [] for m in animators}
     frames = []
     for i, name in enumerate(names):

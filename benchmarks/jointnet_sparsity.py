@@ -135,10 +135,9 @@ def main() -> None:
                     for (m, t, s), changes in runs.items()]:
             job.result()
 
-    from accuracy import knee_height, sequence_body
+    from accuracy import below_knees
 
-    body = sequence_body(store, names[0], store.motion(store.sequence(names[0]).motion).rig)
-    below = store.garment(garment).verts[:, 2] < knee_height(body)
+    below = below_knees(store, garment, names[0])[2]
     vb = {s: score(store, garment, folder("virtualbones", "demo", s), names, below) for s in seeds}
     vb_change = statistics.fmean(r["change_below_knees_mm"] for r in vb.values())
     results = {"data": str(Path(a.data).resolve()), "garment": garment, "sequences": names, "joint": JOINT,
