@@ -219,11 +219,12 @@ LEGS = ["LeftUpLeg", "RightUpLeg", "LeftLeg", "RightLeg", "LowerBack"]
 
 
 def _paper_steps(data, test, optimizer: str, steps: int = 12, seed: int = 0):
-    """``steps`` optimiser steps of JointNet's first stage at the paper's widths (GRU 600, K 480, F 1024-2048-1024)
-    and learning rate (1e-3, batches of 8 windows) with ``optimizer``; returns the step losses and the skinned RMSE
-    (mm) of the first test sequence before and after."""
+    """``steps`` optimiser steps of JointNet's first stage at the paper's widths (GRU 600, K 480, F 1024-2048-1024),
+    association (its L1 form, a random start) and learning rate (1e-3, batches of 8 windows) with ``optimizer``;
+    returns the step losses and the skinned RMSE (mm) of the first test sequence before and after."""
     config = Config()
-    model = _model(data, dataclasses.replace(config.model, joints=LEGS, loss_frames=4), seed)
+    model = _model(data, dataclasses.replace(config.model, joints=LEGS, loss_frames=4, association="l1",
+                                             association_radius=0.0), seed)
     windows = WindowDataset(data, 8, 6, 2)
     kind, settings = OPTIMIZERS[optimizer]
     optimizer = kind(list(model.stage_parameters("stage1")), lr=config.train.lr, **settings)
@@ -252,11 +253,13 @@ def test_paper_widths_train_stably_with_the_paper_optimiser(tiny_train, tiny_tes
     loss jumps forty-fold and its held-out error grows by half (the contrast shows that the bounds can fail)."""
     losses, before, after = _paper_steps(tiny_train, tiny_test, "rmsprop")
     assert all(math.isfinite(v) for v in losses)
-    # measured: losses 0.043 .. 0.072 (one batch), last four 0.038 against 0.045; held-out 67.0 -> 64.9 mm
+    # measured: losses 0.033 .. 0.054, last four 0.041 against 0.046; held-out 66.5 -> 72.9 mm (seed 1: 67.0 ->
+    # 79.7). Twelve steps move the held-out error by a few mm either way; the shipped association's start adds
+    # its own spread (66.5 -> 77-90 mm at radii 0.2-0.6 on seed 0), so this optimiser test holds the paper's.
     assert max(losses) < 3 * losses[0], losses
     assert np.mean(losses[-4:]) < np.mean(losses[:4]), losses
     assert after < 1.3 * before, (before, after)
-    # measured: 0.043 -> 1.84 at the second step; held-out 67.0 -> 98.7 mm
+    # measured: 0.044 -> 1.79 at the second step; held-out 66.5 -> 203.8 mm
     uncorrected, _, after_uncorrected = _paper_steps(tiny_train, tiny_test, "rmsprop-torch")
     assert max(uncorrected) > 10 * uncorrected[0] and after_uncorrected > 1.3 * before, uncorrected
 
@@ -328,7 +331,7 @@ def test_the_shipped_sparsity_term_prunes_the_association(tiny_train):
             model.training_loss(batch, "stage1")[0].backward()
             optimizer.step()
         nonzero[weight] = float((model.association_matrix() > 0).float().mean())
-    # measured: 38 % of the entries positive without the term, 16 % with it
+    # measured: 46 % of the entries positive without the term, 20 % with it
     assert 0 < nonzero[shipped.lambda_sparse] < 0.6 * nonzero[0.0], nonzero
 
 

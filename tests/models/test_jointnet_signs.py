@@ -101,4 +101,4 @@ def test_cloth_loss_is_the_mean_absolute_coordinate_error():
     pred[0, :, 2, 1] = -0.03
     assert float(vertex_l1(pred, target)) == pytest.approx(0.03 / 15, rel=1e-6)
     c = JointNetConfig()
-    assert (c.lambda_norm, c.lambda_sparse, c.association, c.association_radius) == (0.05, 1e-4, "hoyer", 0.2)
+    assert (c.lambda_norm, c.lambda_sparse, c.association, c.association_radius) == (0.05, 1e-4, "hoyer", 0.4)
