@@ -104,7 +104,7 @@ class JointNetConfig:
             third of the L1 vertex term, in metres, at a few millimetres of error).
         lambda_sparse: weight of the association's sparsity term (not in the paper). Shipped: 1e-4 with the
             ``"hoyer"`` term and ``association_radius`` 0.4 m, where an arm nudge moved the skirt below the knees
-            0.05-0.12x as much as VirtualBones' on the three seeds tried; the paper's L1 at 1e-5 left the association
+            0.06-0.12x as much as VirtualBones' on the three seeds tried; the paper's L1 at 1e-5 left the association
             dense and that ratio a draw of the seed (0.25x or 0.78x), and at 1e-3 it shrank ``A`` so far that on
             80 bones training lagged (``benchmarks/jointnet_sparsity.py``, ``benchmarks/README.md``).
         association: ``"l1"`` (the paper): bones read ``relu(A) psi`` and the loss holds ``||relu(A)||_1``;
