@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from loosefit.errors import InputError
-from loosefit.metrics.reference import References, floor_m, mean_run, rmse_m
+from loosefit.metrics.reference import BandedReferences, References, floor_m, mean_run, rmse_m
 
 T, V = 5, 7
 
@@ -51,6 +51,33 @@ def test_no_prediction_beats_the_floor_over_the_runs():
         over_runs = np.mean([rmse_m(p, r) ** 2 for r in runs])
         assert over_runs == pytest.approx(rmse_m(p, refs.mean) ** 2 + refs.floor_m ** 2, rel=1e-9)
         assert np.sqrt(over_runs) >= refs.floor_m
+
+
+def vertex_mean_split(x):
+    """A linear split with orthogonal bands: each frame's mean over the vertices, and the rest."""
+    low = np.broadcast_to(x.mean(axis=-2, keepdims=True), x.shape)
+    return low, x - low
+
+
+def test_bands_split_the_error_and_the_floor():
+    """The runs differ by offsets common to every vertex (all low band); a prediction off the mean by such an
+    offset c and by a zero-mean pattern w: low band |c|, high band rms(w), and all^2 = low^2 + high^2."""
+    m, runs = synthetic_runs()
+    bands = BandedReferences(runs[0], runs[1:], vertex_mean_split)
+    w = np.random.default_rng(2).normal(0.0, 0.002, (T, V, 3))
+    w -= w.mean(axis=-2, keepdims=True)
+    c = np.array([0.0, 0.0, 0.002])
+    score = bands.score(m + c + w)
+    assert score["low"].floor_mm == pytest.approx(np.sqrt(12.5), rel=1e-9)
+    assert score["high"].floor_mm == pytest.approx(0.0, abs=1e-9)
+    assert score["low"].rmse_vs_mean_mm == pytest.approx(2.0, rel=1e-9)
+    assert score["high"].rmse_vs_mean_mm == pytest.approx(1e3 * np.sqrt(np.mean(np.sum(w * w, -1))), rel=1e-9)
+    assert score["low"].rmse_mm == pytest.approx(np.sqrt(4.0 + 9.0), rel=1e-9)  # |c - a| against the base
+    for target in ("rmse_mm", "rmse_vs_mean_mm"):
+        whole = getattr(score["all"], target)
+        assert whole ** 2 == pytest.approx(getattr(score["low"], target) ** 2 + getattr(score["high"], target) ** 2,
+                                           rel=1e-9)
+    assert score["all"] == References(runs[0], runs[1:]).score(m + c + w)
 
 
 def test_bad_runs_are_refused():

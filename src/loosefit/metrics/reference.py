@@ -118,3 +118,34 @@ class References:
         """``pred (T, V, 3)`` metres against the base run and the mean run, beside the floor."""
         return ReferenceScore(1000.0 * rmse_m(pred, self.base), 1000.0 * rmse_m(pred, self.mean), self.floor_mm,
                               self.count)
+
+
+class BandedReferences:
+    """The runs of one sequence split into a smooth and a detail band, each with its own mean and floor.
+
+    A model's error can be chaos it cannot predict or a shape it gets wrong; splitting by frequency says in
+    which part of the garment it is. With the split of ``loosefit prepare`` (the rig's smoothing,
+    :func:`loosefit.geometry.smoothing.frequency_split`) the ``"low"`` band is the smooth garment (VirtualBones'
+    bones, paper Sec. 3.2) and ``"high"`` the wrinkles. ``split`` must be linear with ``low + high = x``, so the
+    band of an error is the error of the band: ``low(pred) - low(run)``.
+
+    Args:
+        base: the base run ``(T, V, 3)`` metres.
+        references: the reference runs ``(K, T, V, 3)`` (K >= 1).
+        split: ``x (T, V, 3) -> (low, high)``, each ``(T, V, 3)``.
+    """
+
+    BANDS = ("all", "low", "high")
+
+    def __init__(self, base, references, split):
+        self.split = split
+        parts = [split(run) for run in (np.asarray(base), *np.asarray(references))]
+        self.bands = {"all": References(base, references)}
+        for i, band in enumerate(self.BANDS[1:]):
+            self.bands[band] = References(parts[0][i], np.stack([p[i] for p in parts[1:]]))
+
+    def score(self, pred) -> dict[str, ReferenceScore]:
+        """``pred (T, V, 3)`` metres scored in every band (:data:`BANDS`) against the base and the mean run."""
+        low, high = self.split(np.asarray(pred))
+        return {"all": self.bands["all"].score(pred), "low": self.bands["low"].score(low),
+                "high": self.bands["high"].score(high)}
