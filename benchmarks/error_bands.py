@@ -30,23 +30,23 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _common import save_results  # noqa: E402
+from accuracy import held_out_sequences  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.errors import InputError  # noqa: E402
 from loosefit.geometry.smoothing import frequency_split  # noqa: E402
 from loosefit.metrics.reference import BandedReferences, rmse_m  # noqa: E402
+from loosefit.rig.prepare import prepared_split  # noqa: E402
 
 
 def band_split(store: DatasetStore, garment: str):
-    """``split(x (T, V, 3)) -> (low, high)`` with the garment's rig settings (smoothing preset, pinned vertices)."""
-    attrs = store.read_attrs(f"garments/{garment}/rig")
-    if attrs.get("status") != "done":
+    """``split(x (T, V, 3)) -> (low, high)`` as the garment's rig was prepared (smoothing preset, pinned vertices)."""
+    settings, smoothing, fixed = prepared_split(store, garment)
+    if not settings:
         raise InputError(f"garment {garment} has no prepared rig (run loosefit prepare first)", store.path)
-    settings = attrs["settings"]
-    g = store.garment(garment)
-    fixed = g.pinned if settings.get("keep_pinned", False) else None
-    return lambda x: frequency_split(x, g.faces, settings["smoothing"], fixed=fixed)
+    faces = store.garment(garment).faces
+    return lambda x: frequency_split(x, faces, smoothing, fixed=fixed)
 
 
 def sequence_bands(store: DatasetStore, name: str, animators: dict, split) -> dict:
@@ -81,7 +81,7 @@ def main() -> None:
         parser.error("--run takes LABEL=RUN_FOLDER")
     runs = dict(r.split("=", 1) for r in args.run)
     animators = {label: Animator(Path(path)) for label, path in runs.items()}
-    names = [n for n in store.sequence_names(split="test") if store.sequence(n).garment == args.garment]
+    names = held_out_sequences(store, args.garment)
     started = time.perf_counter()
     figures = {}
     for name in names:

@@ -30,6 +30,7 @@ from loosefit.geometry.smoothing import frequency_split
 from loosefit.models.motion_features import MotionHistory, heading_frames, motion_features, to_canonical
 from loosefit.motion.mirror import joint_partners, mirror_motion
 from loosefit.motion.motion import Motion
+from loosefit.rig.prepare import load_bone_transforms, prepared_split
 
 
 #: Smallest std used to normalise each feature group: root features mix metres per frame and radians
@@ -108,14 +109,9 @@ class GarmentSequences:
         self.garment_name = garment
         self.garment = self.store.garment(garment)
         self.faces = self.garment.faces
-        try:  # the split follows the rig's settings in every split, with or without bone transforms
-            settings = self.store.read_attrs(f"garments/{garment}/rig").get("settings", {})
-        except InputError:
-            settings = {}  # not prepared (yet): the default split
-        self.rig_settings = dict(settings)  # how the store was prepared ({} without a rig)
-        self.smoothing = smoothing or settings.get("smoothing", "virtualbones")
-        # as the rig was prepared (stores prepared before the setting existed smoothed pinned vertices too)
-        self.fixed = self.garment.pinned if settings.get("keep_pinned", False) else None
+        # the split follows the rig's settings in every split, with or without bone transforms
+        self.rig_settings, prepared_smoothing, self.fixed = prepared_split(self.store, garment)
+        self.smoothing = smoothing or prepared_smoothing
         selected = [
             n for n in self.store.sequence_names(split=split)
             if self.store.sequence(n).garment == garment
@@ -144,8 +140,6 @@ class GarmentSequences:
         feats = motion_features(motion, self.history)
         bone_rot = bone_trans = None
         if bones:
-            from loosefit.rig.prepare import load_bone_transforms
-
             bone_rot, bone_trans = canonical_bones(*load_bone_transforms(self.store, self.garment_name, name), rot, origin)
         body_c = body_n = nearest = None
         if body:

@@ -427,6 +427,18 @@ def load_rig(store, garment: str) -> VirtualBoneRig:
     return rig
 
 
+def prepared_split(store: DatasetStore, garment: str) -> tuple[dict, str, np.ndarray | None]:
+    """How ``garment``'s rig was prepared: its settings (``{}`` when it was not), and the low/high-frequency split
+    it used, as :func:`loosefit.geometry.smoothing.frequency_split`'s smoothing preset and ``fixed (V,)`` vertices
+    (None: none; stores prepared before ``keep_pinned`` existed smoothed the pinned vertices too)."""
+    try:
+        settings = dict(store.read_attrs(f"garments/{garment}/rig").get("settings", {}))
+    except InputError:
+        settings = {}  # not prepared (yet): the default split
+    fixed = store.garment(garment).pinned if settings.get("keep_pinned", False) else None
+    return settings, settings.get("smoothing", "virtualbones"), fixed
+
+
 def load_bone_transforms(store, garment: str, sequence: str) -> tuple[np.ndarray, np.ndarray]:
     """``rotations (T, B, 3, 3)`` and ``translations (T, B, 3)`` float32 of a training sequence's frames (or of its
     mirror's, ``<sequence>=mirrored``, in a store prepared with ``mirror``)."""
