@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import weakref
 
 import numpy as np
 import torch
@@ -82,6 +83,7 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
+from loosefit.models.layers import native
 
 #: Slope of GAT's LeakyReLU on the attention scores (Velickovic et al. 2018).
 SCORE_SLOPE = 0.2
@@ -95,6 +97,11 @@ NORMS = ("graph", "node")
 PROJECT_FIRST_HEADS = 4
 #: On the CPU every concatenated layer projects first and :func:`neighbour_sum` runs as one ``embedding_bag``.
 CPU_EMBEDDING_BAG = True
+#: How many :func:`bag_rows` indices the CPU keeps (tables, batch sizes and head counts together).
+BAG_ROWS_KEPT = 32
+_BAG_ROWS: dict = {}
+#: Up to this ``alpha`` the normalised scores' exponentials stay far inside float32's range (e^40 ~ 2e17).
+MAX_BOUNDED_ALPHA = 40.0
 
 
 def attention_table(faces: np.ndarray, num_verts: int) -> tuple[np.ndarray, np.ndarray]:
@@ -149,20 +156,89 @@ def attention_entropy(P: torch.Tensor, valid: torch.Tensor) -> tuple[torch.Tenso
     return entropy, valid.sum(1).double().log().mean().to(P.dtype)
 
 
+def bag_rows(table: torch.Tensor, batch: int, heads: int) -> torch.Tensor:
+    """``rows (B, V, H, D)`` int64: ``(b V + table[v, d]) H + h``, the row of ``(b, table[v, d], h)`` in a ``(B, V, H,
+    ...)`` tensor flattened over its first three axes. On the CPU it is kept per table (while that tensor lives and
+    is not modified), batch and head count: building it is a quarter of a concatenated layer's frame at SwinGar's
+    sizes, and a garment's table does not change."""
+    key = (id(table), table.device, batch, heads)
+    hit = _BAG_ROWS.get(key)
+    if hit is not None and hit[0]() is table and hit[1] == table._version:
+        return hit[2]
+    V = table.shape[0]
+    rows = ((torch.arange(batch, device=table.device)[:, None, None, None] * V + table[None, :, None, :]) * heads
+            + torch.arange(heads, device=table.device)[None, None, :, None])
+    if table.device.type == "cpu" and not torch.compiler.is_compiling():
+        while len(_BAG_ROWS) >= BAG_ROWS_KEPT:
+            _BAG_ROWS.pop(next(iter(_BAG_ROWS)))  # the oldest first
+        _BAG_ROWS[key] = (weakref.ref(table, lambda _, key=key: _BAG_ROWS.pop(key, None)), table._version, rows)
+    return rows
+
+
+def gather_slots(u: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
+    """``out[b, v, h, d] = u[b, table[v, d], h]``: per-vertex, per-head values ``u (B, V, H)`` at the table's slots ->
+    ``(B, V, H, D)`` (the slots last, as the attention's passes read them)."""
+    B, V, H = u.shape
+    return u.index_select(1, table.reshape(-1)).view(B, V, -1, H).transpose(2, 3).contiguous()
+
+
+def neighbourhood_mean(x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
+                       gathered: torch.Tensor | None = None) -> torch.Tensor:
+    """``mu (B, V, C)``: the mean of ``x (B, V, C)`` over each vertex's valid slots (itself and its neighbours); read
+    off ``gathered`` (``x`` at the slots, ``(B, V, D, C)``) when there is one (a batched product), else as a
+    neighbour sum (no ``(B, V, D, C)`` tensor)."""
+    weight = valid.to(x.dtype) / valid.sum(1, keepdim=True).to(x.dtype)  # (V, D)
+    if gathered is not None:
+        return (weight[None, :, None, :] @ gathered)[:, :, 0]
+    B, V, D = x.shape[0], x.shape[1], table.shape[1]
+    return neighbour_sum(x[:, :, None], table, weight[None, :, :, None].expand(B, V, D, 1))[:, :, 0]
+
+
+def lipschitz(c_dst: torch.Tensor, c_src: torch.Tensor) -> torch.Tensor:
+    """``(H,)``: the norm of each head's score function ``[c_dst, c_src]`` (SwinGar Eq. 4), kept off 0 (the square
+    root's gradient there is infinite)."""
+    return (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(NORM_EPS * NORM_EPS).sqrt()
+
+
+def centred_norms(x: torch.Tensor, mu: torch.Tensor, table: torch.Tensor, inplace: bool) -> torch.Tensor:
+    """``out[b, v, d] = ||x[b, table[v, d]] - mu[b, v]||``: features ``x (B, V, C)`` at the table's slots, less a
+    per-vertex centre ``mu (B, V, C)`` -> ``(B, V, D)``, slot by slot (no ``(B, V, D, C)`` tensor). ``inplace`` (no
+    autograd): every slot in one reused buffer; a fresh ``(B, V, C)`` tensor per slot and pass made this ten times
+    slower at SwinGar's 256 channels (9k vertices, one CPU thread)."""
+    columns = table.T.contiguous()
+    if not inplace:
+        return torch.stack([torch.linalg.vector_norm(x.index_select(1, c) - mu, dim=-1) for c in columns], 2)
+    buffer, out = torch.empty_like(x), x.new_empty(*x.shape[:2], len(columns))
+    for d, c in enumerate(columns):
+        torch.linalg.vector_norm(torch.index_select(x, 1, c, out=buffer).sub_(mu), dim=-1, out=out[..., d])
+    return out
+
+
+def slot_softmax(s: torch.Tensor, slots: torch.Tensor, bounded: bool, inplace: bool) -> torch.Tensor:
+    """The softmax of scores ``s (B, V, H, D)`` over their last axis (the table's slots), zero where ``slots (1, V,
+    1, D)`` is False. Written out because torch's CPU softmax over a short last axis is ~15x slower than these
+    passes (SwinGar, 9k vertices, 10 slots: 37 ms against 4). ``bounded``: the scores lie in ``[-alpha, alpha]``
+    (GAT-LN), so no maximum is subtracted first; ``inplace``: overwrite ``s`` (no autograd)."""
+    if not bounded:  # a padded slot holds the vertex's own score: a finite shift like any other
+        s = s.sub_(s.amax(-1, keepdim=True)) if inplace else s - s.amax(-1, keepdim=True)
+    e = s.exp_().masked_fill_(~slots, 0.0) if inplace else s.exp().masked_fill(~slots, 0.0)
+    return e.div_(e.sum(-1, keepdim=True)) if inplace else e / e.sum(-1, keepdim=True)
+
+
 def neighbour_sum(y: torch.Tensor, table: torch.Tensor, P: torch.Tensor) -> torch.Tensor:
     """``out[b, v, h] = sum_d P[b, v, d, h] y[b, table[v, d], h]``: each head's features ``y (B, V, H, C)`` summed
     over the table's slots (``table (V, D)``) with that head's weights ``P (B, V, D, H)`` -> ``(B, V, H, C)``.
 
     On the CPU one ``embedding_bag`` per call (a bag per vertex and head, its slots' rows weighted: no gathered
     ``(B, V, D, H, C)`` tensor and no temporary per slot; 4-11 times faster than the loop below on SwinGar's
-    layers, one thread); elsewhere the slots one by one (the shapes fixed by the table, for CUDA graphs)."""
+    layers, one thread; ``P`` is read without a copy where it is a view of a ``(B, V, H, D)`` tensor, as
+    :meth:`GATLN.attention` returns it); elsewhere the slots one by one (the shapes fixed by the table, for CUDA
+    graphs)."""
     B, V, H, C = y.shape
     D = table.shape[1]
     if y.device.type == "cpu" and CPU_EMBEDDING_BAG:
-        rows = (torch.arange(B)[:, None, None, None] * V + table[None, :, None, :]) * H \
-            + torch.arange(H)[None, None, :, None]  # (B, V, H, D): row of y.view(B * V * H, C)
         weights = P.permute(0, 1, 3, 2).reshape(B * V * H, D)
-        out = nn.functional.embedding_bag(rows.view(B * V * H, D), y.reshape(B * V * H, C),
+        out = nn.functional.embedding_bag(bag_rows(table, B, H).view(B * V * H, D), y.reshape(B * V * H, C),
                                           per_sample_weights=weights, mode="sum")
         return out.view(B, V, H, C)
     return neighbour_sum_by_slot(y, table, P)
@@ -224,11 +300,12 @@ class GATLN(nn.Module):
             self.weight = nn.Parameter(torch.empty(in_channels, out_channels))
             self.att_dst = nn.Parameter(torch.empty(out_channels))
             self.att_src = nn.Parameter(torch.empty(out_channels))
-            # (H, out) 1 where the channel belongs to the head, and (out,) each channel's head; set by
-            # reset_parameters (the layer may be built undrawn)
+            # (H, out) 1 where the channel belongs to the head, (out,) each channel's place among the heads padded
+            # to equal widths, and (out,) each channel's head; set by reset_parameters (the layer may be built undrawn)
             self.register_buffer("head_mask", torch.empty(heads, out_channels), persistent=False)
             # each channel's place when every head is padded to the widest head's width (heads side by side)
             self.register_buffer("padded_index", torch.empty(out_channels, dtype=torch.int64), persistent=False)
+            self.register_buffer("head_index", torch.empty(out_channels, dtype=torch.int64), persistent=False)
         else:
             self.weight = nn.Parameter(torch.empty(in_channels, heads * out_channels))
             self.att_dst = nn.Parameter(torch.empty(heads, out_channels))
@@ -241,6 +318,7 @@ class GATLN(nn.Module):
         """Glorot uniform weights (per head for the projection and the attention vectors), zero bias."""
         if self.concat:
             with torch.no_grad():
+                self.head_index.copy_(torch.from_numpy(self._head_of))
                 self.head_mask.copy_(torch.from_numpy(
                     self._head_of[None] == np.arange(self.heads)[:, None]).to(self.head_mask))
                 sizes = np.bincount(self._head_of, minlength=self.heads)
@@ -290,34 +368,30 @@ class GATLN(nn.Module):
         """Attention weights ``P (B, V, D, H)`` (rows sum to 1 over the valid slots) of ``x (B, V, in)``;
         ``gathered``: ``x`` at the table's slots ``(B, V, D, in)`` when already computed.
 
-        Every step has shapes fixed by the table (no data-dependent indexing, no host synchronisation), so the
-        layer can be captured in a CUDA graph."""
+        ``P`` is a view of a ``(B, V, H, D)`` tensor: the scores are laid out with the slots last, where the row norms
+        and the softmax run over contiguous memory. Without autograd the score passes run in place (SwinGar's
+        streaming frame on the CPU spends most of its time in passes over these ``V D H`` scores). Every step has
+        shapes fixed by the table (no data-dependent indexing, no host synchronisation), so the layer can be captured
+        in a CUDA graph."""
         c_dst, c_src = self.score_vectors()
-        H = c_dst.shape[0]
-        flat = table.reshape(-1)
-        mask = valid[None, :, :, None]
+        inplace = not torch.is_grad_enabled()
+        slots = valid[None, :, None, :]  # (1, V, 1, D)
         if self.centred:
-            weight = valid.to(x.dtype) / valid.sum(1, keepdim=True).to(x.dtype)  # (V, D): the neighbourhood mean's weights
-            # (B, V, in): each neighbourhood's mean feature; from the gathered features when there are (a batched
-            # product reads them once), else as a neighbour sum (no (B, V, D, in) tensor)
-            if gathered is not None:
-                mu = (weight[None, :, None, :] @ gathered)[:, :, 0]
-            else:
-                B, V, D = x.shape[0], x.shape[1], table.shape[1]
-                mu = neighbour_sum(x[:, :, None], table, weight[None, :, :, None].expand(B, V, D, 1))[:, :, 0]
+            mu = neighbourhood_mean(x, table, valid, gathered)
             # c . (x_j - mu_i): the scores of the centred features (the projections are linear)
-            u_dst = (x - mu) @ c_dst.T  # (B, V, H)
-            u_src = (x @ c_src.T).index_select(1, flat).unflatten(1, table.shape) - (mu @ c_src.T)[:, :, None]
-            s = u_dst[:, :, None] + u_src  # (B, V, D, H)
+            s = gather_slots(x @ c_src.T, table)  # (B, V, H, D): c_src . x_j
+            centre = ((x - mu) @ c_dst.T - mu @ c_src.T)[..., None]  # (B, V, H, 1)
+            s = s.add_(centre) if inplace else s + centre
         else:
+            H = c_dst.shape[0]
             u = x @ torch.cat([c_dst, c_src]).T  # (B, V, 2H)
-            s = u[:, :, None, :H] + u[..., H:].index_select(1, flat).unflatten(1, table.shape)
+            s = gather_slots(u[..., H:].contiguous(), table)
+            s = s.add_(u[..., :H, None]) if inplace else s + u[..., :H, None]
         if self.alpha is not None:
-            s = s * mask
-            # square roots clamped away from 0: their gradient there is infinite (a zero recurrent state)
-            tiny = NORM_EPS * NORM_EPS
-            rows = s.square().sum(2).clamp_min(tiny).sqrt()  # (B, V, H): each vertex's score row norm
-            lip = (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(tiny).sqrt()  # (H,)
+            s = s.masked_fill_(~slots, 0.0) if inplace else s * slots
+            # norms clamped away from 0: the square root's gradient there is infinite (a zero recurrent state)
+            rows = torch.linalg.vector_norm(s, dim=-1).clamp_min(NORM_EPS)  # (B, V, H): each vertex's score row norm
+            lip = lipschitz(c_dst, c_src)
             if self.centred and gathered is not None:
                 # ||x_j - mu_i|| read off the gathered features without writing their differences (the clamp keeps
                 # the norms off 0, where the square root's gradient is infinite)
@@ -325,17 +399,40 @@ class GATLN(nn.Module):
                 feats = torch.cdist(gathered.reshape(B * V, D, C), mu.reshape(B * V, 1, C),
                                     compute_mode="donot_use_mm_for_euclid_dist").view(B, V, D).clamp_min(NORM_EPS)
             elif self.centred:  # slot by slot: each slot's neighbours gathered and measured, no (B, V, D, in) tensor
-                columns = table.T.contiguous()
-                feats = torch.stack([torch.linalg.vector_norm(x.index_select(1, columns[d]) - mu, dim=-1)
-                                     for d in range(table.shape[1])], 2).clamp_min(NORM_EPS)
+                feats = centred_norms(x, mu, table, inplace).clamp_min(NORM_EPS)
             else:
-                feats = x.square().sum(-1).clamp_min(tiny).sqrt()[:, table]  # (B, V, D) ||x_j||
+                feats = x.square().sum(-1).clamp_min(NORM_EPS * NORM_EPS).sqrt()[:, table]  # (B, V, D) ||x_j||
             feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
             if self.norm == "graph":
                 rows, feat = rows.amax(1, keepdim=True), feat.amax(1, keepdim=True)  # (B, 1, H), (B, 1)
-            s = self.alpha * s / torch.maximum(rows, feat[..., None] * lip)[:, :, None]
-        s = nn.functional.leaky_relu(s, SCORE_SLOPE).masked_fill(~mask, float("-inf"))
-        return torch.softmax(s, 2)
+            scale = (self.alpha / torch.maximum(rows, feat[..., None] * lip))[..., None]  # (B, V or 1, H, 1)
+            s = s.mul_(scale) if inplace else s * scale
+        s = nn.functional.leaky_relu_(s, SCORE_SLOPE) if inplace else nn.functional.leaky_relu(s, SCORE_SLOPE)
+        return slot_softmax(s, slots, self.alpha is not None and self.alpha <= MAX_BOUNDED_ALPHA, inplace).transpose(2, 3)
+
+    def _native_applies(self, x: torch.Tensor) -> bool:
+        """Whether :meth:`_native_forward` computes this call: the default design (concatenated heads, centred scores,
+        per-node norm, bounded scores) in float32 on the CPU, with no gradient wanted and no attention recorded."""
+        if not (self.concat and self.centred and self.norm == "node" and self.alpha is not None
+                and self.alpha <= MAX_BOUNDED_ALPHA and x.device.type == "cpu" and x.dtype == torch.float32
+                and self._record is None and native.enabled()):
+            return False
+        if torch.is_grad_enabled() and (x.requires_grad or self.weight.requires_grad):
+            return False
+        return not torch.compiler.is_compiling() and native.library() is not None
+
+    def _native_forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+        """The layer on ``x (B, V, in)`` through the fused CPU kernel (:mod:`loosefit.models.layers.native`): the
+        products and the neighbourhood means here, the attention and the aggregation in one sweep there."""
+        if table.numel() and (int(table.min()) < 0 or int(table.max()) >= x.shape[1]):
+            raise InputError(f"the attention table indexes vertices outside [0, {x.shape[1]})")
+        with torch.no_grad():
+            c_dst, c_src = self.score_vectors()
+            mu = neighbourhood_mean(x, table, valid)
+            centre = (x - mu) @ c_dst.T - mu @ c_src.T  # (B, V, H)
+            return native.gat_ln_concat_node_centred(
+                x, mu, x @ self.weight, x @ c_src.T, centre, lipschitz(c_dst, c_src), table, valid, self.head_index,
+                self.bias, self.activation == "tanh", self.alpha, SCORE_SLOPE, NORM_EPS)
 
     def forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         """``x (..., V, in)``, ``table``/``valid (V, D)`` from :func:`attention_table` -> ``(..., V, out)``."""
@@ -343,6 +440,8 @@ class GATLN(nn.Module):
             raise InputError(f"GAT-LN expects (..., {table.shape[0]}, {self.in_channels}) features, got {tuple(x.shape)}")
         lead = x.shape[:-2]
         x = x.reshape(-1, *x.shape[-2:])
+        if self._native_applies(x):
+            return self._native_forward(x, table, valid).reshape(*lead, x.shape[-2], self.out_channels)
         flat = table.reshape(-1)
         gathered = None
         if not self.concat or (self.heads <= PROJECT_FIRST_HEADS and not (CPU_EMBEDDING_BAG and x.device.type == "cpu")):
@@ -358,15 +457,17 @@ class GATLN(nn.Module):
             # heads padded to equal widths (zero columns), so that a head's weight broadcasts over its channels
             weight = self.weight.new_zeros(self.in_channels, H * C).index_copy(1, self.padded_index, self.weight)
             y = x @ weight  # (B, V, H * C)
-            acc = neighbour_sum(y.view(B, V, H, C), table, P)
-            out = acc.flatten(-2).index_select(-1, self.padded_index) + self.bias
+            out = neighbour_sum(y.view(B, V, H, C), table, P).flatten(-2)
+            if H * C != self.out_channels:  # drop the padding (a gather: index_select on the last axis is ~10x slower)
+                out = torch.gather(out, -1, self.padded_index.expand(B, V, -1))
+            out = out + self.bias if torch.is_grad_enabled() else out.add_(self.bias)
         else:
             # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j): aggregate the inputs per head, then one product with
             # the heads' stacked projections (averaged heads: H * out columns, all of them used)
             z = torch.einsum("bvdh,bvdc->bvhc", P, gathered)  # (B, V, H, in)
             out = z.flatten(-2) @ self.projection() + self.bias
         if self.activation == "tanh":
-            out = torch.tanh(out)
+            out = torch.tanh(out) if torch.is_grad_enabled() else out.tanh_()
         return out.reshape(*lead, *out.shape[-2:])
 
 
