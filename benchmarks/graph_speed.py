@@ -11,7 +11,8 @@ similar loads.
    frame per call with the recurrent state, the median of ``frames`` calls after ``warmup``) and batch 16
    (16 frames of one motion in one call from a cold start). The paper: about 26 ms a frame (38.1 fps)
    streaming and 307.8 fps in batches of 10 for a 10k-vertex garment on an RTX 4090 (SwinGar Sec. V-D,
-   Table V).
+   Table V). On the CPU the streaming frames run with GAT-LN's fused kernel (:mod:`loosefit.models.layers.native`)
+   and again without it (``stream_no_kernel_*``: torch's eager passes), with the largest vertex difference.
 3. :func:`fitgar_speed`: FitGar (``configs/models/fitgar.yaml``) one frame per pass, inputs collated
    beforehand. The paper: about 21 ms a frame (8 ms coarse, 13 ms detail) for 3-4k vertices on an RTX
    2080 Ti (FitGar Sec. 5.4); SwinGar's Table V lists it at 47.6 fps.
@@ -43,6 +44,7 @@ Run: PYTHONPATH=src .venv/bin/python benchmarks/graph_speed.py [--swingar-vertic
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import statistics
 import sys
@@ -58,6 +60,7 @@ from _common import save_results  # noqa: E402
 import torch  # noqa: E402
 from torch.utils.flop_counter import FlopCounterMode  # noqa: E402
 
+from loosefit.models.layers import native  # noqa: E402
 from loosefit.threads import torch_threads  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
@@ -236,6 +239,12 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
                 bound.use_graphs = False  # eager first; the CUDA graph's frames after
                 stream, times, eager_verts, state = _swingar_stream(bound, root, joints, warmup, frames, dev)
                 stream_load = load_average()
+                kernel = dev.type == "cpu" and native.library() is not None
+                if kernel:  # the same frames with GAT-LN's fused CPU kernel off: torch's eager passes
+                    with native_off():
+                        no_kernel, no_kernel_times, plain_verts, _ = _swingar_stream(bound, root, joints, warmup, frames,
+                                                                                     dev)
+                    kernel_diff = max(float((a - b).abs().max()) for a, b in zip(eager_verts, plain_verts))
                 graph = None
                 if dev.type == "cuda":
                     bound.use_graphs = True
@@ -256,6 +265,12 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
                    f"batch{batch}_ms_per_frame": batch_s * 1e3, f"batch{batch}_fps": 1.0 / batch_s,
                    "batch_load_average": batch_load, "load_average": batch_load}
             _achieved(row, stream_flops, stream, rates, "stream_")
+            row["native_kernel"] = kernel
+            if kernel:
+                row.update({"stream_no_kernel_ms_per_frame": no_kernel * 1e3,
+                            "stream_no_kernel_ms_all": [x * 1e3 for x in no_kernel_times[warmup:]],
+                            "stream_kernel_max_abs_diff_m": kernel_diff, "stream_kernel_speedup": no_kernel / stream})
+                _achieved(row, stream_flops, no_kernel, rates, "stream_no_kernel_")
             if graph is not None:
                 row.update({"stream_graph_ms_per_frame": graph * 1e3, "stream_graph_fps": 1.0 / graph,
                             "stream_graph_ms_all": [x * 1e3 for x in graph_times[warmup:]],
@@ -267,10 +282,25 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
             row["motion_lstm_gflop_per_frame_uncounted"] = lstm_flops(bound.model, 1) / 1e9
             row["paper"] = PAPER["swingar"]
             rows.append(row)
-            print({k: v for k, v in row.items()
-                   if k not in ("stream_ms_all", "stream_graph_ms_all", "stream_counted_flops_by_op", "paper")},
+            print({k: v for k, v in row.items() if k not in ("stream_ms_all", "stream_graph_ms_all",
+                                                             "stream_no_kernel_ms_all", "stream_counted_flops_by_op",
+                                                             "paper")},
                   flush=True)
     return rows
+
+
+@contextlib.contextmanager
+def native_off():
+    """GAT-LN's fused CPU kernel switched off (``LOOSEFIT_NATIVE=0``) while inside."""
+    before = os.environ.get("LOOSEFIT_NATIVE")
+    os.environ["LOOSEFIT_NATIVE"] = "0"
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ["LOOSEFIT_NATIVE"]
+        else:
+            os.environ["LOOSEFIT_NATIVE"] = before
 
 
 def _swingar_stream(bound, root, joints, warmup: int, frames: int, device: torch.device):

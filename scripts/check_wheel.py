@@ -7,8 +7,9 @@
    minutes and is pip's job, not loosefit's).
 3. Checks, in the fresh venv: ``loosefit`` imports from the venv (not from the checkout); the wheel's
    metadata puts Blender, Newton and Ray behind ``[sim]`` and the renderers behind ``[viz]``, nothing
-   of them in the core; the report templates are in the wheel; ``loosefit --help`` runs from the venv's
-   console script; with ``bpy`` absent, ``loosefit simulate`` fails with an error naming ``loosefit[sim]``.
+   of them in the core; the report templates and the native kernel's C source are in the wheel; ``loosefit
+   --help`` runs from the venv's console script; with ``bpy`` absent, ``loosefit simulate`` fails with an error
+   naming ``loosefit[sim]``.
 
 Prints the wheel's size and the install time and exits non-zero on a failed check.
 
@@ -90,6 +91,7 @@ def main() -> int:
         check(all(extra_of.get(p) == "viz" for p in ("pyvista", "matplotlib", "jinja2")), "renderers, jinja2 are [viz]")
         check(extra_of.get("smplx") == "smpl", "smplx is the [smpl] extra")
         check("view" in (meta.get_all("Provides-Extra") or []), "the [view] extra exists")
+        check("loosefit/models/layers/gat_ln_cpu.c" in names, "the native GAT-LN kernel's source is package data")
         check(any(n.startswith("loosefit/report/templates/") and n.endswith(".j2") for n in names),
               "report templates are package data")
 

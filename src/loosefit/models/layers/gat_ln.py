@@ -67,6 +67,13 @@ streaming frame, 9k vertices, one CPU thread: see ``benchmarks/README.md``). Eve
 fixed by the table, with no data-dependent indexing or host synchronisation, so a layer can be captured in a CUDA
 graph (:mod:`loosefit.models.cuda_graph`).
 
+On the CPU without autograd (inference), the default design (per-node norm, centred scores, concatenated heads) in
+float32 runs through a fused C kernel (:mod:`loosefit.models.layers.native`): the products and the neighbourhood
+means here, then the scores, their normalisation, the softmax, the aggregation, the bias and the tanh in one sweep
+over the vertices. The eager passes below write and read the ``(B, V, H, D)`` scores about ten times; at SwinGar's
+sizes on a 9k-vertex dress they took two thirds of the streaming frame (``benchmarks/README.md``). Training,
+other devices, float64, the other designs and :func:`recording_attention` keep the eager layer.
+
 :func:`recording_attention` records each layer's mean attention entropy per vertex (and that of a uniform
 attention over the same neighbourhoods, its upper bound): how far the attention is from a mean filter.
 """

@@ -43,6 +43,15 @@ from loosefit.models.layers.gat_ln import GATLN
 from loosefit.models.layers.init import undrawn
 
 
+def _tanh(x: torch.Tensor) -> torch.Tensor:
+    """``tanh``; on the CPU without autograd as ``2 sigmoid(2 x) - 1`` (absolute error near 1e-7): torch's CPU tanh
+    takes about ten times its sigmoid's time here (573k values: 1.1 ms against 0.12), a tenth of SwinGar's streaming
+    frame once its GAT-LN layers run fused."""
+    if x.device.type != "cpu" or torch.is_grad_enabled():
+        return torch.tanh(x)
+    return torch.sigmoid(2.0 * x).mul_(2.0).sub_(1.0)
+
+
 class LSTMGATLN(nn.Module):
     """The LSTM-GAT-LN cell and its loop over frames.
 
@@ -95,16 +104,16 @@ class LSTMGATLN(nn.Module):
         gx = self.input_map(x, table, valid) if x_gates is None else x_gates
         if state is None:
             gi, gf, gg, go = (gx + self.state_map.bias).chunk(4, -1)
-            c = torch.sigmoid(gi) * torch.tanh(gg)
-            return torch.sigmoid(go) * torch.tanh(c), c
+            c = torch.sigmoid(gi) * _tanh(gg)
+            return torch.sigmoid(go) * _tanh(c), c
         h, c = state
         gates = gx + self.state_map(h, table, valid)
         gi, gf, gg, go = gates.chunk(4, -1)
         i = torch.sigmoid(gi + self.peephole[0] * c)
         f = torch.sigmoid(gf + self.peephole[1] * c)
         o = torch.sigmoid(go + self.peephole[2] * c)
-        c = i * torch.tanh(gg) + f * c
-        return o * torch.tanh(c), c
+        c = i * _tanh(gg) + f * c
+        return o * _tanh(c), c
 
     def forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
                 state: tuple[torch.Tensor, torch.Tensor] | None = None):

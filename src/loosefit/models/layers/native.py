@@ -62,7 +62,12 @@ def library() -> ctypes.CDLL | None:
     if compiler is None:
         warnings.warn("loosefit: no C compiler found; GAT-LN runs its eager CPU path", RuntimeWarning, stacklevel=2)
         return None
-    source = SOURCE.read_bytes()
+    try:
+        source = SOURCE.read_bytes()
+    except OSError as error:
+        warnings.warn(f"loosefit: the native GAT-LN kernel's source is missing ({error}); GAT-LN runs its eager CPU "
+                      "path", RuntimeWarning, stacklevel=2)
+        return None
     try:
         version = subprocess.run([compiler, "--version"], capture_output=True, text=True, timeout=30).stdout
     except (OSError, subprocess.SubprocessError):
