@@ -87,12 +87,16 @@ def test_training_and_other_designs_keep_the_eager_layer():
 
 
 @needs_kernel
-def test_a_table_outside_the_vertices_is_refused():
+def test_a_table_outside_the_vertices_or_without_its_vertex_is_refused():
     layer, (table, valid) = layer_and_graph(3, 7)
     bad = table.clone()
     bad[2, 1] = V
     with torch.no_grad(), pytest.raises(InputError, match="outside"):
         layer(torch.randn(1, V, IN), bad, valid)
+    empty = valid.clone()
+    empty[3] = False
+    with torch.no_grad(), pytest.raises(InputError, match="first slot"):
+        layer(torch.randn(1, V, IN), table, empty)
 
 
 def test_head_channels_are_blocks_in_head_order():

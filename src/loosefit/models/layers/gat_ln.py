@@ -68,9 +68,9 @@ fixed by the table, with no data-dependent indexing or host synchronisation, so 
 graph (:mod:`loosefit.models.cuda_graph`).
 
 On the CPU without autograd (inference), the default design (per-node norm, centred scores, concatenated heads) in
-float32 runs through a fused C kernel (:mod:`loosefit.models.layers.native`): the products and the neighbourhood
-means here, then the scores, their normalisation, the softmax, the aggregation, the bias and the tanh in one sweep
-over the vertices. The eager passes below write and read the ``(B, V, H, D)`` scores about ten times; at SwinGar's
+float32 runs through a fused C kernel (:mod:`loosefit.models.layers.native`): the products here, then the
+neighbourhood means, the scores, their normalisation, the softmax, the aggregation, the bias and the tanh in one
+sweep over the vertices. The eager passes below write and read the ``(B, V, H, D)`` scores about ten times; at SwinGar's
 sizes on a 9k-vertex dress they took two thirds of the streaming frame (``benchmarks/README.md``). Training,
 other devices, float64, the other designs and :func:`recording_attention` keep the eager layer.
 
@@ -430,16 +430,16 @@ class GATLN(nn.Module):
 
     def _native_forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         """The layer on ``x (B, V, in)`` through the fused CPU kernel (:mod:`loosefit.models.layers.native`): the
-        products and the neighbourhood means here, the attention and the aggregation in one sweep there."""
+        products here, the neighbourhood means, the attention and the aggregation in one sweep there."""
         if table.numel() and (int(table.min()) < 0 or int(table.max()) >= x.shape[1]):
             raise InputError(f"the attention table indexes vertices outside [0, {x.shape[1]})")
+        if not bool(valid[:, 0].all()):
+            raise InputError("the attention table's first slot (each vertex itself) must be valid")
         with torch.no_grad():
             c_dst, c_src = self.score_vectors()
-            mu = neighbourhood_mean(x, table, valid)
-            centre = (x - mu) @ c_dst.T - mu @ c_src.T  # (B, V, H)
             return native.gat_ln_concat_node_centred(
-                x, mu, x @ self.weight, x @ c_src.T, centre, lipschitz(c_dst, c_src), table, valid, self.head_index,
-                self.bias, self.activation == "tanh", self.alpha, SCORE_SLOPE, NORM_EPS)
+                x, x @ self.weight, x @ torch.cat([c_dst, c_src]).T, lipschitz(c_dst, c_src), table, valid,
+                self.head_index, self.bias, self.activation == "tanh", self.alpha, SCORE_SLOPE, NORM_EPS)
 
     def forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         """``x (..., V, in)``, ``table``/``valid (V, D)`` from :func:`attention_table` -> ``(..., V, out)``."""

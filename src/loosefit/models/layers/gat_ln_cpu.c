@@ -2,18 +2,21 @@
  * normalisation, neighbourhood-centred scores, concatenated heads; SwinGar Eq. 4 and
  * loosefit/models/layers/gat_ln.py, whose eager passes this computes in one sweep over the vertices).
  *
- * Per batch b and vertex v, over the valid slots d of its attention table row (t = table[v, d]):
- *   feat    = max_d max(|x[t] - mu[v]|, eps)                      the neighbourhood's largest centred feature norm
- *   s[d, h] = u_src[t, h] + centre[v, h]                          c_src . (x_t - mu_v) + c_dst . (x_v - mu_v)
+ * Per batch b and vertex v, over the n valid slots d of its attention table row (t = table[v, d]):
+ *   mu      = (1/n) sum_d x[t]                                    the neighbourhood's mean feature
+ *   feat    = max_d max(|x[t] - mu|, eps)                         its largest centred feature norm
+ *   centre  = u_dst[v] - (1/n) sum_d (u_dst[t] + u_src[t])        c_dst . (x_v - mu) - c_src . mu (the scores are
+ *                                                                 linear: c . mu is the mean of c . x_t)
+ *   s[d, h] = u_src[t, h] + centre[h]                             c_src . (x_t - mu) + c_dst . (x_v - mu)
  *   scale_h = alpha / max(max(|s[., h]|, eps), feat * lip[h])     the per-node normaliser
  *   P[d, h] = softmax_d(leaky_relu(scale_h s[d, h]))              over the valid slots
  *   out[v, o] = act(bias[o] + sum_d P[d, head_of[o]] y[t, o])     each channel weighted by its head; act: tanh
  *                                                                 (activation 1) or none (0)
  *
  * Arrays are C-contiguous float32 (int64 indices, one byte per validity flag):
- *   x, mu (B, V, C_in); y (B, V, C_out); u_src, centre (B, V, H); lip (H); table (V, D); valid (V, D);
- *   head_of (C_out), non-decreasing (each head's channels one block, in head order); bias (C_out);
- *   out (B, V, C_out).
+ *   x (B, V, C_in); y (B, V, C_out), the projections x W; u (B, V, 2 H), c_dst . x then c_src . x per head;
+ *   lip (H); table (V, D); valid (V, D), slot 0 valid; head_of (C_out), non-decreasing (each head's channels one
+ *   block, in head order); bias (C_out); out (B, V, C_out).
  * Single-threaded. Returns 0, or -1 where its scratch memory could not be had.
  */
 #include <math.h>
@@ -86,6 +89,16 @@ static void add_scores(float *restrict sd, float *restrict rows, const float *re
     }
 }
 
+/* acc[k] += a[k] (k < n) */
+static void add_to(float *restrict acc, const float *restrict a, int64_t n) {
+    for (int64_t k = 0; k < n; k++) acc[k] += a[k];
+}
+
+/* acc[k] *= f (k < n) */
+static void scale_by(float *restrict acc, float f, int64_t n) {
+    for (int64_t k = 0; k < n; k++) acc[k] *= f;
+}
+
 /* rows[h] <- alpha / max(max(sqrt(rows[h]), eps), feat lip[h]): the row norms become the heads' score scales */
 static void score_scales(float *restrict rows, const float *restrict lip, float feat, float alpha, float eps,
                          int64_t H) {
@@ -118,11 +131,10 @@ static void aggregate(float *restrict o, const float *restrict sd, const float *
 }
 
 int gat_ln_concat_node_centred(int64_t B, int64_t V, int64_t D, int64_t C_in, int64_t C_out, int64_t H,
-                               const float *x, const float *mu, const float *y, const float *u_src,
-                               const float *centre, const float *lip, const int64_t *table, const uint8_t *valid,
-                               const int64_t *head_of, const float *bias, int activation, float alpha, float slope,
-                               float eps, float *out) {
-    float *s = malloc(sizeof(float) * (size_t)(D * H + 2 * H));
+                               const float *x, const float *y, const float *u, const float *lip, const int64_t *table,
+                               const uint8_t *valid, const int64_t *head_of, const float *bias, int activation,
+                               float alpha, float slope, float eps, float *out) {
+    float *s = malloc(sizeof(float) * (size_t)(D * H + 4 * H + C_in));
     int64_t *start = malloc(sizeof(int64_t) * (size_t)(H + 1));
     if (!s || !start) {
         free(s);
@@ -131,27 +143,39 @@ int gat_ln_concat_node_centred(int64_t B, int64_t V, int64_t D, int64_t C_in, in
     }
     float *rows = s + D * H;    /* (H) */
     float *sum = rows + H;      /* (H) */
+    float *centre = sum + H;    /* (2 H): the neighbourhood's mean of u, then the centre in its first H */
+    float *mu = centre + 2 * H; /* (C_in) */
     /* each head's channels are one contiguous block, in head order (loosefit.models.layers.gat_ln.head_columns) */
     for (int64_t h = 0, k = 0; h <= H; h++) {
         while (k < C_out && head_of[k] < h) k++;
         start[h] = k;
     }
     for (int64_t b = 0; b < B; b++) {
-        const float *xb = x + b * V * C_in, *mub = mu + b * V * C_in, *yb = y + b * V * C_out;
-        const float *ub = u_src + b * V * H, *cb = centre + b * V * H;
+        const float *xb = x + b * V * C_in, *yb = y + b * V * C_out, *ub = u + b * V * 2 * H;
         float *ob = out + b * V * C_out;
         for (int64_t v = 0; v < V; v++) {
             const int64_t *t = table + v * D;
             const uint8_t *ok = valid + v * D;
+            int64_t n = 0;
+            memset(mu, 0, sizeof(float) * (size_t)C_in);
+            memset(centre, 0, sizeof(float) * (size_t)(2 * H));
+            for (int64_t d = 0; d < D; d++) {
+                if (!ok[d]) continue;
+                n++;
+                add_to(mu, xb + t[d] * C_in, C_in);
+                add_to(centre, ub + t[d] * 2 * H, 2 * H);
+            }
+            scale_by(mu, 1.0f / (float)n, C_in);
+            for (int64_t h = 0; h < H; h++) centre[h] = ub[v * 2 * H + h] - (centre[h] + centre[H + h]) / (float)n;
             float feat = eps;
             for (int64_t d = 0; d < D; d++) {
                 if (!ok[d]) continue;
-                float f = sqrtf(squared_distance(xb + t[d] * C_in, mub + v * C_in, C_in));
+                float f = sqrtf(squared_distance(xb + t[d] * C_in, mu, C_in));
                 if (f > feat) feat = f;
             }
             memset(rows, 0, sizeof(float) * (size_t)(2 * H)); /* rows and sum */
             for (int64_t d = 0; d < D; d++)
-                if (ok[d]) add_scores(s + d * H, rows, ub + t[d] * H, cb + v * H, H);
+                if (ok[d]) add_scores(s + d * H, rows, ub + t[d] * 2 * H + H, centre, H);
             score_scales(rows, lip, feat, alpha, eps, H);
             for (int64_t d = 0; d < D; d++)
                 if (ok[d]) exp_scores(s + d * H, sum, rows, slope, H);

@@ -93,20 +93,19 @@ def library() -> ctypes.CDLL | None:
             return None
     lib = ctypes.CDLL(str(target))
     lib.gat_ln_concat_node_centred.restype = ctypes.c_int
-    lib.gat_ln_concat_node_centred.argtypes = [_INT64] * 6 + [_PTR] * 10 + [ctypes.c_int] + [_FLOAT] * 3 + [_PTR]
+    lib.gat_ln_concat_node_centred.argtypes = [_INT64] * 6 + [_PTR] * 8 + [ctypes.c_int] + [_FLOAT] * 3 + [_PTR]
     return lib
 
 
-def gat_ln_concat_node_centred(x: torch.Tensor, mu: torch.Tensor, y: torch.Tensor, u_src: torch.Tensor,
-                               centre: torch.Tensor, lip: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
-                               head_of: torch.Tensor, bias: torch.Tensor, tanh: bool, alpha: float, slope: float,
-                               eps: float) -> torch.Tensor:
+def gat_ln_concat_node_centred(x: torch.Tensor, y: torch.Tensor, u: torch.Tensor, lip: torch.Tensor,
+                               table: torch.Tensor, valid: torch.Tensor, head_of: torch.Tensor, bias: torch.Tensor,
+                               tanh: bool, alpha: float, slope: float, eps: float) -> torch.Tensor:
     """A GAT-LN layer's output features, ``(B, V, C_out)`` float32 (see ``gat_ln_cpu.c``).
 
     Args:
-        x, mu: ``(B, V, C_in)``: the input features and each neighbourhood's mean.
+        x: ``(B, V, C_in)``: the input features.
         y: ``(B, V, C_out)``: the projected features ``x W``.
-        u_src, centre: ``(B, V, H)``: ``c_src . x`` and ``c_dst . (x - mu) - c_src . mu``.
+        u: ``(B, V, 2 H)``: ``c_dst . x`` then ``c_src . x``, the score function's two halves per head.
         lip: ``(H,)``: each head's score function's Lipschitz constant.
         table, valid: ``(V, D)``: the attention table (:func:`~loosefit.models.layers.gat_ln.attention_table`).
         head_of: ``(C_out,)`` int64: each output channel's head, non-decreasing (each head's channels one block).
@@ -117,13 +116,13 @@ def gat_ln_concat_node_centred(x: torch.Tensor, mu: torch.Tensor, y: torch.Tenso
     if lib is None:
         raise RuntimeError("the native GAT-LN kernel is not available")
     B, V, C_in = x.shape
-    C_out, H, D = y.shape[-1], u_src.shape[-1], table.shape[1]
-    x, mu, y, u_src, centre, lip, bias = (t.detach().contiguous().float() for t in (x, mu, y, u_src, centre, lip, bias))
+    C_out, H, D = y.shape[-1], lip.shape[0], table.shape[1]
+    x, y, u, lip, bias = (t.detach().contiguous().float() for t in (x, y, u, lip, bias))
     table, head_of = table.contiguous().long(), head_of.contiguous().long()
     valid = valid.contiguous().to(torch.uint8)
     out = torch.empty(B, V, C_out, dtype=torch.float32)
     status = lib.gat_ln_concat_node_centred(B, V, D, C_in, C_out, H, *(t.data_ptr() for t in (
-        x, mu, y, u_src, centre, lip, table, valid, head_of, bias)), int(tanh), alpha, slope, eps, out.data_ptr())
+        x, y, u, lip, table, valid, head_of, bias)), int(tanh), alpha, slope, eps, out.data_ptr())
     if status != 0:
         raise MemoryError("the native GAT-LN kernel could not allocate its scratch memory")
     return out
