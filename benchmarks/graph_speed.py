@@ -254,6 +254,9 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
                     bound.use_graphs = False
                 k = warmup + frames
                 stream_flops, stream_ops = count_flops(lambda: bound(root[:, k:k + 1], joints[:, k:k + 1], state))
+                if kernel:  # the eager passes multiply more: the kernel takes the scores' centre as a mean
+                    with native_off():
+                        no_kernel_flops, _ = count_flops(lambda: bound(root[:, k:k + 1], joints[:, k:k + 1], state))
                 whole = lambda: bound(root[:, :batch], joints[:, :batch])  # noqa: E731
                 _timed(whole, dev)
                 batch_s = min(_timed(whole, dev)[0] for _ in range(repeats)) / batch
@@ -270,7 +273,7 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
                 row.update({"stream_no_kernel_ms_per_frame": no_kernel * 1e3,
                             "stream_no_kernel_ms_all": [x * 1e3 for x in no_kernel_times[warmup:]],
                             "stream_kernel_max_abs_diff_m": kernel_diff, "stream_kernel_speedup": no_kernel / stream})
-                _achieved(row, stream_flops, no_kernel, rates, "stream_no_kernel_")
+                _achieved(row, no_kernel_flops, no_kernel, rates, "stream_no_kernel_")
             if graph is not None:
                 row.update({"stream_graph_ms_per_frame": graph * 1e3, "stream_graph_fps": 1.0 / graph,
                             "stream_graph_ms_all": [x * 1e3 for x in graph_times[warmup:]],
