@@ -242,8 +242,8 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
                 kernel = dev.type == "cpu" and native.library() is not None
                 if kernel:  # the same frames with GAT-LN's fused CPU kernel off: torch's eager passes
                     with native_off():
-                        no_kernel, no_kernel_times, plain_verts, _ = _swingar_stream(bound, root, joints, warmup, frames,
-                                                                                     dev)
+                        no_kernel, no_kernel_times, plain_verts, _ = _swingar_stream(
+                            bound, root, joints, warmup, frames, dev)
                     kernel_diff = max(float((a - b).abs().max()) for a, b in zip(eager_verts, plain_verts))
                 graph = None
                 if dev.type == "cuda":

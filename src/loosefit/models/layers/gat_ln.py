@@ -70,8 +70,8 @@ graph (:mod:`loosefit.models.cuda_graph`).
 On the CPU without autograd (inference), the default design (per-node norm, centred scores, concatenated heads) in
 float32 runs through a fused C kernel (:mod:`loosefit.models.layers.native`): the products here, then the
 neighbourhood means, the scores, their normalisation, the softmax, the aggregation, the bias and the tanh in one
-sweep over the vertices. The eager passes below write and read the ``(B, V, H, D)`` scores about ten times; at SwinGar's
-sizes on a 9k-vertex dress they took two thirds of the streaming frame (``benchmarks/README.md``). Training,
+sweep over the vertices. The eager passes below write and read the ``(B, V, H, D)`` scores about ten times; at
+SwinGar's sizes on a 9k-vertex dress the kernel halves the streaming frame (``benchmarks/README.md``). Training,
 other devices, float64, the other designs and :func:`recording_attention` keep the eager layer.
 
 :func:`recording_attention` records each layer's mean attention entropy per vertex (and that of a uniform
@@ -166,7 +166,7 @@ def attention_entropy(P: torch.Tensor, valid: torch.Tensor) -> tuple[torch.Tenso
 def bag_rows(table: torch.Tensor, batch: int, heads: int) -> torch.Tensor:
     """``rows (B, V, H, D)`` int64: ``(b V + table[v, d]) H + h``, the row of ``(b, table[v, d], h)`` in a ``(B, V, H,
     ...)`` tensor flattened over its first three axes. On the CPU it is kept per table (while that tensor lives and
-    is not modified), batch and head count: building it is a quarter of a concatenated layer's frame at SwinGar's
+    is not modified), batch and head count: building it took a tenth of a concatenated layer's time at SwinGar's
     sizes, and a garment's table does not change."""
     key = (id(table), table.device, batch, heads)
     hit = _BAG_ROWS.get(key)
@@ -307,10 +307,10 @@ class GATLN(nn.Module):
             self.weight = nn.Parameter(torch.empty(in_channels, out_channels))
             self.att_dst = nn.Parameter(torch.empty(out_channels))
             self.att_src = nn.Parameter(torch.empty(out_channels))
-            # (H, out) 1 where the channel belongs to the head, (out,) each channel's place among the heads padded
-            # to equal widths, and (out,) each channel's head; set by reset_parameters (the layer may be built undrawn)
+            # set by reset_parameters (the layer may be built undrawn): (H, out) 1 where the channel belongs to the
+            # head; (out,) each channel's place when every head is padded to the widest head's width (heads side by
+            # side); (out,) each channel's head
             self.register_buffer("head_mask", torch.empty(heads, out_channels), persistent=False)
-            # each channel's place when every head is padded to the widest head's width (heads side by side)
             self.register_buffer("padded_index", torch.empty(out_channels, dtype=torch.int64), persistent=False)
             self.register_buffer("head_index", torch.empty(out_channels, dtype=torch.int64), persistent=False)
         else:
@@ -415,7 +415,8 @@ class GATLN(nn.Module):
             scale = (self.alpha / torch.maximum(rows, feat[..., None] * lip))[..., None]  # (B, V or 1, H, 1)
             s = s.mul_(scale) if inplace else s * scale
         s = nn.functional.leaky_relu_(s, SCORE_SLOPE) if inplace else nn.functional.leaky_relu(s, SCORE_SLOPE)
-        return slot_softmax(s, slots, self.alpha is not None and self.alpha <= MAX_BOUNDED_ALPHA, inplace).transpose(2, 3)
+        bounded = self.alpha is not None and self.alpha <= MAX_BOUNDED_ALPHA
+        return slot_softmax(s, slots, bounded, inplace).transpose(2, 3)
 
     def _native_applies(self, x: torch.Tensor) -> bool:
         """Whether :meth:`_native_forward` computes this call: the default design (concatenated heads, centred scores,
