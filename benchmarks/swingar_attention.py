@@ -259,7 +259,7 @@ def cmd_curve(args) -> None:
     body = AnnyBody()
     runs = Path(args.runs)
     lbs = body_lbs_scores(Path(args.data), body)
-    results = {"design": args.design, "settings": CURVE_SETTINGS, "body_lbs_mm": lbs,
+    results = {"design": args.design, "settings": [*CURVE_SETTINGS, *args.set], "body_lbs_mm": lbs,
                "body_lbs_mean_mm": float(np.mean(list(lbs.values()))), "variants": {}}
     for variant in args.variants.split(","):
         for seed in args.seeds.split(","):
