@@ -44,13 +44,13 @@ Run: PYTHONPATH=src .venv/bin/python benchmarks/graph_speed.py [--swingar-vertic
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import statistics
 import sys
 import time
 from pathlib import Path
 from typing import Callable
+from unittest import mock
 
 import numpy as np
 
@@ -292,18 +292,9 @@ def swingar_speed(vertices: list[int] = (10000,), threads: list[int] = (1, 2), d
     return rows
 
 
-@contextlib.contextmanager
 def native_off():
     """GAT-LN's fused CPU kernel switched off (``LOOSEFIT_NATIVE=0``) while inside."""
-    before = os.environ.get("LOOSEFIT_NATIVE")
-    os.environ["LOOSEFIT_NATIVE"] = "0"
-    try:
-        yield
-    finally:
-        if before is None:
-            del os.environ["LOOSEFIT_NATIVE"]
-        else:
-            os.environ["LOOSEFIT_NATIVE"] = before
+    return mock.patch.dict(os.environ, {"LOOSEFIT_NATIVE": "0"})
 
 
 def _swingar_stream(bound, root, joints, warmup: int, frames: int, device: torch.device):

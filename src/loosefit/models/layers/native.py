@@ -119,7 +119,7 @@ def gat_ln_concat_node_centred(x: torch.Tensor, y: torch.Tensor, u: torch.Tensor
     C_out, H, D = y.shape[-1], lip.shape[0], table.shape[1]
     x, y, u, lip, bias = (t.detach().contiguous().float() for t in (x, y, u, lip, bias))
     table, head_of = table.contiguous().long(), head_of.contiguous().long()
-    valid = valid.contiguous().to(torch.uint8)
+    valid = valid.contiguous().view(torch.uint8) if valid.dtype == torch.bool else valid.contiguous().to(torch.uint8)
     out = torch.empty(B, V, C_out, dtype=torch.float32)
     status = lib.gat_ln_concat_node_centred(B, V, D, C_in, C_out, H, *(t.data_ptr() for t in (
         x, y, u, lip, table, valid, head_of, bias)), int(tanh), alpha, slope, eps, out.data_ptr())
