@@ -56,6 +56,8 @@ DESIGNS = {
                       "gate_attention": "per_gate"},
     "node-centred": {"attention_norm": "node", "attention_centred": True, "concat_heads": True,
                      "gate_attention": "per_gate"},
+    "row-centred": {"attention_norm": "row", "attention_centred": True, "concat_heads": True,
+                    "gate_attention": "per_gate"},
 }
 ALPHAS = {"alpha-0": "0.0", "alpha-1": "1.0", "alpha-2": "2.0", "alpha-3": "3.0", "plain-gat": "null"}
 #: The curve's training budget on top of the CPU preset (small store: more epochs of fewer windows).

@@ -326,6 +326,20 @@ def test_checkpoint_of_the_first_attention_design_loads_only_as_that_design(mode
         load_weights(again, tmp_path / "new.pt")
 
 
+def test_score_row_norm_is_its_own_design(model, tmp_path):
+    """``attention_norm: row`` marks its checkpoints with the norm's index (2): today's per-node default refuses
+    them by name, and the other way round."""
+    row = SwinGar(model.sizes(), SwinGarConfig(**{**SMALL, "attention_norm": "row"}))
+    assert row.attention_design.tolist() == [2, *model.attention_design.tolist()[1:]]
+    state = {"model": row.state_dict(), "optimizer": None, "scheduler": None, "stages": ["all"], "stage_index": 0,
+             "epoch": 0, "global_step": 0, "best_metric": None, "rng": rng_state(), "config": {}, "history": [],
+             "elapsed_s": 0.0, "complete": True}
+    save_checkpoint(tmp_path / "row.pt", state)
+    with pytest.raises(InputError, match="design is score-row norm, centred scores.*this model's is per-node norm"):
+        load_weights(SwinGar(model.sizes(), CONFIG), tmp_path / "row.pt")
+    load_weights(SwinGar(model.sizes(), SwinGarConfig(**{**SMALL, "attention_norm": "row"})), tmp_path / "row.pt")
+
+
 def test_bad_input(model, data):
     graph = data.graphs[0].tensors()
     s = data.sequences[0].sequences[0]

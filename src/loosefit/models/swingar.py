@@ -221,7 +221,7 @@ class SwinGar(nn.Module):
         some of the new designs, but other outputs."""
         def words(design):
             flags = [0, 0, 0, 0] if design is None else [int(v) for v in design]
-            return ", ".join(pair[0 if f else 1] for f, pair in zip(flags, _DESIGN_WORDS))
+            return ", ".join(names[f] for f, names in zip(flags, _DESIGN_WORDS))
 
         theirs, mine = state_dict.get("attention_design"), getattr(self, "attention_design", None)
         if (theirs is None) != (mine is None) or (mine is not None and theirs.tolist() != mine.tolist()):

@@ -18,9 +18,10 @@ STAGES = ("supervised", "all")
 GLOBAL_DESCRIPTORS = {"spectral": "geodesic", "euclidean": "euclidean", "pooling": None, "none": None}
 #: Values of :attr:`SwinGarConfig.gate_attention`.
 GATE_ATTENTION = ("per_gate", "shared")
-#: What each flag of :attr:`SwinGarConfig.attention_design` means, set and unset.
-_DESIGN_WORDS = (("per-node norm", "per-graph norm"), ("centred scores", "raw scores"),
-                 ("concatenated heads", "averaged heads"), ("a GAT-LN per gate", "gates sharing a GAT-LN"))
+#: What each value of :attr:`SwinGarConfig.attention_design` means: the norm's index in ``NORMS``, then three
+#: flags, each unset and set.
+_DESIGN_WORDS = (("per-graph norm", "per-node norm", "score-row norm"), ("raw scores", "centred scores"),
+                 ("averaged heads", "concatenated heads"), ("gates sharing a GAT-LN", "a GAT-LN per gate"))
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,8 @@ class SwinGarConfig:
         skinning_prior: start the dynamic skinning weights from the garment's body-LBS weights (ours; see the
             module doc). False: the paper's predictor alone.
         attention_norm: GAT-LN's normaliser (:mod:`loosefit.models.layers.gat_ln`): ``node``, per vertex, as the
-            Lipschitz normalisation SwinGar cites; ``graph``, one per graph and head, as Eq. 4's matrix norms read.
+            Lipschitz normalisation SwinGar cites; ``graph``, one per graph and head, as Eq. 4's matrix norms read;
+            ``row`` (ours), per vertex by its score row's norm alone, so that ``alpha`` sets the sharpness.
         attention_centred: GAT-LN scores from neighbourhood-centred features (ours; without it the attention of
             every layer stays a neighbourhood mean: see the module doc).
         concat_heads: concatenate each GAT-LN's heads (GAT's way; the width split among the heads) instead of
@@ -137,9 +139,10 @@ class SwinGarConfig:
 
     @property
     def attention_design(self) -> tuple[int, int, int, int]:
-        """The GAT-LN design as four flags (per-node norm, centred, concatenated heads, a GAT-LN per gate); all
-        zero for the attention of runs trained before the four keys existed."""
-        return (int(self.attention_norm == "node"), int(self.attention_centred), int(self.concat_heads),
+        """The GAT-LN design as four values: the norm (0 graph, 1 node, 2 row), then flags for centred scores,
+        concatenated heads and a GAT-LN per gate; all zero for the attention of runs trained before the four keys
+        existed."""
+        return (NORMS.index(self.attention_norm), int(self.attention_centred), int(self.concat_heads),
                 int(self.gate_attention == "per_gate"))
 
     def attention_options(self) -> dict:

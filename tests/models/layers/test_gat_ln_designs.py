@@ -18,7 +18,7 @@ from tests.rig.conftest import tube
 
 
 def by_hand(layer: GATLN, x: torch.Tensor) -> torch.Tensor:
-    """Concatenated heads, per-node or per-graph norm, centred or raw scores, loop by loop (float64)."""
+    """Concatenated heads, per-node, per-graph or score-row norm, centred or raw scores, loop by loop (float64)."""
     H, alpha = layer.heads, layer.alpha
     W = layer.weight.detach().double()  # (in, out)
     head_of = head_columns(layer.out_channels, H, layer.groups)
@@ -41,6 +41,8 @@ def by_hand(layer: GATLN, x: torch.Tensor) -> torch.Tensor:
             for i in range(V):
                 if layer.norm == "graph":
                     n = max(max(row.values()), max(feat.values()) * lip)
+                elif layer.norm == "row":
+                    n = row[i]
                 else:
                     n = max(row[i], feat[i] * lip)
                 for j in near[i]:
@@ -58,7 +60,8 @@ def graph():
 
 @pytest.mark.parametrize("norm, centred, heads, alpha", [("node", True, 2, 2.0), ("node", False, 3, 1.5),
                                                          ("graph", True, 1, 2.0), ("graph", False, 4, 3.0),
-                                                         ("node", True, 2, None)])
+                                                         ("node", True, 2, None), ("row", True, 2, 2.0),
+                                                         ("row", False, 3, 3.0)])
 def test_layer_is_the_design_by_hand(norm, centred, heads, alpha):
     torch.manual_seed(0)
     layer = GATLN(IN, OUT, heads=heads, alpha=alpha, norm=norm, centred=centred, concat=True)
@@ -122,6 +125,26 @@ def test_centred_scores_ignore_a_translation_and_stay_homogeneous(norm):
     with torch.no_grad():
         for s in (0.01, 5.0):
             torch.testing.assert_close(layer(s * x, table, valid), s * layer(x, table, valid), rtol=1e-9, atol=1e-12)
+
+
+def test_score_row_norm_sharpens_every_row():
+    """With the same weights, the score-row norm divides each row by its own norm where the per-node norm divides by
+    the larger of it and the feature bound: the same scores scaled up, so every row's attention entropy is at most
+    the per-node one (a softmax's entropy falls as its scores are scaled up), and strictly lower on a tube's
+    positions, where the bound is the larger."""
+    verts, faces = tube(6, 12)
+    table, valid = map(torch.from_numpy, attention_table(faces, len(verts)))
+    x = torch.from_numpy(verts)[None]
+
+    def entropies(norm):
+        torch.manual_seed(4)
+        P = GATLN(3, 8, heads=2, alpha=2.0, norm=norm, centred=True, concat=True).double().attention(x, table, valid)
+        return -(P * P.clamp_min(1e-300).log()).sum(2)  # (1, V, H)
+
+    with torch.no_grad():
+        row, node = entropies("row"), entropies("node")
+    assert bool((row <= node + 1e-12).all())
+    assert float((node - row).mean()) > 0.03, float((node - row).mean())
 
 
 def test_node_norm_is_local():

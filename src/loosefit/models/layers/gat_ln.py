@@ -19,7 +19,13 @@ SwinGar Eq. 4 divides it by the larger of two norms and scales it by ``alpha``::
 - ``"graph"``: over the whole graph, one normaliser per graph and head, as Eq. 4's matrix norms read;
 - ``"node"``: per vertex ``i``, its own row ``||s_i.||_2`` and the largest feature norm of its neighbourhood
   ``max_{j in N(i)} ||x_j||``: the per-node Lipschitz normalisation of Dasoulas et al., which Eq. 4 cites. A
-  vertex's scores then no longer depend on the largest scores or features elsewhere in the graph.
+  vertex's scores then no longer depend on the largest scores or features elsewhere in the graph;
+- ``"row"`` (ours): per vertex, its own row norm ``||s_i.||_2`` alone, without the feature bound. Each row of
+  normalised scores then has norm ``alpha`` exactly, so ``alpha`` alone sets the attention's sharpness. Under
+  ``"node"`` the bound term ``max ||x_j|| * ||[c_dst, c_src]||`` (a Cauchy-Schwarz worst case) is the larger of the
+  two in most rows of a trained SwinGar, and its scores span a fraction of ``[-alpha, alpha]``
+  (``benchmarks/README.md``). The scores stay within ``[-alpha, alpha]``, but the layer is no longer Lipschitz
+  with a constant set by ``alpha``: a row of tiny scores is scaled up as much as a row of large ones.
 
 ``centred=True`` (ours) computes the scores and the feature norms from each neighbourhood's features minus
 their mean, ``x_j - mu_i`` with ``mu_i`` the mean over ``i`` and its neighbours (edge-relative features). Why:
@@ -97,7 +103,7 @@ SCORE_SLOPE = 0.2
 #: Smallest normaliser of the scores: an all-zero input (a zero recurrent state) gives zero scores.
 NORM_EPS = 1e-12
 #: Values of ``GATLN(norm=...)``.
-NORMS = ("graph", "node")
+NORMS = ("graph", "node", "row")
 #: Off the CPU, concatenated heads above this count project before aggregating (see the module doc): with few
 #: heads the per-head aggregates are small and one stacked product is cheaper than a gather per slot. On the CPU
 #: every concatenated layer projects first (:func:`neighbour_sum`'s one ``embedding_bag`` is faster either way).
@@ -270,7 +276,8 @@ class GATLN(nn.Module):
         heads: attention heads (all groups together).
         alpha: the score scale of SwinGar Eq. 4 (2 in the paper); ``None``: no normalisation (plain GAT).
         activation: ``"tanh"`` (SwinGar) or ``None`` (linear output).
-        norm: ``"graph"`` (Eq. 4's norms over the graph) or ``"node"`` (per vertex; see the module doc).
+        norm: ``"graph"`` (Eq. 4's norms over the graph), ``"node"`` (per vertex) or ``"row"`` (per vertex, the
+            score row's norm alone); see the module doc.
         centred: scores and norms from neighbourhood-centred features (see the module doc).
         concat: concatenate the heads (each its block of ``out`` channels) instead of averaging them.
         groups: independent layers side by side (concatenated heads only; see the module doc).
@@ -383,6 +390,7 @@ class GATLN(nn.Module):
         c_dst, c_src = self.score_vectors()
         inplace = not torch.is_grad_enabled()
         slots = valid[None, :, None, :]  # (1, V, 1, D)
+        mu = None
         if self.centred:
             mu = neighbourhood_mean(x, table, valid, gathered)
             # c . (x_j - mu_i): the scores of the centred features (the projections are linear)
@@ -398,25 +406,36 @@ class GATLN(nn.Module):
             s = s.masked_fill_(~slots, 0.0) if inplace else s * slots
             # norms clamped away from 0: the square root's gradient there is infinite (a zero recurrent state)
             rows = torch.linalg.vector_norm(s, dim=-1).clamp_min(NORM_EPS)  # (B, V, H): each vertex's score row norm
-            lip = lipschitz(c_dst, c_src)
-            if self.centred and gathered is not None:
-                # ||x_j - mu_i|| read off the gathered features without writing their differences (the clamp keeps
-                # the norms off 0, where the square root's gradient is infinite)
-                B, V, D, C = gathered.shape
-                feats = torch.cdist(gathered.reshape(B * V, D, C), mu.reshape(B * V, 1, C),
-                                    compute_mode="donot_use_mm_for_euclid_dist").view(B, V, D).clamp_min(NORM_EPS)
-            elif self.centred:  # slot by slot: each slot's neighbours gathered and measured, no (B, V, D, in) tensor
-                feats = centred_norms(x, mu, table, inplace).clamp_min(NORM_EPS)
+            if self.norm == "row":  # every row's norm becomes alpha
+                norm = rows
             else:
-                feats = x.square().sum(-1).clamp_min(NORM_EPS * NORM_EPS).sqrt()[:, table]  # (B, V, D) ||x_j||
-            feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
-            if self.norm == "graph":
-                rows, feat = rows.amax(1, keepdim=True), feat.amax(1, keepdim=True)  # (B, 1, H), (B, 1)
-            scale = (self.alpha / torch.maximum(rows, feat[..., None] * lip))[..., None]  # (B, V or 1, H, 1)
+                norm = self._bound(x, rows, lipschitz(c_dst, c_src), table, valid, gathered, mu, inplace)
+            scale = (self.alpha / norm)[..., None]  # (B, V or 1, H, 1)
             s = s.mul_(scale) if inplace else s * scale
         s = nn.functional.leaky_relu_(s, SCORE_SLOPE) if inplace else nn.functional.leaky_relu(s, SCORE_SLOPE)
         bounded = self.alpha is not None and self.alpha <= MAX_BOUNDED_ALPHA
         return slot_softmax(s, slots, bounded, inplace).transpose(2, 3)
+
+    def _bound(self, x: torch.Tensor, rows: torch.Tensor, lip: torch.Tensor, table: torch.Tensor,
+               valid: torch.Tensor, gathered: torch.Tensor | None, mu: torch.Tensor | None,
+               inplace: bool) -> torch.Tensor:
+        """Eq. 4's normaliser ``(B, V or 1, H)``: the larger of the score rows' norms ``rows (B, V, H)`` and the
+        feature bound ``max ||x_j|| * lip`` (``lip (H,)``), per vertex (``norm="node"``) or per graph; ``mu (B, V,
+        in)``: the neighbourhood means (centred scores)."""
+        if self.centred and gathered is not None:
+            # ||x_j - mu_i|| read off the gathered features without writing their differences (the clamp keeps
+            # the norms off 0, where the square root's gradient is infinite)
+            B, V, D, C = gathered.shape
+            feats = torch.cdist(gathered.reshape(B * V, D, C), mu.reshape(B * V, 1, C),
+                                compute_mode="donot_use_mm_for_euclid_dist").view(B, V, D).clamp_min(NORM_EPS)
+        elif self.centred:  # slot by slot: each slot's neighbours gathered and measured, no (B, V, D, in) tensor
+            feats = centred_norms(x, mu, table, inplace).clamp_min(NORM_EPS)
+        else:
+            feats = x.square().sum(-1).clamp_min(NORM_EPS * NORM_EPS).sqrt()[:, table]  # (B, V, D) ||x_j||
+        feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
+        if self.norm == "graph":
+            rows, feat = rows.amax(1, keepdim=True), feat.amax(1, keepdim=True)  # (B, 1, H), (B, 1)
+        return torch.maximum(rows, feat[..., None] * lip)
 
     def _native_applies(self, x: torch.Tensor) -> bool:
         """Whether :meth:`_native_forward` computes this call: the default design (concatenated heads, centred scores,
