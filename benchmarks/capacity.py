@@ -89,10 +89,14 @@ def anchor_sharing(edge_length: float = 0.03, seed: int = 0, kinds=KINDS) -> dic
     for kind in kinds:
         garment = make_garment(kind, body, seed=seed, edge_length=edge_length)
         out[kind] = {}
+        pairs = {}
         for anchor in ANCHOR_MODES:
-            pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), np.zeros(1),
-                                         anchor=anchor)
+            pairs[anchor] = pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(),
+                                                         np.zeros(1), anchor=anchor)
             out[kind][anchor] = shared_anchor_fraction(pair)
+            if anchor == "spread":  # how far the spreading moved anchors from their projection along the normals
+                move = np.linalg.norm(pair.rest_anchors() - pairs["normal"].rest_anchors(), axis=1)
+                out[kind][anchor].update(moved=int((move > 0).sum()), largest_move_mm=float(move.max() * 1e3))
             print(f"{kind} {anchor}: {out[kind][anchor]}", flush=True)
         out[kind]["subdivided_vertex"] = subdivided_sharing(garment.verts, body)
         print(f"{kind} subdivided_vertex: {out[kind]['subdivided_vertex']}", flush=True)

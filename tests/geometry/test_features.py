@@ -1,6 +1,7 @@
 """Garment-body indicator, vertex-joint distances and FitGar's relative skinning features."""
 
 import numpy as np
+import pytest
 import torch
 from scipy.spatial.distance import cdist
 
@@ -123,3 +124,26 @@ def test_normal_projection_on_a_plane_is_the_orthogonal_projection():
     x = np.random.default_rng(0).uniform([0.1, 0.1, 0.05], [0.9, 0.9, 0.5], (20, 3))
     face, bary = normal_projection_points(x, P, F)
     np.testing.assert_allclose(np.einsum("vk,vkc->vc", bary, P[F[face]]), np.c_[x[:, :2], np.zeros(len(x))], atol=1e-9)
+
+
+def test_spread_moves_coinciding_points_apart_in_the_garment_layout():
+    """On a plane: five garment vertices in a row 0.2 mm apart, rising, project within 1 mm of one another; the
+    lowest keeps its point, the others move to their offsets scaled to the 2 mm gap, in the row's order (closed
+    form). Two vertices stacked along the normal: the upper one moves 2 mm along a triangle's edge. A vertex alone
+    keeps its point exactly."""
+    from loosefit.geometry.features import closest_body_points, spread_shared_points
+
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 6)), -1).reshape(-1, 2)
+    P = np.c_[g, np.zeros(len(g))]
+    F = np.array([[i * 6 + j, i * 6 + j + 1, (i + 1) * 6 + j + 1] for i in range(5) for j in range(5)]
+                 + [[i * 6 + j, (i + 1) * 6 + j + 1, (i + 1) * 6 + j] for i in range(5) for j in range(5)])
+    row = np.c_[0.5 + 2e-4 * np.arange(5), np.full(5, 0.47), 0.10 + 0.01 * np.arange(5)]
+    x = np.concatenate([row, [[0.23, 0.31, 0.1], [0.23, 0.31, 0.2], [0.81, 0.77, 0.3]]])
+    face, bary = closest_body_points(x, P, F)
+    spread_face, spread_bary = spread_shared_points(x, P, F, face, bary)
+    point = np.einsum("vk,vkc->vc", spread_bary, P[F[spread_face]])
+    np.testing.assert_allclose(point[:5], np.c_[0.5 + 2e-3 * np.arange(5), np.full(5, 0.47), np.zeros(5)], atol=1e-12)
+    np.testing.assert_allclose(point[5], [0.23, 0.31, 0.0], atol=1e-12)
+    assert np.linalg.norm(point[6] - point[5]) == pytest.approx(2e-3, abs=1e-12)
+    assert spread_face[7] == face[7] and np.array_equal(spread_bary[7], bary[7])
+    assert cdist(point, point)[np.triu_indices(len(x), 1)].min() >= 2e-3 - 1e-12

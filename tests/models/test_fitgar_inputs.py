@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from loosefit.errors import InputError
 from loosefit.geometry.features import closest_body_points, relative_skinning_features
@@ -136,12 +137,12 @@ def test_shared_anchor_fraction(case, surface):
 
 
 def test_normal_anchor_is_where_the_body_normal_points_at_the_vertex(case, surface):
-    """The default anchor: each garment vertex lies on the body's interpolated normal from its anchor (t > 0; the
+    """The projection along the normals: each garment vertex lies on the body's interpolated normal from its anchor (t > 0; the
     corners' normals from the faces around them, as the inputs take them), at least as far as its closest point;
     anchors are shared no more than the closest points are."""
     body, garment, *_ = case
-    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3])
-    assert pair.anchor == "normal"
+    pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3],
+                                 anchor="normal")
     anchors = pair.rest_anchors()
     corner_normals = vertex_normals(pair.ring_rest, pair.ring_faces).astype(np.float64)[pair.ring_tri]
     normal = np.einsum("vk,vkc->vc", pair.bary, corner_normals)
@@ -151,3 +152,22 @@ def test_normal_anchor_is_where_the_body_normal_points_at_the_vertex(case, surfa
     closest = np.linalg.norm(garment.verts - surface[0].rest_anchors(), axis=1)
     assert (np.linalg.norm(garment.verts - anchors, axis=1) >= closest - 1e-7).all()
     assert shared_anchor_fraction(pair)["fraction"] <= shared_anchor_fraction(surface[0])["fraction"]
+
+
+def test_spread_anchor_is_the_normal_projection_with_shared_anchors_moved_apart(body):
+    """The default anchor, on a long dress whose hem's projections meet at the toes: the projection along the
+    normals wherever no other vertex's is within 1 mm; no two anchors within 1 mm; a moved anchor stays within a
+    centimetre of its projection."""
+    from loosefit.garment import make_garment
+
+    garment = make_garment("dress", body, seed=0, edge_length=0.05)
+    args = (garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3])
+    spread, normal = GarmentBodyPair.build(*args), GarmentBodyPair.build(*args, anchor="normal")
+    assert spread.anchor == "spread"
+    assert shared_anchor_fraction(spread)["fraction"] == 0.0
+    projected = normal.rest_anchors()
+    close = cKDTree(projected).query_pairs(1e-3, output_type="ndarray")
+    alone = np.setdiff1d(np.arange(normal.num_verts), close.ravel())
+    np.testing.assert_allclose(spread.rest_anchors()[alone], projected[alone], atol=1e-12)
+    assert len(close), "the case should share some projections"
+    assert np.linalg.norm(spread.rest_anchors() - projected, axis=1).max() < 0.01

@@ -166,7 +166,7 @@ def test_a_run_recorded_before_surface_anchors_animates_on_its_own_anchors(run, 
     from loosefit.animate_any import AnyGarmentAnimator
     from loosefit.models.fitgar_inputs import GarmentBodyPair
 
-    assert json.loads((run / "model.json").read_text())["sizes"]["anchor"] == "normal"
+    assert json.loads((run / "model.json").read_text())["sizes"]["anchor"] == "spread"
     old = tmp_path / "old"
     shutil.copytree(run, old)
     meta = json.loads((old / "model.json").read_text())
@@ -180,7 +180,7 @@ def test_a_run_recorded_before_surface_anchors_animates_on_its_own_anchors(run, 
     assert np.array_equal(pair.rest_anchors(), vertex.rest_anchors())
     assert np.isfinite(animator.animate(pair, motion)).all()
     projected = GarmentBodyPair.build(garment.verts, garment.faces, heavy, heavy.shape.to_array(), pair.alpha)
-    with pytest.raises(InputError, match="trained on 'vertex' anchors .*recorded before.*built with 'normal'"):
+    with pytest.raises(InputError, match="trained on 'vertex' anchors .*recorded before.*built with 'spread'"):
         animator.animate(projected, motion)
 
 

@@ -200,3 +200,60 @@ def _project_along_normals(x: np.ndarray, face: np.ndarray, near: sp.csr_matrix,
     found = np.isfinite(distance[first])
     w = np.clip(np.stack([1 - u - v, u, v], 1), 0.0, 1.0)[first[found]]
     return found, cand[first[found]], w / w.sum(1, keepdims=True)
+
+
+def spread_shared_points(garment_verts: np.ndarray, body_verts: np.ndarray, body_faces: np.ndarray,
+                         face: np.ndarray, bary: np.ndarray, min_distance: float = 1e-3, gap: float = 2e-3,
+                         rounds: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Surface points of garment vertices (``face``, ``bary`` as :func:`closest_body_points` returns them) moved
+    apart where several coincide, so that no two lie within ``min_distance`` metres.
+
+    Vertices whose points are within ``min_distance`` of one another (connected through such pairs) form a group.
+    In each group the vertex nearest its point keeps it; every other one moves to the body's closest point to
+    ``c + s (x_i - x_k)_T``: the kept point ``c`` plus its garment offset from the kept vertex ``x_k``, projected
+    onto the tangent plane of the kept point's triangle, scaled by one ``s`` per group so that the offsets are at
+    least ``gap`` apart. The group's points keep the layout of their garment vertices. Points still within
+    ``min_distance`` after a round (the surface curves, or a moved point lands by another) are spread again with
+    the gap doubled, for up to ``rounds`` rounds.
+
+    Args:
+        garment_verts: ``(Vg, 3)`` metres. body_verts: ``(Vb, 3)``. body_faces: ``(F, 3)`` int.
+        face: ``(Vg,)`` int, bary: ``(Vg, 3)``: the points to spread.
+
+    Returns:
+        ``face (Vg,)`` int64 and ``bary (Vg, 3)`` float64, new arrays; unchanged where no point is shared.
+    """
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial.distance import pdist
+
+    x = np.asarray(garment_verts, np.float64)
+    P = np.asarray(body_verts, np.float64)
+    F = np.asarray(body_faces, np.int64)
+    face, bary = np.array(face, np.int64), np.array(bary, np.float64)
+    for round_ in range(rounds):
+        points = np.einsum("vk,vkc->vc", bary, P[F[face]])
+        pairs = cKDTree(points).query_pairs(min_distance, output_type="ndarray")
+        if not len(pairs):
+            break
+        graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(x), len(x)))
+        _, label = connected_components(graph, directed=False)
+        label = label[np.unique(pairs)]
+        moved, targets = [], []
+        for group in np.split(np.unique(pairs)[np.argsort(label, kind="stable")],
+                              np.flatnonzero(np.diff(np.sort(label))) + 1):
+            keep = group[np.argmin(np.linalg.norm(x[group] - points[group], axis=1))]
+            tri = P[F[face[keep]]]
+            n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+            n /= max(np.linalg.norm(n), 1e-300)
+            offset = x[group] - x[keep]
+            offset -= np.outer(offset @ n, n)
+            closest = pdist(offset).min()
+            if closest < 1e-9:  # offsets along the normal alone: in a row along the triangle's first edge
+                edge = (tri[1] - tri[0]) / max(np.linalg.norm(tri[1] - tri[0]), 1e-300)
+                offset, closest = np.outer(np.arange(len(group)), edge), 1.0
+            others = group != keep
+            moved.append(group[others])
+            targets.append(points[keep] + offset[others] * (gap * 2.0 ** round_ / closest))
+        moved = np.concatenate(moved)
+        face[moved], bary[moved] = closest_body_points(np.concatenate(targets), P, F)
+    return face, bary

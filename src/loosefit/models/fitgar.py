@@ -53,10 +53,11 @@ Departures from the paper, named:
   encoding is never negative and FitGar Eq. 7's product can only gate a feature (scale it down, up or shut
   it), never flip its sign;
 - the anchors ``I M_b`` are each garment vertex's projection onto the body surface along its interpolated normals
-  (a triangle and barycentric coordinates, the normal and skinning weights interpolated), where the paper
-  subdivides SMPL to 27,554 vertices and takes the closest vertex; :mod:`loosefit.models.fitgar_inputs` measures
-  the choices (the closest surface point and the closest Anny vertex stay selectable, ``anchor="surface"`` and
-  ``"vertex"``, for runs recorded before);
+  (a triangle and barycentric coordinates, the normal and skinning weights interpolated), the few that coincide
+  moved apart, where the paper subdivides SMPL to 27,554 vertices and takes the closest vertex;
+  :mod:`loosefit.models.fitgar_inputs` measures the choices (the projection alone, the closest surface point and
+  the closest Anny vertex stay selectable, ``anchor="normal"``, ``"surface"`` and ``"vertex"``, for runs recorded
+  before);
 - ``beta`` is the body model's shape vector and ``theta`` 6D rotations (SMPL: 10 and 72 axis-angle values).
 """
 

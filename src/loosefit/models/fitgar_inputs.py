@@ -26,27 +26,32 @@ subdivides SMPL once (6,890 to 27,554 vertices) so that every garment vertex has
 (Sec. 4.1, 4.3, 5.1). Here each garment vertex is anchored at a point of the rest body's surface: a triangle and
 barycentric coordinates, with which the posed triangle's corners, their area-weighted normals (renormalised) and
 skinning weights are interpolated, so the anchor stays on the posed surface. The point is the garment vertex's
-projection along the body's interpolated normal field (``anchor="normal"``, the default;
-:func:`~loosefit.geometry.features.normal_projection_points`), or its closest point (``anchor="surface"``). Chosen
-by measurement (``benchmarks/capacity.py anchors``, seed-0 templates at 3 cm edges on the average Anny body; share
-of garment vertices whose anchor another one's is within 1 mm, largest group):
+projection along the body's interpolated normal field (:func:`~loosefit.geometry.features.normal_projection_points`),
+with the few projections that fall within 1 mm of another one moved apart (``anchor="spread"``, the default;
+:func:`~loosefit.geometry.features.spread_shared_points`); the projection alone (``anchor="normal"``); or the closest
+point (``anchor="surface"``). Chosen by measurement (``benchmarks/capacity.py anchors``, seed-0 templates at 3 cm
+edges on the average Anny body; share of garment vertices whose anchor another one's is within 1 mm, largest group):
 
-=========== ======== ================= ========================== ================= =====================
-kind        vertices closest Anny      closest vertex, subdivided closest surface   projection along the
-                     vertex (13,718)   once (54,848; the paper's) point             normals (default)
-=========== ======== ================= ========================== ================= =====================
-skirt       781      45 %, 6           10 %, 3                    0.5 %, 2          0 %, 1
-dress       2,615    76 %, 28          56 %, 22                   23 %, 19          0.6 %, 6
-long shirt  1,807    25 %, 4           3.8 %, 3                   0.4 %, 2          0 %, 1
-jumpsuit    2,455    58 %, 9           25 %, 9                    5.8 %, 9          0.7 %, 3
-=========== ======== ================= ========================== ================= =====================
+=========== ======== ============= ====================== ============= ============= ===================
+kind        vertices closest Anny  closest vertex,        closest       projection    projection, shared
+                     vertex        subdivided once        surface point along the     ones moved apart
+                     (13,718)      (54,848; the paper's)                normals       (default)
+=========== ======== ============= ====================== ============= ============= ===================
+skirt       781      45 %, 6       10 %, 3                0.5 %, 2      0 %, 1        0 %, 1
+dress       2,615    76 %, 28      56 %, 22               23 %, 19      0.6 %, 6      0 %, 1 (12 moved)
+long shirt  1,807    25 %, 4       3.8 %, 3               0.4 %, 2      0 %, 1        0 %, 1
+jumpsuit    2,453    58 %, 9       25 %, 9                5.6 %, 9      0.7 %, 3      0 %, 1 (13 moved)
+=========== ======== ============= ====================== ============= ============= ===================
 
 What the closest point leaves shared is low on the garment and far from the body (the dress's hem: 28 cm from the
 body; the jumpsuit's trouser ends, 13 cm), two thirds of it at a body vertex itself: every point in the cone of
 normals at a convex vertex has that vertex as its closest point. The projection along the normals gives each
-direction a point of its own; what it leaves within 1 mm is where the normals of the legs converge under a long
-hem. ``anchor="vertex"`` (the closest body vertex, ``nearest``) and ``"surface"`` are kept: runs record their
-anchor, and a run recorded before anchors were (its sizes name none) was trained on body vertices.
+direction a point of its own; what it leaves within 1 mm is where the normals converge under a long hem: the
+dress's hem, 45 cm out, and the trouser ends project onto the toe tips, whose normals turn through 90 degrees in a
+centimetre. Spreading moves those anchors (in each group all but the vertex nearest the body) by at most 6.5 mm,
+in the layout of their garment vertices. ``anchor="normal"``, ``"vertex"`` (the closest body vertex, ``nearest``)
+and ``"surface"`` are kept: runs record their anchor, and a run recorded before anchors were (its sizes name none)
+was trained on body vertices.
 """
 
 from __future__ import annotations
@@ -59,7 +64,8 @@ import torch
 from scipy.spatial import cKDTree
 
 from loosefit.errors import InputError
-from loosefit.geometry.features import closest_body_points, nearest_body_vertex, normal_projection_points
+from loosefit.geometry.features import (closest_body_points, nearest_body_vertex, normal_projection_points,
+                                        spread_shared_points)
 from loosefit.geometry.laplacian import edges as mesh_edges
 from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
 from loosefit.geometry.normals import vertex_normals
@@ -84,11 +90,12 @@ def pose_vector(motion: Motion) -> np.ndarray:
     return np.concatenate([feats["root"][:, ROOT_TILT], feats["joints"].reshape(T, -1)], 1).astype(np.float32)
 
 
-#: Where a garment vertex is anchored on the body (FitGar Eq. 5's ``I M_b``): ``"surface"``, its closest point
-#: on the body surface (one-to-one at 3 cm garment edges, see the module docstring); ``"vertex"``, its closest
-#: body vertex (many-to-one on Anny), the behaviour of runs that record no anchor.
-ANCHOR_MODES = ("surface", "vertex", "normal")
-DEFAULT_ANCHOR = "normal"
+#: Where a garment vertex is anchored on the body (FitGar Eq. 5's ``I M_b``; see the module docstring):
+#: ``"spread"``, its projection along the body's normals with coinciding projections moved apart; ``"normal"``,
+#: that projection alone; ``"surface"``, its closest point on the body surface; ``"vertex"``, its closest body
+#: vertex (many-to-one on Anny), the behaviour of runs that record no anchor.
+ANCHOR_MODES = ("surface", "vertex", "normal", "spread")
+DEFAULT_ANCHOR = "spread"
 #: Anchors closer than this (metres) in the rest pose count as shared (:func:`shared_anchor_fraction`).
 SHARED_ANCHOR_DISTANCE = 1e-3
 
@@ -116,7 +123,7 @@ class GarmentBodyPair:
         weights: ``(V, J)`` float32 skinning weights at the anchors (interpolated; borrowed by the garment).
         rest_joints: ``(J, 3)`` float32. parents: ``(J,)`` int64.
         shape: ``(S,)`` float32 body shape ``beta``. alpha: ``(F,)`` float32 fit attribute.
-        anchor: ``"normal"``, ``"surface"`` or ``"vertex"`` (:data:`ANCHOR_MODES`).
+        anchor: ``"spread"``, ``"normal"``, ``"surface"`` or ``"vertex"`` (:data:`ANCHOR_MODES`).
     """
 
     garment_verts: np.ndarray
@@ -157,6 +164,9 @@ class GarmentBodyPair:
         else:
             project = closest_body_points if anchor == "surface" else normal_projection_points
             face, bary = project(garment_verts, rest, body_faces)
+            if anchor == "spread":
+                face, bary = spread_shared_points(garment_verts, rest, body_faces, face, bary,
+                                                  min_distance=SHARED_ANCHOR_DISTANCE)
             corners = body_faces[face]
             nearest = corners[np.arange(len(corners)), bary.argmax(1)]
         around = body_faces[np.isin(body_faces, corners).any(1)]
