@@ -1,6 +1,6 @@
 """Can a method fit what it has seen? Anchor sharing, memorisation and a small scale curve.
 
-Four measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
+Five measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
 replaces only itself, so the sections can be run one at a time):
 
 1. ``anchors`` (FitGar, no store needed): ``shared_anchor_fraction`` of the seed-0 template of every kind
@@ -20,7 +20,9 @@ replaces only itself, so the sections can be run one at a time):
    samples) of ``--sequences`` in minibatches of ``--batch``, the coarse and detail errors on the training frames
    used and on every ``--test-stride``-th frame of the test sequences of the same garments, after each of
    ``--scale-checkpoints`` steps of the coarse stage and at the end of as many detail steps as the last one;
-4. ``twins`` (FitGar's data): is the garment a function of the pose? (:func:`pose_twins`).
+4. ``twins`` (FitGar's data): is the garment a function of the pose? (:func:`pose_twins`);
+5. ``lookup`` (FitGar's data): the held-out coarse error of no learning at all, a lookup of the nearest training
+   pose, beside the anchors and their mean displacement (:func:`pose_lookup`).
 
 Every run uses one torch thread (``--device cuda`` trains on a GPU, same widths and steps), the config file's
 widths (``configs/models/fitgar-cpu.yaml`` by default), its learning rate and gradient clip (``--set train.lr=...``
@@ -33,6 +35,7 @@ Run:
         --samples 4 --steps 50,100,200,400 --anchor surface --label surface --name capacity-fitgar
     .venv/bin/python benchmarks/capacity.py scale --data S.zarr --strides 8,4,2 --name capacity-fitgar
     .venv/bin/python benchmarks/capacity.py twins --data S.zarr --name capacity-fitgar
+    .venv/bin/python benchmarks/capacity.py lookup --data FS.zarr --strides 8,2 --test-stride 12 --label fitgar-static --name capacity-fitgar
 (the commands of the published numbers are in benchmarks/README.md, "FitGar's capacity")
 """
 
@@ -286,6 +289,45 @@ def pose_twins(args) -> dict:
     return {"twin_gap": args.twin_gap, "sequences": out}
 
 
+def pose_lookup(args) -> dict:
+    """What a held-out coarse error can be read against: per garment, on every ``--test-stride``-th test frame,
+    the mean per-vertex distance (mm) to the coarse target of the anchors alone (``anchors``), the anchors plus
+    the training frames' mean displacement (``mean_displacement``), and the anchors plus the displacement of the
+    training frame (every ``k``-th, ``--strides``) whose pose ``theta`` is nearest (``nearest_pose``: a lookup,
+    no learning); beside them the simulation's distance to its own coarse target (``detail_magnitude``, what a
+    detail generator adds). ``all``: the same means over every garment's vertices."""
+    test = GarmentFrames(args.data, "test", frame_stride=args.test_stride, anchor=args.anchor)
+    out: dict = {}
+    for stride in (int(s) for s in args.strides.split(",")):
+        train = GarmentFrames(args.data, "train", frame_stride=stride, anchor=args.anchor)
+        seen: dict = {}
+        for k, (i, _) in enumerate(train.index):
+            it = train[k]
+            seen.setdefault(train.sequences[i]["garment"], []).append((it["pose"], it["smooth"] - it["anchor"]))
+        rows, totals, n = {}, {}, 0
+        for k, (i, _) in enumerate(test.index):
+            garment, it = test.sequences[i]["garment"], test[k]
+            poses = np.stack([p for p, _ in seen[garment]])
+            disp = np.stack([d for _, d in seen[garment]])
+            nearest = disp[int(((poses - it["pose"]) ** 2).sum(1).argmin())]
+            errors = {"anchors": it["anchor"], "mean_displacement": it["anchor"] + disp.mean(0),
+                      "nearest_pose": it["anchor"] + nearest, "detail_magnitude": it["verts"]}
+            row = rows.setdefault(garment, {"frames": 0, "training_frames": len(disp)})
+            row["frames"] += 1
+            for key, pred in errors.items():
+                total = float(np.linalg.norm(pred - it["smooth"], axis=1).sum() * 1e3)
+                row[key] = row.get(key, 0.0) + total / len(pred)
+                totals[key] = totals.get(key, 0.0) + total
+            n += len(it["smooth"])
+        for row in rows.values():
+            for key in totals:
+                row[key] /= row["frames"]
+        rows["all"] = {key: value / n for key, value in totals.items()}
+        out[f"stride-{stride}"] = rows
+        print(f"stride {stride}:", json.dumps(rows), flush=True)
+    return {"test_stride": args.test_stride, "anchor": args.anchor, "by_training_stride": out}
+
+
 # ---------------------------------------------------------------------- script
 
 def merge(name: str, section: str, value, label: str | None) -> dict:
@@ -301,7 +343,7 @@ def merge(name: str, section: str, value, label: str | None) -> dict:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("section", choices=["anchors", "memorise", "scale", "twins"])
+    p.add_argument("section", choices=["anchors", "memorise", "scale", "twins", "lookup"])
     p.add_argument("--method", default="fitgar", choices=sorted(MEMORISE))
     p.add_argument("--data", default=None, help="a simulated, prepared store (memorise, scale)")
     p.add_argument("--config", type=Path, default=ROOT / "configs" / "models" / "fitgar-cpu.yaml")
@@ -333,6 +375,8 @@ def main(argv=None) -> None:
         value, label = MEMORISE[args.method](args), args.label or f"{args.method}-{args.anchor}"
     elif args.section == "twins":
         value, label = pose_twins(args), None
+    elif args.section == "lookup":
+        value, label = pose_lookup(args), args.label or Path(args.data).stem
     else:
         label = args.label or args.anchor
         value = fitgar_scale(args, lambda partial: save_results(args.name, merge(args.name, "scale", partial, label)))
