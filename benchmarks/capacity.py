@@ -293,13 +293,14 @@ def pose_lookup(args) -> dict:
     """What a held-out coarse error can be read against: per garment, on every ``--test-stride``-th test frame,
     the mean per-vertex distance (mm) to the coarse target of the anchors alone (``anchors``), the anchors plus
     the training frames' mean displacement (``mean_displacement``), and the anchors plus the displacement of the
-    training frame (every ``k``-th, ``--strides``) whose pose ``theta`` is nearest (``nearest_pose``: a lookup,
+    training frame (every ``k``-th, ``--strides``, of ``--sequences`` or all) whose pose ``theta`` is nearest (``nearest_pose``: a lookup,
     no learning); beside them the simulation's distance to its own coarse target (``detail_magnitude``, what a
     detail generator adds). ``all``: the same means over every garment's vertices."""
     test = GarmentFrames(args.data, "test", frame_stride=args.test_stride, anchor=args.anchor)
     out: dict = {}
     for stride in (int(s) for s in args.strides.split(",")):
-        train = GarmentFrames(args.data, "train", frame_stride=stride, anchor=args.anchor)
+        train = GarmentFrames(args.data, "train", frame_stride=stride, anchor=args.anchor,
+                              names=args.sequences.split(",") if args.sequences else None)
         seen: dict = {}
         for k, (i, _) in enumerate(train.index):
             it = train[k]
