@@ -35,7 +35,8 @@ Run:
         --samples 4 --steps 50,100,200,400 --anchor surface --label surface --name capacity-fitgar
     .venv/bin/python benchmarks/capacity.py scale --data S.zarr --strides 8,4,2 --name capacity-fitgar
     .venv/bin/python benchmarks/capacity.py twins --data S.zarr --name capacity-fitgar
-    .venv/bin/python benchmarks/capacity.py lookup --data FS.zarr --strides 8,2 --test-stride 12 --label fitgar-static --name capacity-fitgar
+    .venv/bin/python benchmarks/capacity.py lookup --data FS.zarr --strides 8,2 --test-stride 12 --anchor spread \
+        --label fitgar-static --name capacity-fitgar
 (the commands of the published numbers are in benchmarks/README.md, "FitGar's capacity")
 """
 
@@ -293,23 +294,24 @@ def pose_lookup(args) -> dict:
     """What a held-out coarse error can be read against: per garment, on every ``--test-stride``-th test frame,
     the mean per-vertex distance (mm) to the coarse target of the anchors alone (``anchors``), the anchors plus
     the training frames' mean displacement (``mean_displacement``), and the anchors plus the displacement of the
-    training frame (every ``k``-th, ``--strides``, of ``--sequences`` or all) whose pose ``theta`` is nearest (``nearest_pose``: a lookup,
-    no learning); beside them the simulation's distance to its own coarse target (``detail_magnitude``, what a
-    detail generator adds). ``all``: the same means over every garment's vertices."""
+    training frame (every ``k``-th, ``--strides``, of ``--sequences`` or all) whose pose ``theta`` is nearest
+    (``nearest_pose``: a lookup, no learning); beside them the simulation's distance to its own coarse target
+    (``detail_magnitude``, what a detail generator adds). ``all``: the same means over every garment's vertices."""
     test = GarmentFrames(args.data, "test", frame_stride=args.test_stride, anchor=args.anchor)
     out: dict = {}
     for stride in (int(s) for s in args.strides.split(",")):
         train = GarmentFrames(args.data, "train", frame_stride=stride, anchor=args.anchor,
                               names=args.sequences.split(",") if args.sequences else None)
-        seen: dict = {}
+        frames: dict = {}
         for k, (i, _) in enumerate(train.index):
             it = train[k]
-            seen.setdefault(train.sequences[i]["garment"], []).append((it["pose"], it["smooth"] - it["anchor"]))
+            frames.setdefault(train.sequences[i]["garment"], []).append((it["pose"], it["smooth"] - it["anchor"]))
+        # per garment: the training poses (n, P) and displacements (n, V, 3)
+        seen = {g: tuple(np.stack(column) for column in zip(*pairs)) for g, pairs in frames.items()}
         rows, totals, n = {}, {}, 0
         for k, (i, _) in enumerate(test.index):
             garment, it = test.sequences[i]["garment"], test[k]
-            poses = np.stack([p for p, _ in seen[garment]])
-            disp = np.stack([d for _, d in seen[garment]])
+            poses, disp = seen[garment]
             nearest = disp[int(((poses - it["pose"]) ** 2).sum(1).argmin())]
             errors = {"anchors": it["anchor"], "mean_displacement": it["anchor"] + disp.mean(0),
                       "nearest_pose": it["anchor"] + nearest, "detail_magnitude": it["verts"]}

@@ -137,9 +137,9 @@ def test_shared_anchor_fraction(case, surface):
 
 
 def test_normal_anchor_is_where_the_body_normal_points_at_the_vertex(case, surface):
-    """The projection along the normals: each garment vertex lies on the body's interpolated normal from its anchor (t > 0; the
-    corners' normals from the faces around them, as the inputs take them), at least as far as its closest point;
-    anchors are shared no more than the closest points are."""
+    """The projection along the normals: each garment vertex lies on the body's interpolated normal from its anchor
+    (t > 0; the corners' normals from the faces around them, as the inputs take them), at least as far as its closest
+    point; anchors are shared no more than the closest points are."""
     body, garment, *_ = case
     pair = GarmentBodyPair.build(garment.verts, garment.faces, body, body.shape.to_array(), [0.1, 0.2, 0.3],
                                  anchor="normal")

@@ -202,6 +202,21 @@ def _project_along_normals(x: np.ndarray, face: np.ndarray, near: sp.csr_matrix,
     return found, cand[first[found]], w / w.sum(1, keepdims=True)
 
 
+def coincident_groups(points: np.ndarray, distance: float) -> list[np.ndarray]:
+    """The groups of ``points (N, 3)`` that lie within ``distance`` of one another, connected through such pairs:
+    each an int64 array of two or more indices, ascending; points with no other within ``distance`` are in none."""
+    from scipy.sparse.csgraph import connected_components
+
+    pairs = cKDTree(points).query_pairs(distance, output_type="ndarray")
+    if not len(pairs):
+        return []
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points), len(points)))
+    members = np.unique(pairs)
+    label = connected_components(graph, directed=False)[1][members]
+    order = np.argsort(label, kind="stable")
+    return np.split(members[order], np.flatnonzero(np.diff(label[order])) + 1)
+
+
 def spread_shared_points(garment_verts: np.ndarray, body_verts: np.ndarray, body_faces: np.ndarray,
                          face: np.ndarray, bary: np.ndarray, min_distance: float = 1e-3, gap: float = 2e-3,
                          rounds: int = 8) -> tuple[np.ndarray, np.ndarray]:
@@ -223,7 +238,6 @@ def spread_shared_points(garment_verts: np.ndarray, body_verts: np.ndarray, body
     Returns:
         ``face (Vg,)`` int64 and ``bary (Vg, 3)`` float64, new arrays; unchanged where no point is shared.
     """
-    from scipy.sparse.csgraph import connected_components
     from scipy.spatial.distance import pdist
 
     x = np.asarray(garment_verts, np.float64)
@@ -232,15 +246,11 @@ def spread_shared_points(garment_verts: np.ndarray, body_verts: np.ndarray, body
     face, bary = np.array(face, np.int64), np.array(bary, np.float64)
     for round_ in range(rounds):
         points = np.einsum("vk,vkc->vc", bary, P[F[face]])
-        pairs = cKDTree(points).query_pairs(min_distance, output_type="ndarray")
-        if not len(pairs):
+        groups = coincident_groups(points, min_distance)
+        if not groups:
             break
-        graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(x), len(x)))
-        _, label = connected_components(graph, directed=False)
-        label = label[np.unique(pairs)]
         moved, targets = [], []
-        for group in np.split(np.unique(pairs)[np.argsort(label, kind="stable")],
-                              np.flatnonzero(np.diff(np.sort(label))) + 1):
+        for group in groups:
             keep = group[np.argmin(np.linalg.norm(x[group] - points[group], axis=1))]
             tri = P[F[face[keep]]]
             n = np.cross(tri[1] - tri[0], tri[2] - tri[0])

@@ -59,13 +59,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 import torch
-from scipy.spatial import cKDTree
 
 from loosefit.errors import InputError
-from loosefit.geometry.features import (closest_body_points, nearest_body_vertex, normal_projection_points,
-                                        spread_shared_points)
+from loosefit.geometry.features import (closest_body_points, coincident_groups, nearest_body_vertex,
+                                        normal_projection_points, spread_shared_points)
 from loosefit.geometry.laplacian import edges as mesh_edges
 from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
 from loosefit.geometry.normals import vertex_normals
@@ -227,17 +225,10 @@ def shared_anchor_fraction(pair: GarmentBodyPair, distance: float = SHARED_ANCHO
     """How many garment vertices share their anchor: ``fraction``, the share of vertices whose rest anchor
     another vertex's is within ``distance`` metres of; ``largest``, the most vertices in one such group
     (connected through pairs within ``distance``); ``vertices``."""
-    from scipy.sparse.csgraph import connected_components
-
-    anchors = pair.rest_anchors()
-    close = cKDTree(anchors).query_pairs(distance, output_type="ndarray")
-    V = len(anchors)
-    shared = np.zeros(V, bool)
-    shared[close.ravel()] = True
-    graph = sp.coo_matrix((np.ones(len(close)), (close[:, 0], close[:, 1])), shape=(V, V)) if len(close) else \
-        sp.coo_matrix((V, V))
-    _, label = connected_components(graph, directed=False)
-    return {"fraction": float(shared.mean()), "largest": int(np.bincount(label).max()), "vertices": int(V)}
+    groups = coincident_groups(pair.rest_anchors(), distance)
+    V = pair.num_verts
+    return {"fraction": sum(len(g) for g in groups) / V, "largest": max((len(g) for g in groups), default=1),
+            "vertices": int(V)}
 
 
 @dataclass
