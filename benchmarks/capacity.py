@@ -230,12 +230,14 @@ def fitgar_scale(args, save=None) -> dict:
     store = DatasetStore.open(args.data, mode="r")
     garments = None if not args.sequences else {store.sequence(n).garment for n in args.sequences.split(",")}
     tests = [n for n in store.sequence_names(split="test") if garments is None or store.sequence(n).garment in garments]
-    test = GarmentFrames(store, "test", names=tests, anchor=args.anchor)
-    test_batches = batches_of(test, np.arange(0, len(test), args.test_stride), 8)
+    test = GarmentFrames(store, "test", names=tests, anchor=args.anchor, frame_stride=args.test_stride,
+                         frame_offset=args.frame_offset)
+    test_batches = batches_of(test, np.arange(len(test)), 8)
     checkpoints = sorted(int(s) for s in args.scale_checkpoints.split(","))
     for stride in (int(s) for s in args.strides.split(",")):
         names = args.sequences.split(",") if args.sequences else None
-        data = GarmentFrames(args.data, "train", names=names, anchor=args.anchor, frame_stride=stride)
+        data = GarmentFrames(args.data, "train", names=names, anchor=args.anchor, frame_stride=stride,
+                             frame_offset=args.frame_offset)
         model, cfg = fitgar_model(data, args.config, args.set or [])
         rng = np.random.default_rng(0)
         order = rng.permutation(len(data))
@@ -259,6 +261,7 @@ def scale_result(args, test: GarmentFrames, test_batches: list[dict], rows: list
     return {"method": "fitgar", "anchor": args.anchor, "config": str(args.config), "overrides": args.set or [],
             "test_sequences": test.sequence_names,
             "test_frames": int(sum(len(b["counts"]) for b in test_batches)), "test_stride": args.test_stride,
+            "frame_offset": args.frame_offset,
             "curve": rows}
 
 
@@ -297,10 +300,12 @@ def pose_lookup(args) -> dict:
     training frame (every ``k``-th, ``--strides``, of ``--sequences`` or all) whose pose ``theta`` is nearest
     (``nearest_pose``: a lookup, no learning); beside them the simulation's distance to its own coarse target
     (``detail_magnitude``, what a detail generator adds). ``all``: the same means over every garment's vertices."""
-    test = GarmentFrames(args.data, "test", frame_stride=args.test_stride, anchor=args.anchor)
+    test = GarmentFrames(args.data, "test", frame_stride=args.test_stride, frame_offset=args.frame_offset,
+                         anchor=args.anchor)
     out: dict = {}
     for stride in (int(s) for s in args.strides.split(",")):
-        train = GarmentFrames(args.data, "train", frame_stride=stride, anchor=args.anchor,
+        train = GarmentFrames(args.data, "train", frame_stride=stride, frame_offset=args.frame_offset,
+                              anchor=args.anchor,
                               names=args.sequences.split(",") if args.sequences else None)
         frames: dict = {}
         for k, (i, _) in enumerate(train.index):
@@ -328,7 +333,8 @@ def pose_lookup(args) -> dict:
         rows["all"] = {key: value / n for key, value in totals.items()}
         out[f"stride-{stride}"] = rows
         print(f"stride {stride}:", json.dumps(rows), flush=True)
-    return {"test_stride": args.test_stride, "anchor": args.anchor, "by_training_stride": out}
+    return {"test_stride": args.test_stride, "frame_offset": args.frame_offset, "anchor": args.anchor,
+            "by_training_stride": out}
 
 
 # ---------------------------------------------------------------------- script
@@ -360,6 +366,9 @@ def main(argv=None) -> None:
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--scale-checkpoints", default="100,200")
     p.add_argument("--test-stride", type=int, default=6)
+    p.add_argument("--frame-offset", type=int, default=0,
+                   help="scale, lookup: the first frame kept of every sequence, training and test (a held-pose "
+                        "plan's settled frames: stride = frames a key, offset = stride - 1)")
     p.add_argument("--twin-gap", type=int, default=15, help="twins: frames between a frame and its pose twin")
     p.add_argument("--label", default=None, help="key of this run inside its section (default: the anchor)")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])

@@ -1,8 +1,10 @@
 import numpy as np
 import pytest
+import torch
 
 from loosefit.errors import InputError
-from loosefit.motion.hold import hold_poses, settled_frames
+from loosefit.geometry.rotations import axis_angle_to_matrix, axis_angle_to_quaternion, matrix_to_axis_angle
+from loosefit.motion.hold import hold_poses, rest_under, settled_frames
 from loosefit.motion.motion import Motion
 
 
@@ -48,3 +50,47 @@ def test_hold_arguments_are_checked():
                    {"every": 2, "transition": 1, "hold": 2.5}):
         with pytest.raises(InputError, match="must be an integer >= 1"):
             hold_poses(_turning(5), **kwargs)
+
+
+def test_from_rest_reaches_every_key_from_the_rest_pose():
+    """With ``from_rest`` the targets alternate: the rest pose under each key (here the root only turns about
+    z, so its rest keeps the key's root; the knee is straight), then the key; each is reached in a linear
+    ramp of the angle and held."""
+    source, every, transition, hold = _turning(10), 3, 4, 2
+    held = hold_poses(source, every, transition, hold, from_rest=True)
+    keys = np.arange(0, 10, every)
+    half = transition + hold
+    assert held.num_frames == 2 * len(keys) * half
+    ramp = np.concatenate([np.arange(1, transition + 1) / transition, np.ones(hold)])
+    for k, key in enumerate(keys):
+        previous = keys[max(k - 1, 0)]
+        to_rest = slice(2 * k * half, (2 * k + 1) * half)
+        to_key = slice((2 * k + 1) * half, (2 * k + 2) * half)
+        # going to the rest: the root turns on from the previous key, the knee straightens from it
+        root_time = previous + ramp * (key - previous) if k else np.zeros(half)
+        np.testing.assert_allclose(held.rotations[to_rest, 0, 2], 0.1 * root_time, atol=1e-6)
+        np.testing.assert_allclose(held.rotations[to_rest, 1, 0], 0.05 * previous * (1 - ramp) if k else 0,
+                                   atol=1e-6)
+        np.testing.assert_allclose(held.translation[to_rest, 0], 0.01 * root_time, atol=1e-7)
+        # going to the key: the root stays, the knee bends from straight
+        np.testing.assert_allclose(held.rotations[to_key, 0, 2], 0.1 * key, atol=1e-6)
+        np.testing.assert_allclose(held.rotations[to_key, 1, 0], 0.05 * key * ramp, atol=1e-6)
+        np.testing.assert_allclose(held.translation[to_key, 0], 0.01 * key, atol=1e-7)
+    settled = settled_frames(held.num_frames, transition, hold, from_rest=True)
+    assert settled.tolist() == [11, 23, 35, 47]
+    np.testing.assert_allclose(held.rotations[settled], source.rotations[keys], atol=1e-6)
+    np.testing.assert_allclose(held.rotations[settled - half, 1], 0.0, atol=1e-7)  # the settled rest
+
+
+def test_rest_under_keeps_only_the_heading():
+    """A root pitched forward by 0.3 rad and turned by psi about z rests turned by psi alone (the rest forward
+    is -Y); every other joint rests unrotated."""
+    psi = np.array([0.0, 0.7, -2.5])
+    pitch = axis_angle_to_matrix(torch.tensor([0.3, 0.0, 0.0], dtype=torch.float64))
+    yaw = axis_angle_to_matrix(torch.from_numpy(np.stack([0 * psi, 0 * psi, psi], 1)))
+    root = matrix_to_axis_angle(yaw @ pitch).numpy()
+    keys = np.tile(np.array([0.9, 0.1, 0.3, -0.3]), (3, 2, 1))
+    rest = rest_under(keys, root)
+    expected = axis_angle_to_quaternion(torch.from_numpy(np.stack([0 * psi, 0 * psi, psi], 1))).numpy()
+    np.testing.assert_allclose(rest[:, 0], expected, atol=1e-12)
+    np.testing.assert_array_equal(rest[:, 1], np.tile([1.0, 0, 0, 0], (3, 1)))

@@ -5,6 +5,12 @@ Playing a motion slower (:func:`loosefit.motion.resample.slow_down`) only weaken
 held pose removes it: after ``hold`` frames at rest the garment is near its static equilibrium for that
 pose, which is the ground truth a static method (FitGar) is built for. The settled frame of key ``k`` is
 frame ``(k + 1) * (transition + hold) - 1`` of the result (:func:`settled_frames`).
+
+A held pose is still reached from the previous key, and a loose garment's rest shape depends on the way
+it came: a dress's hem stays where the last stride put it, so one pose has several drapes and a network
+of the pose learns their mean. ``from_rest`` removes that memory: between keys the body goes back to its
+rest pose (every joint unrotated, the root turned only to the key's heading) and holds it, so that every
+key is reached along the same path from the same settled drape, and its drape is a function of the key.
 """
 
 from __future__ import annotations
@@ -13,15 +19,17 @@ import numpy as np
 import torch
 
 from loosefit.errors import InputError
-from loosefit.geometry.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+from loosefit.geometry.rotations import axis_angle_to_matrix, axis_angle_to_quaternion, quaternion_to_axis_angle
+from loosefit.models.motion_features import heading_angles
 from loosefit.motion.motion import Motion
 from loosefit.motion.resample import slerp
 
 
-def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place: bool = False) -> Motion:
+def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place: bool = False,
+               from_rest: bool = False) -> Motion:
     """Every ``every``-th frame of ``motion`` as a key pose: ``transition`` frames moving from the previous
-    key (rotations by slerp, root translation linearly; the first key is held throughout), then ``hold``
-    frames standing still at the key.
+    target (rotations by slerp, root translation linearly; the first target is held throughout), then
+    ``hold`` frames standing still at the key.
 
     Args:
         motion: ``T`` frames.
@@ -31,9 +39,13 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
         in_place: keep the root's horizontal (x, y) position at the first frame's: the body poses on the spot
             instead of covering a walk's stride in each transition, which would swing the cloth for nothing
             (a static garment shape does not depend on where the body stands).
+        from_rest: reach every key from the rest pose: first ``transition + hold`` frames going to, then
+            holding, the rest pose under the key's root (joints unrotated, the root's rotation reduced to its
+            heading about +Z, the key's root position), then ``transition + hold`` frames to the key as above.
 
     Returns:
-        A Motion of ``K * (transition + hold)`` frames at the source's frame rate, ``K = ceil(T / every)``.
+        A Motion of ``K * B`` frames at the source's frame rate, ``K = ceil(T / every)`` keys of ``B =
+        transition + hold`` frames each (``2 * (transition + hold)`` with ``from_rest``).
     """
     for name, value in (("every", every), ("transition", transition), ("hold", hold)):
         if not (isinstance(value, (int, np.integer)) and value >= 1):
@@ -42,19 +54,34 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
     t = motion.translation[::every].astype(np.float64)
     if in_place:
         t[:, :2] = t[0, :2]
-    previous = np.concatenate([q[:1], q[:-1]])  # (K, J, 4): the first key moves from itself
+    if from_rest:  # the targets alternate: rest under key 0, key 0, rest under key 1, key 1, ...
+        q = np.stack([rest_under(q, motion.rotations[::every, 0]), q], axis=1).reshape(-1, *q.shape[1:])
+        t = np.repeat(t, 2, axis=0)
+    previous = np.concatenate([q[:1], q[:-1]])  # (K, J, 4): the first target moves from itself
     previous_t = np.concatenate([t[:1], t[:-1]])
     a = np.concatenate([np.arange(1, transition + 1) / transition, np.ones(hold)])  # (B,) fraction of the way
     quats = slerp(previous[:, None], q[:, None], a[None, :, None, None])  # (K, B, J, 4)
     trans = previous_t[:, None] + a[None, :, None] * (t - previous_t)[:, None]  # (K, B, 3)
     count = quats.shape[0] * quats.shape[1]
     rotations = quaternion_to_axis_angle(torch.from_numpy(quats.reshape(count, -1, 4))).numpy()
-    name = f"{motion.name} (key every {every}, {transition} + {hold} frames{', in place' if in_place else ''})"
+    name = (f"{motion.name} (key every {every}, {transition} + {hold} frames{', in place' if in_place else ''}"
+            f"{', from rest' if from_rest else ''})")
     return Motion(rotations, trans.reshape(count, 3), motion.fps, motion.rig, motion.joint_names, name)
 
 
-def settled_frames(num_frames: int, transition: int, hold: int) -> np.ndarray:
+def rest_under(keys: np.ndarray, root_rotations: np.ndarray) -> np.ndarray:
+    """The rest pose under each key: quaternions ``(K, J, 4)`` (w, x, y, z) of every joint unrotated but the
+    root, turned about +Z to the heading of ``root_rotations`` (``(K, 3)`` axis-angle)."""
+    root = axis_angle_to_matrix(torch.from_numpy(root_rotations.astype(np.float64))).numpy()
+    psi = heading_angles(root)
+    rest = np.zeros_like(keys)
+    rest[..., 0] = 1.0
+    rest[:, 0] = np.stack([np.cos(psi / 2), np.zeros_like(psi), np.zeros_like(psi), np.sin(psi / 2)], axis=1)
+    return rest
+
+
+def settled_frames(num_frames: int, transition: int, hold: int, from_rest: bool = False) -> np.ndarray:
     """Indices of the settled frames (the last held frame of every key) of a :func:`hold_poses` result of
     ``num_frames`` frames."""
-    block = transition + hold
+    block = (transition + hold) * (2 if from_rest else 1)
     return np.arange(block - 1, num_frames, block)

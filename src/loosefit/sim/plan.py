@@ -124,12 +124,14 @@ class FileGarment:
 @dataclass(frozen=True)
 class Hold:
     """Key poses held until the cloth settles (:func:`loosefit.motion.hold.hold_poses`): every ``every``-th
-    frame, reached in ``transition`` frames, then held for ``frames`` frames; ``in_place``: on the spot."""
+    frame, reached in ``transition`` frames, then held for ``frames`` frames; ``in_place``: on the spot;
+    ``from_rest``: each key reached from the rest pose, held as long first (twice the frames a key)."""
 
     every: int
     transition: int = 10
     frames: int = 30
     in_place: bool = False
+    from_rest: bool = False
 
     def __post_init__(self):
         for key in ("every", "transition", "frames"):

@@ -135,7 +135,8 @@ def load_plan_motion(plan: Plan, name: str):
     motion = _plan_motion_played(plan, name, spec)
     if spec.hold is None:
         return motion
-    return hold_poses(motion, spec.hold.every, spec.hold.transition, spec.hold.frames, spec.hold.in_place)
+    return hold_poses(motion, spec.hold.every, spec.hold.transition, spec.hold.frames, spec.hold.in_place,
+                      spec.hold.from_rest)
 
 
 def _plan_motion_played(plan: Plan, name: str, spec):
