@@ -19,7 +19,8 @@ replaces only itself, so the sections can be run one at a time):
 3. ``scale`` (FitGar): trained on every ``k``-th training frame (``--strides``, e.g. 8, 4, 2: x1, x2, x4
    samples) of ``--sequences`` in minibatches of ``--batch``, the coarse and detail errors on the training frames
    used and on every ``--test-stride``-th frame of the test sequences of the same garments, after each of
-   ``--scale-checkpoints`` steps of the coarse stage and at the end of as many detail steps as the last one;
+   ``--scale-checkpoints`` steps of the coarse stage and at the end of as many detail steps as the last one
+   (``--save-run DIR``: the trained model kept as a run folder, to animate and render);
 4. ``twins`` (FitGar's data): is the garment a function of the pose? (:func:`pose_twins`);
 5. ``lookup`` (FitGar's data): the held-out coarse error of no learning at all, a lookup of the nearest training
    pose, beside the anchors and their mean displacement (:func:`pose_lookup`).
@@ -58,6 +59,7 @@ from loosefit.config import load_config  # noqa: E402
 from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.models.fitgar import Config, FitGar  # noqa: E402
 from loosefit.models.fitgar_data import GarmentFrames, collate_frames  # noqa: E402
+from loosefit.training import save_trained_frames_run  # noqa: E402
 from loosefit.models.fitgar_inputs import ANCHOR_MODES, GarmentBodyPair, shared_anchor_fraction  # noqa: E402
 from loosefit.train.protocol import to_device  # noqa: E402
 
@@ -234,6 +236,8 @@ def fitgar_scale(args, save=None) -> dict:
                          frame_offset=args.frame_offset)
     test_batches = batches_of(test, np.arange(len(test)), 8)
     checkpoints = sorted(int(s) for s in args.scale_checkpoints.split(","))
+    if args.save_run and "," in args.strides:
+        raise SystemExit("capacity.py scale: --save-run keeps one model: give one --strides")
     for stride in (int(s) for s in args.strides.split(",")):
         names = args.sequences.split(",") if args.sequences else None
         data = GarmentFrames(args.data, "train", names=names, anchor=args.anchor, frame_stride=stride,
@@ -249,6 +253,8 @@ def fitgar_scale(args, save=None) -> dict:
         steps = checkpoints[-1]
         train_stage(model, "coarse", batches, steps, cfg.train.lr, cfg.train.grad_clip, set(checkpoints), evaluate, log)
         train_stage(model, "detail", batches, steps, cfg.train.lr, cfg.train.grad_clip, {steps}, evaluate, log)
+        if args.save_run:
+            save_trained_frames_run(args.save_run, "fitgar", model.cpu(), cfg, data, args.data)
         rows.append({"frame_stride": stride, "samples": len(data), "sequences": data.sequence_names,
                      "batch": args.batch,
                      "steps": log})
@@ -370,6 +376,7 @@ def main(argv=None) -> None:
                    help="scale, lookup: the first frame kept of every sequence, training and test (a held-pose "
                         "plan's settled frames: stride = frames a key, offset = stride - 1)")
     p.add_argument("--twin-gap", type=int, default=15, help="twins: frames between a frame and its pose twin")
+    p.add_argument("--save-run", default=None, help="scale: keep the trained model as a run folder (one stride)")
     p.add_argument("--label", default=None, help="key of this run inside its section (default: the anchor)")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--name", default="capacity-fitgar")

@@ -32,10 +32,11 @@ from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion_range import META_KEY as MOTION_RANGE, store_motion_range
 from loosefit.paths import atomic_path
 from loosefit.train import distributed
+from loosefit.train.protocol import model_stages
 from loosefit.train.run import RunDir, save_checkpoint
 from loosefit.train.seeding import rng_state, seed_everything
 from loosefit.train.settings import TrainResult
-from loosefit.train.validation import choose_validation, train_on_fraction
+from loosefit.train.validation import Validation, choose_validation, train_on_fraction
 from loosefit.train.trainer import StaleRunError, train  # noqa: F401 - StaleRunError re-exported
 
 MODEL_META = "model.json"
@@ -127,7 +128,7 @@ def train_model(
             "validation": validation.to_json(), "rig": train_data.rig_settings}
     _write_run(run, meta, cfg, resume, motion_range=trained)  # body-lbs follows any motion
     if not trained:
-        _save_fixed(model, run)
+        _save_weights(model, run, ["fixed"])
         return None
     return train(model, cfg.data.dataset(train_data), cfg.data.dataset(val_data) if val_data else None,
                  cfg.train, run.path, resume=resume)
@@ -166,12 +167,29 @@ def _train_garment_frames(method, cls, cfg, data, run: RunDir, resume: bool, car
     if validation.val:
         val_data = GarmentFrames(data, None, sim_params=sim_params, names=validation.val, **frames)
     model = cls.from_data(train_data, cfg.model)
-    meta = {"method": method, "garment": None, "data": str(Path(data).resolve()), "sizes": model.sizes(),
+    _write_run(run, _garment_frames_meta(method, data, model, train_data, val_data, validation, sim_params), cfg,
+               resume)
+    return train(model, train_data, val_data, cfg.train, run.path, resume=resume)
+
+
+def _garment_frames_meta(method, data, model, train_data, val_data, validation, sim_params) -> dict:
+    """The ``model.json`` record of a static method's run."""
+    return {"method": method, "garment": None, "data": str(Path(data).resolve()), "sizes": model.sizes(),
             "sim_params": sim_params, "train_sequences": train_data.sequence_names,
             "val_sequences": val_data.sequence_names if val_data else [], "validation": validation.to_json(),
             "rig": {}}
-    _write_run(run, meta, cfg, resume)
-    return train(model, train_data, val_data, cfg.train, run.path, resume=resume)
+
+
+def save_trained_frames_run(out: str | Path, method: str, model, cfg, train_data, data: str | Path) -> RunDir:
+    """A run folder for a static model (FitGar) trained outside :func:`train_model` (a benchmark's own loop),
+    so that it animates, renders and scores as any run: ``model.json`` (no validation), ``method.yaml`` and
+    a complete last checkpoint of the model's weights (its stages, step 0: the loop's own history is not kept).
+    """
+    run = RunDir(out)
+    validation = Validation("none", train_data.sequence_names, note="trained outside loosefit train")
+    _write_run(run, _garment_frames_meta(method, data, model, train_data, None, validation, None), cfg, False)
+    _save_weights(model, run, list(model_stages(model)))
+    return run
 
 
 def _train_garment_windows(cls, method: str, data, garment: str | None, run: RunDir, cfg, resume: bool,
@@ -238,11 +256,12 @@ def _check_same_data(path: Path, meta: dict) -> None:
                             "train into a new folder or delete this run", path.parent)
 
 
-def _save_fixed(model, run: RunDir) -> None:
-    """A method without trainable parameters (the body-LBS baseline) still gets a loadable checkpoint."""
+def _save_weights(model, run: RunDir, stages: list[str]) -> None:
+    """A complete checkpoint of ``model``'s weights alone: a method without trainable parameters (the body-LBS
+    baseline, stages ``["fixed"]``) still gets a loadable one, and so does a model trained elsewhere."""
     if not distributed.is_main():
         return
-    state = {"model": model.state_dict(), "optimizer": None, "scheduler": None, "stages": ["fixed"], "stage_index": 0,
+    state = {"model": model.state_dict(), "optimizer": None, "scheduler": None, "stages": stages, "stage_index": 0,
              "epoch": 0, "global_step": 0, "best_metric": None, "rng": rng_state(),
              "config": {}, "history": [], "elapsed_s": 0.0, "complete": True}
     save_checkpoint(run.last_checkpoint, state)

@@ -184,6 +184,27 @@ def test_a_run_recorded_before_surface_anchors_animates_on_its_own_anchors(run, 
         animator.animate(projected, motion)
 
 
+def test_a_model_trained_elsewhere_saves_as_a_run(store, run, heavy_case, tmp_path):
+    """A benchmark's own training loop keeps its model as a run folder: the CLI run's model saved again
+    animates to the same vertices, and the folder records its data and no validation."""
+    from loosefit.animate import load_run
+    from loosefit.animate_any import AnyGarmentAnimator
+    from loosefit.training import save_trained_frames_run
+
+    meta, model, cfg = load_run(run)
+    data = GarmentFrames(store, "train", names=meta["train_sequences"])
+    saved = save_trained_frames_run(tmp_path / "saved", "fitgar", model, cfg, data, store).path
+    again = json.loads((saved / "model.json").read_text())
+    assert again["sizes"] == meta["sizes"] and again["train_sequences"] == meta["train_sequences"]
+    assert again["validation"]["source"] == "none" and again["val_sequences"] == []
+    shape, heavy, garment, motion = heavy_case
+    verts = []
+    for folder in (run, saved):
+        animator = AnyGarmentAnimator(folder)
+        verts.append(animator.animate(animator.pair(garment.verts, garment.faces, heavy), motion))
+    np.testing.assert_array_equal(verts[1], verts[0])
+
+
 def test_loosefit_animate_cli(run, heavy_case, tmp_path):
     from loosefit.cli import main
     from loosefit.io.mesh_sequence import MeshSequence
