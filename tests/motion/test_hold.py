@@ -54,9 +54,10 @@ def test_hold_arguments_are_checked():
 
 def test_from_rest_reaches_every_key_from_the_rest_pose():
     """With ``from_rest`` the targets alternate: the rest pose under each key (here the root only turns about
-    z, so its rest keeps the key's root; the knee is straight), then the key; each is reached in a linear
-    ramp of the angle and held."""
+    z, so its rest keeps the key's root; the knee is straight; the root at the first key's height), then the
+    key; each is reached in a linear ramp of the angle and held."""
     source, every, transition, hold = _turning(10), 3, 4, 2
+    source.translation[:, 2] += 0.02 * np.arange(10)  # the root rises 2 cm a frame
     held = hold_poses(source, every, transition, hold, from_rest=True)
     keys = np.arange(0, 10, every)
     half = transition + hold
@@ -72,6 +73,9 @@ def test_from_rest_reaches_every_key_from_the_rest_pose():
         np.testing.assert_allclose(held.rotations[to_rest, 1, 0], 0.05 * previous * (1 - ramp) if k else 0,
                                    atol=1e-6)
         np.testing.assert_allclose(held.translation[to_rest, 0], 0.01 * root_time, atol=1e-7)
+        height = 0.9 + 0.02 * previous * (1 - ramp) if k else np.full(half, 0.9)  # down to the first key's
+        np.testing.assert_allclose(held.translation[to_rest, 2], height, atol=1e-7)
+        np.testing.assert_allclose(held.translation[to_key, 2], 0.9 + 0.02 * key * ramp, atol=1e-7)
         # going to the key: the root stays, the knee bends from straight
         np.testing.assert_allclose(held.rotations[to_key, 0, 2], 0.1 * key, atol=1e-6)
         np.testing.assert_allclose(held.rotations[to_key, 1, 0], 0.05 * key * ramp, atol=1e-6)

@@ -41,7 +41,8 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
             (a static garment shape does not depend on where the body stands).
         from_rest: reach every key from the rest pose: first ``transition + hold`` frames going to, then
             holding, the rest pose under the key's root (joints unrotated, the root's rotation reduced to its
-            heading about +Z, the key's root position), then ``transition + hold`` frames to the key as above.
+            heading about +Z, the key's horizontal root position at the first key's height), then
+            ``transition + hold`` frames to the key as above.
 
     Returns:
         A Motion of ``K * B`` frames at the source's frame rate, ``K = ceil(T / every)`` keys of ``B =
@@ -57,6 +58,7 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
     if from_rest:  # the targets alternate: rest under key 0, key 0, rest under key 1, key 1, ...
         q = np.stack([rest_under(q, motion.rotations[::every, 0]), q], axis=1).reshape(-1, *q.shape[1:])
         t = np.repeat(t, 2, axis=0)
+        t[0::2, 2] = t[0, 2]  # every rest at one height: a walk's bounce would lift the rested drape by cm
     previous = np.concatenate([q[:1], q[:-1]])  # (K, J, 4): the first target moves from itself
     previous_t = np.concatenate([t[:1], t[:-1]])
     a = np.concatenate([np.arange(1, transition + 1) / transition, np.ones(hold)])  # (B,) fraction of the way
