@@ -1,6 +1,6 @@
 """Can a method fit what it has seen? Anchor sharing, memorisation and a small scale curve.
 
-Five measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
+Six measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
 replaces only itself, so the sections can be run one at a time):
 
 1. ``anchors`` (FitGar, no store needed): ``shared_anchor_fraction`` of the seed-0 template of every kind
@@ -23,7 +23,9 @@ replaces only itself, so the sections can be run one at a time):
    (``--save-run DIR``: the trained model kept as a run folder, to animate and render);
 4. ``twins`` (FitGar's data): is the garment a function of the pose? (:func:`pose_twins`);
 5. ``lookup`` (FitGar's data): the held-out coarse error of no learning at all, a lookup of the nearest training
-   pose, beside the anchors and their mean displacement (:func:`pose_lookup`).
+   pose, beside the anchors and their mean displacement (:func:`pose_lookup`);
+6. ``repeats`` (FitGar's data): where one pose was simulated many times (the rests of a ``from_rest`` plan), the
+   floor of any function of the pose: the drapes' spread about their mean (:func:`pose_repeats`).
 
 Every run uses one torch thread (``--device cuda`` trains on a GPU, same widths and steps), the config file's
 widths (``configs/models/fitgar-cpu.yaml`` by default), its learning rate and gradient clip (``--set train.lr=...``
@@ -343,6 +345,37 @@ def pose_lookup(args) -> dict:
             "by_training_stride": out}
 
 
+def pose_repeats(args) -> dict:
+    """The floor of any function of the pose, where one pose is simulated many times: the frames every ``--strides``
+    from ``--frame-offset`` of each sequence must all be one pose (the settled rests of a ``from_rest`` plan:
+    stride = frames a key, offset = half of it, minus 1), told apart only by the path the cloth took. Per sequence
+    (mean per-vertex distances, mm, in the heading frame): ``detail_floor`` the simulated drapes to their mean (what
+    the best function of the pose misses of the simulation), ``coarse_floor`` the smoothed drapes to their mean (of
+    the coarse target), ``coarse_sim_floor`` the smoothed mean to the simulated drapes (the best coarse mesh against
+    the simulation), ``detail_magnitude`` each drape to its own smoothing, and ``pose_spread`` the largest distance
+    of a frame's pose ``theta`` from the first one's (zero for true repeats). ``all``: the sequences' means."""
+    stride = int(args.strides.split(",")[0])
+    data = GarmentFrames(args.data, None, frame_stride=stride, frame_offset=args.frame_offset, anchor=args.anchor,
+                         names=args.sequences.split(",") if args.sequences else None)
+    by: dict = {}
+    for k, (i, _) in enumerate(data.index):
+        by.setdefault(data.sequences[i]["name"], []).append(data[k])
+    distance = lambda a, b: float(np.linalg.norm(a - b, axis=-1).mean() * 1e3)  # noqa: E731
+    out = {}
+    for name, items in by.items():
+        raw, smooth = np.stack([it["verts"] for it in items]), np.stack([it["smooth"] for it in items])
+        pose = np.stack([it["pose"] for it in items])
+        row = {"frames": len(items), "pose_spread": float(np.abs(pose - pose[0]).max()),
+               "detail_floor": distance(raw, raw.mean(0)), "coarse_floor": distance(smooth, smooth.mean(0)),
+               "coarse_sim_floor": distance(raw, smooth.mean(0)), "detail_magnitude": distance(raw, smooth)}
+        row["detail_over_coarse_floor"] = row["detail_floor"] / row["coarse_sim_floor"]
+        out[name] = row
+        print(name, json.dumps({k: round(v, 3) for k, v in row.items()}), flush=True)
+    out["all"] = {key: float(np.mean([row[key] for row in out.values()])) for key in next(iter(out.values()))}
+    print("all", json.dumps({k: round(v, 3) for k, v in out["all"].items()}), flush=True)
+    return {"frame_stride": stride, "frame_offset": args.frame_offset, "anchor": args.anchor, "sequences": out}
+
+
 # ---------------------------------------------------------------------- script
 
 def merge(name: str, section: str, value, label: str | None) -> dict:
@@ -358,7 +391,7 @@ def merge(name: str, section: str, value, label: str | None) -> dict:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("section", choices=["anchors", "memorise", "scale", "twins", "lookup"])
+    p.add_argument("section", choices=["anchors", "memorise", "scale", "twins", "lookup", "repeats"])
     p.add_argument("--method", default="fitgar", choices=sorted(MEMORISE))
     p.add_argument("--data", default=None, help="a simulated, prepared store (memorise, scale)")
     p.add_argument("--config", type=Path, default=ROOT / "configs" / "models" / "fitgar-cpu.yaml")
@@ -396,6 +429,8 @@ def main(argv=None) -> None:
         value, label = pose_twins(args), None
     elif args.section == "lookup":
         value, label = pose_lookup(args), args.label or Path(args.data).stem
+    elif args.section == "repeats":
+        value, label = pose_repeats(args), args.label or Path(args.data).stem
     else:
         label = args.label or args.anchor
         value = fitgar_scale(args, lambda partial: save_results(args.name, merge(args.name, "scale", partial, label)))
