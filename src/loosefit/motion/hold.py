@@ -10,7 +10,8 @@ A held pose is still reached from the previous key, and a loose garment's rest s
 it came: a dress's hem stays where the last stride put it, so one pose has several drapes and a network
 of the pose learns their mean. ``from_rest`` removes that memory: between keys the body goes back to its
 rest pose (every joint unrotated, the root turned only to the key's heading) and holds it, so that every
-key is reached along the same path from the same settled drape, and its drape is a function of the key.
+key is reached along the same path from a rested drape. What memory is left is the cloth's own: a dress
+rests in one of several drapes of the same pose (``benchmarks/capacity.py repeats`` measures their spread).
 """
 
 from __future__ import annotations
@@ -59,7 +60,7 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
         q = np.stack([rest_under(q, motion.rotations[::every, 0]), q], axis=1).reshape(-1, *q.shape[1:])
         t = np.repeat(t, 2, axis=0)
         t[0::2, 2] = t[0, 2]  # every rest at one height: a walk's bounce would lift the rested drape by cm
-    previous = np.concatenate([q[:1], q[:-1]])  # (K, J, 4): the first target moves from itself
+    previous = np.concatenate([q[:1], q[:-1]])  # (targets, J, 4): the first moves from itself
     previous_t = np.concatenate([t[:1], t[:-1]])
     a = np.concatenate([np.arange(1, transition + 1) / transition, np.ones(hold)])  # (B,) fraction of the way
     quats = slerp(previous[:, None], q[:, None], a[None, :, None, None])  # (K, B, J, 4)
