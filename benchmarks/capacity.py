@@ -1,6 +1,6 @@
 """Can a method fit what it has seen? Anchor sharing, memorisation and a small scale curve.
 
-Six measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
+Seven measurements, each a section of one JSON (``benchmarks/results/<name>.json``; a section run again
 replaces only itself, so the sections can be run one at a time):
 
 1. ``anchors`` (FitGar, no store needed): ``shared_anchor_fraction`` of the seed-0 template of every kind
@@ -19,13 +19,16 @@ replaces only itself, so the sections can be run one at a time):
 3. ``scale`` (FitGar): trained on every ``k``-th training frame (``--strides``, e.g. 8, 4, 2: x1, x2, x4
    samples) of ``--sequences`` in minibatches of ``--batch``, the coarse and detail errors on the training frames
    used and on every ``--test-stride``-th frame of the test sequences of the same garments, after each of
-   ``--scale-checkpoints`` steps of the coarse stage and at the end of as many detail steps as the last one
+   ``--scale-checkpoints`` steps of the coarse stage and at the end of ``--detail-steps`` detail steps (as many
+   as the last checkpoint unless given)
    (``--save-run DIR``: the trained model kept as a run folder, to animate and render);
 4. ``twins`` (FitGar's data): is the garment a function of the pose? (:func:`pose_twins`);
 5. ``lookup`` (FitGar's data): the held-out coarse error of no learning at all, a lookup of the nearest training
    pose, beside the anchors and their mean displacement (:func:`pose_lookup`);
 6. ``repeats`` (FitGar's data): where one pose was simulated many times (the rests of a ``from_rest`` plan), the
-   floor of any function of the pose: the drapes' spread about their mean (:func:`pose_repeats`).
+   floor of any function of the pose: the drapes' spread about their mean (:func:`pose_repeats`);
+7. ``against-mean`` (a saved FitGar run): its held-out errors against the base run and against the mean of the
+   perturbed reference runs, beside their floor (:func:`against_mean`).
 
 Every run uses one torch thread (``--device cuda`` trains on a GPU, same widths and steps), the config file's
 widths (``configs/models/fitgar-cpu.yaml`` by default), its learning rate and gradient clip (``--set train.lr=...``
@@ -252,9 +255,10 @@ def fitgar_scale(args, save=None) -> dict:
         log: list = []
         evaluate = lambda: {**{f"train_{k}": v for k, v in errors_mm(model, seen).items()},  # noqa: E731
                             **{f"test_{k}": v for k, v in errors_mm(model, test_batches).items()}}
-        steps = checkpoints[-1]
+        steps, detail_steps = checkpoints[-1], args.detail_steps or checkpoints[-1]
         train_stage(model, "coarse", batches, steps, cfg.train.lr, cfg.train.grad_clip, set(checkpoints), evaluate, log)
-        train_stage(model, "detail", batches, steps, cfg.train.lr, cfg.train.grad_clip, {steps}, evaluate, log)
+        train_stage(model, "detail", batches, detail_steps, cfg.train.lr, cfg.train.grad_clip, {detail_steps},
+                    evaluate, log)
         if args.save_run:
             save_trained_frames_run(args.save_run, "fitgar", model.cpu(), cfg, data, args.data)
         rows.append({"frame_stride": stride, "samples": len(data), "sequences": data.sequence_names,
@@ -376,6 +380,52 @@ def pose_repeats(args) -> dict:
     return {"frame_stride": stride, "frame_offset": args.frame_offset, "anchor": args.anchor, "sequences": out}
 
 
+def against_mean(args) -> dict:
+    """A saved FitGar run (``--run``, e.g. from ``scale --save-run``) on every ``--test-stride``-th frame from
+    ``--frame-offset`` of the test sequences that have reference runs (the plan's ``references``), scored against
+    the base run as everywhere above and against the mean of the base and its reference runs
+    (:mod:`loosefit.metrics.reference`: a network trained on single chaotic runs learns their mean). Mean per-vertex
+    distances, mm, in the heading frame: ``coarse`` (against the smoothed base, or the smoothed mean), ``coarse_sim``
+    (against the base, or the mean), ``detail`` (the same); ``floor_detail`` the runs' distance to their mean and
+    ``floor_coarse`` that of their smoothings (what no deterministic model can remove from the base figures)."""
+    from loosefit.animate import load_run
+    from loosefit.models.motion_features import to_canonical
+
+    store = DatasetStore.open(args.data, mode="r")
+    names = [n for n in store.sequence_names(split="test") if len(store.references(n))]
+    if not names:
+        raise SystemExit(f"capacity.py against-mean: no test sequence of {args.data} has reference runs")
+    _, model, _ = load_run(args.run, checkpoint="last")
+    model.to(DEVICE).eval()
+    test = GarmentFrames(store, "test", names=names, anchor=args.anchor, frame_stride=args.test_stride,
+                         frame_offset=args.frame_offset)
+    runs = [np.concatenate([s["verts"][None], store.references(s["name"])]) for s in test.sequences]  # (N, T, V, 3)
+    sums: dict = {}
+    distance = lambda a, b: float(np.linalg.norm(a - b, axis=-1).mean() * 1e3)  # noqa: E731
+    with torch.no_grad():
+        for k, (i, t) in enumerate(test.index):
+            item, seq = test[k], test.sequences[i]
+            posed = test._posed[seq["pose"]][t:t + 1]
+            n = len(runs[i])
+            canonical = to_canonical(runs[i][:, t], np.repeat(posed.rot, n, 0), np.repeat(posed.origin, n, 0))
+            assert np.allclose(canonical[0], item["verts"], atol=1e-6), "the base run in another frame"
+            smooth = test.smoothers[seq["garment"]](canonical)
+            mean, smooth_mean = canonical.mean(0), smooth.mean(0)
+            out = model(to_device(collate_frames([item]), DEVICE))
+            coarse, detail = out["coarse"].cpu().numpy(), out["verts"].cpu().numpy()
+            row = {"coarse_mm": distance(coarse, item["smooth"]), "coarse_mean_mm": distance(coarse, smooth_mean),
+                   "coarse_sim_mm": distance(coarse, item["verts"]), "coarse_sim_mean_mm": distance(coarse, mean),
+                   "detail_mm": distance(detail, item["verts"]), "detail_mean_mm": distance(detail, mean),
+                   "floor_detail_mm": distance(canonical, mean), "floor_coarse_mm": distance(smooth, smooth_mean)}
+            for key, value in row.items():
+                sums[key] = sums.get(key, 0.0) + value / len(test)
+    sums["detail_over_coarse"] = sums["detail_mm"] / sums["coarse_sim_mm"]
+    sums["detail_over_coarse_mean"] = sums["detail_mean_mm"] / sums["coarse_sim_mean_mm"]
+    print(json.dumps({k: round(v, 2) for k, v in sums.items()}), flush=True)
+    return {"run": str(args.run), "test_sequences": names, "runs": int(len(runs[0])), "test_frames": len(test),
+            "test_stride": args.test_stride, "frame_offset": args.frame_offset, **sums}
+
+
 # ---------------------------------------------------------------------- script
 
 def merge(name: str, section: str, value, label: str | None) -> dict:
@@ -391,7 +441,7 @@ def merge(name: str, section: str, value, label: str | None) -> dict:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("section", choices=["anchors", "memorise", "scale", "twins", "lookup", "repeats"])
+    p.add_argument("section", choices=["anchors", "memorise", "scale", "twins", "lookup", "repeats", "against-mean"])
     p.add_argument("--method", default="fitgar", choices=sorted(MEMORISE))
     p.add_argument("--data", default=None, help="a simulated, prepared store (memorise, scale)")
     p.add_argument("--config", type=Path, default=ROOT / "configs" / "models" / "fitgar-cpu.yaml")
@@ -404,11 +454,13 @@ def main(argv=None) -> None:
     p.add_argument("--strides", default="8,4,2")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--scale-checkpoints", default="100,200")
+    p.add_argument("--detail-steps", type=int, default=None, help="scale: detail steps (default: the coarse ones)")
     p.add_argument("--test-stride", type=int, default=6)
     p.add_argument("--frame-offset", type=int, default=0,
                    help="scale, lookup: the first frame kept of every sequence, training and test (a held-pose "
                         "plan's settled frames: stride = frames a key, offset = stride - 1)")
     p.add_argument("--twin-gap", type=int, default=15, help="twins: frames between a frame and its pose twin")
+    p.add_argument("--run", default=None, help="against-mean: a saved FitGar run folder")
     p.add_argument("--save-run", default=None, help="scale: keep the trained model as a run folder (one stride)")
     p.add_argument("--label", default=None, help="key of this run inside its section (default: the anchor)")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
@@ -431,6 +483,8 @@ def main(argv=None) -> None:
         value, label = pose_lookup(args), args.label or Path(args.data).stem
     elif args.section == "repeats":
         value, label = pose_repeats(args), args.label or Path(args.data).stem
+    elif args.section == "against-mean":
+        value, label = against_mean(args), args.label or Path(args.run).name
     else:
         label = args.label or args.anchor
         value = fitgar_scale(args, lambda partial: save_results(args.name, merge(args.name, "scale", partial, label)))

@@ -98,3 +98,20 @@ def test_rest_under_keeps_only_the_heading():
     expected = axis_angle_to_quaternion(torch.from_numpy(np.stack([0 * psi, 0 * psi, psi], 1))).numpy()
     np.testing.assert_allclose(rest[:, 0], expected, atol=1e-12)
     np.testing.assert_array_equal(rest[:, 1], np.tile([1.0, 0, 0, 0], (3, 1)))
+
+
+def test_an_order_seed_visits_the_same_keys_in_another_order():
+    source, every, transition, hold = _turning(20), 3, 4, 2
+    keys = np.arange(0, 20, every)
+    order = np.random.default_rng(5).permutation(keys)
+    assert not np.array_equal(order, keys)
+    for from_rest in (False, True):
+        held = hold_poses(source, every, transition, hold, from_rest=from_rest, order_seed=5)
+        settled = settled_frames(held.num_frames, transition, hold, from_rest=from_rest)
+        np.testing.assert_allclose(held.rotations[settled], source.rotations[order], atol=1e-6)
+        np.testing.assert_allclose(held.translation[settled], source.translation[order], atol=1e-6)
+    # the first target moves from itself; then each key is reached from the one visited before it
+    held = hold_poses(source, every, transition, hold, order_seed=5)
+    ramp = np.arange(1, transition + 1) / transition
+    block = slice(transition + hold, transition + hold + transition)
+    np.testing.assert_allclose(held.rotations[block, 1, 0], 0.05 * (order[0] + ramp * (order[1] - order[0])), atol=1e-6)

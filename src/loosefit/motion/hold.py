@@ -27,7 +27,7 @@ from loosefit.motion.resample import slerp
 
 
 def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place: bool = False,
-               from_rest: bool = False) -> Motion:
+               from_rest: bool = False, order_seed: int | None = None) -> Motion:
     """Every ``every``-th frame of ``motion`` as a key pose: ``transition`` frames moving from the previous
     target (rotations by slerp, root translation linearly; the first target is held throughout), then
     ``hold`` frames standing still at the key.
@@ -44,6 +44,9 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
             holding, the rest pose under the key's root (joints unrotated, the root's rotation reduced to its
             heading about +Z, the key's horizontal root position at the first key's height), then
             ``transition + hold`` frames to the key as above.
+        order_seed: visit the keys in a random order drawn with this seed (None: in the motion's order): the same
+            poses reached along other paths, whose drapes at one pose average to what a function of the pose can
+            know (``in_place`` and the rests' height then follow the first key visited).
 
     Returns:
         A Motion of ``K * B`` frames at the source's frame rate, ``K = ceil(T / every)`` keys of ``B =
@@ -52,12 +55,15 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
     for name, value in (("every", every), ("transition", transition), ("hold", hold)):
         if not (isinstance(value, (int, np.integer)) and value >= 1):
             raise InputError(f"hold_poses: {name!r} must be an integer >= 1, got {value!r}")
-    q = axis_angle_to_quaternion(torch.from_numpy(motion.rotations[::every].astype(np.float64))).numpy()
-    t = motion.translation[::every].astype(np.float64)
+    keys = np.arange(0, motion.num_frames, every)
+    if order_seed is not None:
+        keys = np.random.default_rng(order_seed).permutation(keys)
+    q = axis_angle_to_quaternion(torch.from_numpy(motion.rotations[keys].astype(np.float64))).numpy()
+    t = motion.translation[keys].astype(np.float64)
     if in_place:
         t[:, :2] = t[0, :2]
     if from_rest:  # the targets alternate: rest under key 0, key 0, rest under key 1, key 1, ...
-        q = np.stack([rest_under(q, motion.rotations[::every, 0]), q], axis=1).reshape(-1, *q.shape[1:])
+        q = np.stack([rest_under(q, motion.rotations[keys, 0]), q], axis=1).reshape(-1, *q.shape[1:])
         t = np.repeat(t, 2, axis=0)
         t[0::2, 2] = t[0, 2]  # every rest at one height: a walk's bounce would lift the rested drape by cm
     previous = np.concatenate([q[:1], q[:-1]])  # (targets, J, 4): the first moves from itself
@@ -68,7 +74,7 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
     count = quats.shape[0] * quats.shape[1]
     rotations = quaternion_to_axis_angle(torch.from_numpy(quats.reshape(count, -1, 4))).numpy()
     name = (f"{motion.name} (key every {every}, {transition} + {hold} frames{', in place' if in_place else ''}"
-            f"{', from rest' if from_rest else ''})")
+            f"{', from rest' if from_rest else ''}{'' if order_seed is None else f', order {order_seed}'})")
     return Motion(rotations, trans.reshape(count, 3), motion.fps, motion.rig, motion.joint_names, name)
 
 

@@ -125,13 +125,15 @@ class FileGarment:
 class Hold:
     """Key poses held until the cloth settles (:func:`loosefit.motion.hold.hold_poses`): every ``every``-th
     frame, reached in ``transition`` frames, then held for ``frames`` frames; ``in_place``: on the spot;
-    ``from_rest``: each key reached from the rest pose, held as long first (twice the frames a key)."""
+    ``from_rest``: each key reached from the rest pose, held as long first (twice the frames a key);
+    ``order_seed``: the keys in a random order drawn with this seed."""
 
     every: int
     transition: int = 10
     frames: int = 30
     in_place: bool = False
     from_rest: bool = False
+    order_seed: Optional[int] = None
 
     def __post_init__(self):
         for key in ("every", "transition", "frames"):

@@ -136,7 +136,7 @@ def load_plan_motion(plan: Plan, name: str):
     if spec.hold is None:
         return motion
     return hold_poses(motion, spec.hold.every, spec.hold.transition, spec.hold.frames, spec.hold.in_place,
-                      spec.hold.from_rest)
+                      spec.hold.from_rest, spec.hold.order_seed)
 
 
 def _plan_motion_played(plan: Plan, name: str, spec):
