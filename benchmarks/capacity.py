@@ -27,8 +27,8 @@ replaces only itself, so the sections can be run one at a time):
    pose, beside the anchors and their mean displacement (:func:`pose_lookup`);
 6. ``repeats`` (FitGar's data): where one pose was simulated many times (the rests of a ``from_rest`` plan), the
    floor of any function of the pose: the drapes' spread about their mean (:func:`pose_repeats`);
-7. ``against-mean`` (a saved FitGar run): its held-out errors against the base run and against the mean of the
-   perturbed reference runs, beside their floor (:func:`against_mean`).
+7. ``against-mean`` (a saved FitGar run): its held-out errors against the base run and against the mean drape of
+   each held-out pose over its runs (other paths, perturbed starts), beside their floor (:func:`against_mean`).
 
 Every run uses one torch thread (``--device cuda`` trains on a GPU, same widths and steps), the config file's
 widths (``configs/models/fitgar-cpu.yaml`` by default), its learning rate and gradient clip (``--set train.lr=...``
@@ -382,48 +382,58 @@ def pose_repeats(args) -> dict:
 
 def against_mean(args) -> dict:
     """A saved FitGar run (``--run``, e.g. from ``scale --save-run``) on every ``--test-stride``-th frame from
-    ``--frame-offset`` of the test sequences that have reference runs (the plan's ``references``), scored against
-    the base run as everywhere above and against the mean of the base and its reference runs
-    (:mod:`loosefit.metrics.reference`: a network trained on single chaotic runs learns their mean). Mean per-vertex
-    distances, mm, in the heading frame: ``coarse`` (against the smoothed base, or the smoothed mean), ``coarse_sim``
-    (against the base, or the mean), ``detail`` (the same); ``floor_detail`` the runs' distance to their mean and
-    ``floor_coarse`` that of their smoothings (what no deterministic model can remove from the base figures)."""
+    ``--frame-offset`` of the test sequences, scored against the base run as everywhere above and against the mean
+    drape of its pose (:mod:`loosefit.metrics.reference`: a network trained on single chaotic runs learns their
+    mean). The mean of a pose is over every run of it in the test split: each test frame with that pose ``theta``
+    (the same key visited along other paths: ``hold.order_seed``) and their sequences' perturbed reference runs
+    (the plan's ``references``). Mean per-vertex distances, mm, in the heading frame: ``coarse`` (against the
+    smoothed base, or the smoothed mean), ``coarse_sim`` (against the base, or the mean), ``detail`` (the same);
+    ``floor_detail`` the runs' distance to their mean and ``floor_coarse`` that of their smoothings (what no
+    deterministic model removes from the base figures)."""
     from loosefit.animate import load_run
     from loosefit.models.motion_features import to_canonical
 
     store = DatasetStore.open(args.data, mode="r")
-    names = [n for n in store.sequence_names(split="test") if len(store.references(n))]
-    if not names:
-        raise SystemExit(f"capacity.py against-mean: no test sequence of {args.data} has reference runs")
     _, model, _ = load_run(args.run, checkpoint="last")
     model.to(DEVICE).eval()
-    test = GarmentFrames(store, "test", names=names, anchor=args.anchor, frame_stride=args.test_stride,
+    test = GarmentFrames(store, "test", anchor=args.anchor, frame_stride=args.test_stride,
                          frame_offset=args.frame_offset)
     runs = [np.concatenate([s["verts"][None], store.references(s["name"])]) for s in test.sequences]  # (N, T, V, 3)
-    sums: dict = {}
+    items, groups = [], {}
+    for k, (i, t) in enumerate(test.index):
+        item, seq = test[k], test.sequences[i]
+        posed = test._posed[seq["pose"]][t:t + 1]
+        n = len(runs[i])
+        canonical = to_canonical(runs[i][:, t], np.repeat(posed.rot, n, 0), np.repeat(posed.origin, n, 0))
+        assert np.allclose(canonical[0], item["verts"], atol=1e-6), "the base run in another frame"
+        key = (seq["garment"], np.round(item["pose"], 4).tobytes())
+        groups.setdefault(key, []).append(canonical)
+        items.append((item, key))
+    means = {key: np.concatenate(members).mean(0) for key, members in groups.items()}
     distance = lambda a, b: float(np.linalg.norm(a - b, axis=-1).mean() * 1e3)  # noqa: E731
+    sums: dict = {}
     with torch.no_grad():
-        for k, (i, t) in enumerate(test.index):
-            item, seq = test[k], test.sequences[i]
-            posed = test._posed[seq["pose"]][t:t + 1]
-            n = len(runs[i])
-            canonical = to_canonical(runs[i][:, t], np.repeat(posed.rot, n, 0), np.repeat(posed.origin, n, 0))
-            assert np.allclose(canonical[0], item["verts"], atol=1e-6), "the base run in another frame"
-            smooth = test.smoothers[seq["garment"]](canonical)
-            mean, smooth_mean = canonical.mean(0), smooth.mean(0)
+        for item, key in items:
+            smoother = test.smoothers[key[0]]
+            mean, smooth_mean = means[key], smoother(means[key])
             out = model(to_device(collate_frames([item]), DEVICE))
             coarse, detail = out["coarse"].cpu().numpy(), out["verts"].cpu().numpy()
             row = {"coarse_mm": distance(coarse, item["smooth"]), "coarse_mean_mm": distance(coarse, smooth_mean),
                    "coarse_sim_mm": distance(coarse, item["verts"]), "coarse_sim_mean_mm": distance(coarse, mean),
-                   "detail_mm": distance(detail, item["verts"]), "detail_mean_mm": distance(detail, mean),
-                   "floor_detail_mm": distance(canonical, mean), "floor_coarse_mm": distance(smooth, smooth_mean)}
-            for key, value in row.items():
-                sums[key] = sums.get(key, 0.0) + value / len(test)
+                   "detail_mm": distance(detail, item["verts"]), "detail_mean_mm": distance(detail, mean)}
+            for name, value in row.items():
+                sums[name] = sums.get(name, 0.0) + value / len(items)
+    runs_of = [sum(len(m) for m in members) for members in groups.values()]
+    every = [(np.concatenate(members), key) for key, members in groups.items()]
+    sums["floor_detail_mm"] = float(np.mean([distance(r, means[key]) for r, key in every]))
+    sums["floor_coarse_mm"] = float(np.mean([distance(test.smoothers[key[0]](r), test.smoothers[key[0]](means[key]))
+                                             for r, key in every]))
     sums["detail_over_coarse"] = sums["detail_mm"] / sums["coarse_sim_mm"]
     sums["detail_over_coarse_mean"] = sums["detail_mean_mm"] / sums["coarse_sim_mean_mm"]
     print(json.dumps({k: round(v, 2) for k, v in sums.items()}), flush=True)
-    return {"run": str(args.run), "test_sequences": names, "runs": int(len(runs[0])), "test_frames": len(test),
-            "test_stride": args.test_stride, "frame_offset": args.frame_offset, **sums}
+    return {"run": str(args.run), "test_sequences": test.sequence_names, "test_frames": len(items),
+            "poses": len(groups), "runs_per_pose": [min(runs_of), max(runs_of)], "test_stride": args.test_stride,
+            "frame_offset": args.frame_offset, **sums}
 
 
 # ---------------------------------------------------------------------- script
