@@ -16,6 +16,8 @@ Plan format (paths are relative to the plan file)::
       slow: {procedural: walk, seconds: 6, seed: 1, slowdown: 4}   # 1.5 s of a walk over 6 s
       held: {procedural: walk, seconds: 6, seed: 1, hold: {every: 15, transition: 10, frames: 30, in_place: true}}
                                    # every 15th pose, reached in 10 frames then held for 30, on the spot
+      rested: {procedural: walk, seconds: 6, seed: 1, hold: {every: 15, from_rest: true, order_seed: 2}}
+                                   # each key reached from the rest pose, held there first; keys shuffled
     sim_params:                    # named SimParams sets (missing fields keep their defaults)
       default: {}
       stiff: {bending: 1.0e-4}
