@@ -158,6 +158,8 @@ def test_hold_is_checked(tmp_path):
     for hold, message in [({"every": 0}, r"'hold.every' must be an integer >= 1"),
                           ({"transition": 5}, r"'hold.every'.*missing"),
                           ({"every": 5, "frames": "long"}, r"'hold.frames': expected an integer"),
+                          ({"every": 5, "order_seed": -3}, r"'hold.order_seed' must be an integer >= 0"),
+                          ({"every": 5, "from_rest": "yes"}, r"'hold.from_rest': expected true or false"),
                           (3, r"'hold': expected a mapping of Hold fields")]:
         with pytest.raises(InputError, match=message):
             load_plan(_write(tmp_path, {**PLAN, "motions": {"walk": {**walk, "hold": hold}}}))

@@ -141,6 +141,8 @@ class Hold:
         for key in ("every", "transition", "frames"):
             if getattr(self, key) < 1:
                 raise InputError(f"'hold.{key}' must be an integer >= 1, got {getattr(self, key)!r}")
+        if self.order_seed is not None and self.order_seed < 0:
+            raise InputError(f"'hold.order_seed' must be an integer >= 0, got {self.order_seed!r}")
 
 
 @dataclass(frozen=True)
