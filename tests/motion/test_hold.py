@@ -50,6 +50,8 @@ def test_hold_arguments_are_checked():
                    {"every": 2, "transition": 1, "hold": 2.5}):
         with pytest.raises(InputError, match="must be an integer >= 1"):
             hold_poses(_turning(5), **kwargs)
+    with pytest.raises(InputError, match="'order_seed' must be None or an integer >= 0"):
+        hold_poses(_turning(5), 2, 1, 1, order_seed=-1)
 
 
 def test_from_rest_reaches_every_key_from_the_rest_pose():

@@ -55,6 +55,8 @@ def hold_poses(motion: Motion, every: int, transition: int, hold: int, in_place:
     for name, value in (("every", every), ("transition", transition), ("hold", hold)):
         if not (isinstance(value, (int, np.integer)) and value >= 1):
             raise InputError(f"hold_poses: {name!r} must be an integer >= 1, got {value!r}")
+    if order_seed is not None and not (isinstance(order_seed, (int, np.integer)) and order_seed >= 0):
+        raise InputError(f"hold_poses: 'order_seed' must be None or an integer >= 0, got {order_seed!r}")
     keys = np.arange(0, motion.num_frames, every)
     if order_seed is not None:
         keys = np.random.default_rng(order_seed).permutation(keys)
