@@ -1,6 +1,6 @@
 """SwinGar's attention and capacity on a small simulated multi-garment store, on a CPU.
 
-Three measurements, each a subcommand writing ``benchmarks/results/<name>.json``:
+Five measurements, each a subcommand writing ``benchmarks/results/<name>.json``:
 
 - ``entropy``: each GAT-LN layer's mean attention entropy per vertex (nats), next to that of a uniform
   attention over the same neighbourhoods (its maximum: equal means the layer is a neighbourhood mean), for
@@ -11,6 +11,8 @@ Three measurements, each a subcommand writing ``benchmarks/results/<name>.json``
   the store's training garments with ``configs/models/swingar-cpu.yaml`` (and the budget below), scored on the
   held-out garments (RMSE over every frame, animated from the rest garment, next to body-LBS) with each layer's
   attention entropy on them; ``--design`` picks the attention design.
+- ``bands``: :func:`cmd_bands`: the curve's runs scored band by band (the smooth garment and its wrinkles) on the
+  held-out garments, the seeds' mean and spread per variant.
 - ``memorise``: :func:`memorise`: a handful of training frames learnt by heart (Adam on them alone), the
   RMSE on them over the steps, with the coarse stage's share; ``--set`` / ``--patch`` for the hypotheses.
 - ``scale``: :func:`cmd_scale`: the held-out error against the training garments (``--counts`` 1, 2, 4: x1, x2,
@@ -24,6 +26,7 @@ Store (see ``/work/stores/swingar-attention.yaml`` for the plan used)::
     .venv/bin/loosefit simulate PLAN.yaml --out STORE.zarr
     .venv/bin/python benchmarks/swingar_attention.py entropy --data STORE.zarr
     .venv/bin/python benchmarks/swingar_attention.py curve --data STORE.zarr --runs RUNS
+    .venv/bin/python benchmarks/swingar_attention.py bands --data STORE.zarr --runs RUNS --match alpha-0,plain-gat
     .venv/bin/python benchmarks/swingar_attention.py memorise --data STORE.zarr --garment skirt-0+average
     .venv/bin/python benchmarks/swingar_attention.py scale --data STORE.zarr --runs RUNS [--counts 1,2,4]
 """
@@ -287,6 +290,68 @@ def cmd_curve(args) -> None:
     save_results(args.name, results)
 
 
+def cmd_bands(args) -> None:
+    """The curve's trained runs (every run folder under the ``--runs`` folders, comma-separated, whose name has one
+    of ``--match``), scored on the held-out garments band by band: each test sequence's prediction and simulation
+    split as ``loosefit prepare`` splits a garment (:func:`loosefit.geometry.smoothing.frequency_split`, the
+    ``virtualbones`` preset unless the garment's rig says otherwise) into the smooth garment (``low``) and its
+    wrinkles (``high``). The paper's claim for alpha is about the high frequencies (SwinGar Sec. 4.2, Eq. 5): RMSE
+    over all frames, mm, per band, per run, and per variant (the folder name without its seed) the seeds' mean and
+    spread, and its difference from ``--reference`` seed by seed (the seeds move every variant alike);
+    ``high_signal_mm``: the wrinkles' own size (the high-band RMSE of a prediction without any)."""
+    from loosefit.animate import Animator
+    from loosefit.body import AnnyBody
+    from loosefit.data.store import DatasetStore
+    from loosefit.geometry.smoothing import frequency_split
+    from loosefit.rig.prepare import prepared_split
+
+    torch.set_num_threads(1)
+    store, body = DatasetStore.open(args.data), AnnyBody()
+    tests = [n for n in sorted(store.sequence_names()) if store.sequence(n).split == "test"]
+    splits, truths = {}, {}
+    for name in tests:
+        seq = store.sequence(name)
+        if seq.garment not in splits:
+            _, smoothing, fixed = prepared_split(store, seq.garment)
+            faces = store.garment(seq.garment).faces
+            splits[seq.garment] = lambda x, f=faces, sm=smoothing, fx=fixed: frequency_split(x, f, sm, fixed=fx)
+        truths[name] = splits[seq.garment](np.asarray(seq.verts[:], np.float32))
+    rmse = lambda a, b: float(np.sqrt(((a - b) ** 2).sum(-1).mean()) * 1e3)  # noqa: E731
+    runs = sorted((r for folder in args.runs.split(",") for r in Path(folder).iterdir()
+                   if (r / "run.json").exists() and any(m in r.name for m in args.match.split(","))),
+                  key=lambda r: r.name)
+    signal = float(np.mean([rmse(0 * truth[1], truth[1]) for truth in truths.values()]))  # no wrinkles at all
+    results: dict = {"store": args.data, "sequences": tests, "high_signal_mm": signal, "runs": {}, "variants": {}}
+    for run in runs:
+        rows = {}
+        for name in tests:
+            seq = store.sequence(name)
+            pred = Animator(run, garment=store.garment(seq.garment), body=body).animate(store.motion(seq.motion))
+            low, high = splits[seq.garment](pred)
+            rows[name] = {"low": rmse(low, truths[name][0]), "high": rmse(high, truths[name][1])}
+        mean = {band: float(np.mean([r[band] for r in rows.values()])) for band in ("low", "high")}
+        results["runs"][run.name] = {"sequences": rows, **mean}
+        print(run.name, {k: round(v, 3) for k, v in mean.items()}, flush=True)
+        save_results(args.name, results)
+    by_variant: dict = {}
+    for name, row in results["runs"].items():
+        by_variant.setdefault(name.rsplit("-seed-", 1)[0], []).append(row)
+    for variant, rows in by_variant.items():
+        results["variants"][variant] = {
+            f"{band}_{stat}": float(f([r[band] for r in rows])) for band in ("low", "high")
+            for stat, f in (("mean_mm", np.mean), ("spread_mm", np.ptp))} | {"seeds": len(rows)}
+    # the seeds move every variant alike: each variant's difference from --reference at the same seed
+    seeds = lambda variant: {n.rsplit("-seed-", 1)[1]: r for n, r in results["runs"].items()  # noqa: E731
+                             if n.rsplit("-seed-", 1)[0] == variant}
+    reference = seeds(args.reference)
+    for variant in by_variant:
+        own = seeds(variant)
+        for band in ("low", "high"):
+            results["variants"][variant][f"{band}_minus_reference_mm"] = {
+                seed: own[seed][band] - reference[seed][band] for seed in sorted(set(own) & set(reference))}
+    save_results(args.name, results)
+
+
 def scale_garments(store, counts: list[int]) -> dict[int, list[str]]:
     """The training garments of each count: the store's training garments ordered one of each kind in turn
     (kinds and names sorted), the first ``count``."""
@@ -347,6 +412,12 @@ def main() -> None:
     sp.add_argument("--seeds", default="0,1")
     sp.add_argument("--set", action="append", default=[])
     sp.add_argument("--name", default="swingar-alpha-curve")
+    sp = sub.add_parser("bands")
+    sp.add_argument("--data", required=True)
+    sp.add_argument("--runs", required=True)
+    sp.add_argument("--match", required=True, help="comma-separated parts of run folder names, e.g. alpha-0,plain-gat")
+    sp.add_argument("--reference", default="node-centred-alpha-0", help="the variant the others are paired with")
+    sp.add_argument("--name", default="swingar-alpha-bands")
     sp = sub.add_parser("scale")
     sp.add_argument("--data", required=True)
     sp.add_argument("--runs", required=True)
@@ -375,6 +446,8 @@ def main() -> None:
         cmd_scale(args)
     elif args.command == "curve":
         cmd_curve(args)
+    elif args.command == "bands":
+        cmd_bands(args)
     else:
         patch = {k: yaml.safe_load(v) for k, v in (p.split("=", 1) for p in args.patch)}
         save_results(args.name, memorise(Path(args.data), args.garment, args.set, args.frames, args.windows,
