@@ -123,6 +123,11 @@ def fitgar_model(data: GarmentFrames, config: Path, overrides) -> tuple[FitGar, 
     return FitGar.from_data(data, cfg.model).to(DEVICE), cfg
 
 
+def distance_mm(a: np.ndarray, b: np.ndarray) -> float:
+    """Mean per-vertex distance, mm, of two meshes ``(..., V, 3)`` metres (broadcast)."""
+    return float(np.linalg.norm(a - b, axis=-1).mean() * 1e3)
+
+
 def errors_mm(model: FitGar, batches: list[dict]) -> dict[str, float]:
     """Mean per-vertex errors (mm) over the frames of ``batches``: ``coarse_mm`` (coarse against the smoothed
     simulation), ``coarse_sim_mm`` and ``detail_mm`` (against the simulation), weighted by vertex count."""
@@ -364,14 +369,13 @@ def pose_repeats(args) -> dict:
     by: dict = {}
     for k, (i, _) in enumerate(data.index):
         by.setdefault(data.sequences[i]["name"], []).append(data[k])
-    distance = lambda a, b: float(np.linalg.norm(a - b, axis=-1).mean() * 1e3)  # noqa: E731
     out = {}
     for name, items in by.items():
         raw, smooth = np.stack([it["verts"] for it in items]), np.stack([it["smooth"] for it in items])
         pose = np.stack([it["pose"] for it in items])
         row = {"frames": len(items), "pose_spread": float(np.abs(pose - pose[0]).max()),
-               "detail_floor": distance(raw, raw.mean(0)), "coarse_floor": distance(smooth, smooth.mean(0)),
-               "coarse_sim_floor": distance(raw, smooth.mean(0)), "detail_magnitude": distance(raw, smooth)}
+               "detail_floor": distance_mm(raw, raw.mean(0)), "coarse_floor": distance_mm(smooth, smooth.mean(0)),
+               "coarse_sim_floor": distance_mm(raw, smooth.mean(0)), "detail_magnitude": distance_mm(raw, smooth)}
         row["detail_over_coarse_floor"] = row["detail_floor"] / row["coarse_sim_floor"]
         out[name] = row
         print(name, json.dumps({k: round(v, 3) for k, v in row.items()}), flush=True)
@@ -409,25 +413,26 @@ def against_mean(args) -> dict:
         key = (seq["garment"], np.round(item["pose"], 4).tobytes())
         groups.setdefault(key, []).append(canonical)
         items.append((item, key))
-    means = {key: np.concatenate(members).mean(0) for key, members in groups.items()}
-    distance = lambda a, b: float(np.linalg.norm(a - b, axis=-1).mean() * 1e3)  # noqa: E731
+    runs_of, means, smooth_means, floor_detail, floor_coarse = [], {}, {}, [], []
+    for key, members in groups.items():  # each pose's runs: their mean, its smoothing, their spread about it
+        every, smoother = np.concatenate(members), test.smoothers[key[0]]
+        means[key], smooth_means[key] = every.mean(0), smoother(every.mean(0))
+        runs_of.append(len(every))
+        floor_detail.append(distance_mm(every, means[key]))
+        floor_coarse.append(distance_mm(smoother(every), smooth_means[key]))
     sums: dict = {}
     with torch.no_grad():
         for item, key in items:
-            smoother = test.smoothers[key[0]]
-            mean, smooth_mean = means[key], smoother(means[key])
+            mean, smooth_mean = means[key], smooth_means[key]
             out = model(to_device(collate_frames([item]), DEVICE))
             coarse, detail = out["coarse"].cpu().numpy(), out["verts"].cpu().numpy()
-            row = {"coarse_mm": distance(coarse, item["smooth"]), "coarse_mean_mm": distance(coarse, smooth_mean),
-                   "coarse_sim_mm": distance(coarse, item["verts"]), "coarse_sim_mean_mm": distance(coarse, mean),
-                   "detail_mm": distance(detail, item["verts"]), "detail_mean_mm": distance(detail, mean)}
+            row = {"coarse_mm": distance_mm(coarse, item["smooth"]),
+                   "coarse_mean_mm": distance_mm(coarse, smooth_mean),
+                   "coarse_sim_mm": distance_mm(coarse, item["verts"]), "coarse_sim_mean_mm": distance_mm(coarse, mean),
+                   "detail_mm": distance_mm(detail, item["verts"]), "detail_mean_mm": distance_mm(detail, mean)}
             for name, value in row.items():
                 sums[name] = sums.get(name, 0.0) + value / len(items)
-    runs_of = [sum(len(m) for m in members) for members in groups.values()]
-    every = [(np.concatenate(members), key) for key, members in groups.items()]
-    sums["floor_detail_mm"] = float(np.mean([distance(r, means[key]) for r, key in every]))
-    sums["floor_coarse_mm"] = float(np.mean([distance(test.smoothers[key[0]](r), test.smoothers[key[0]](means[key]))
-                                             for r, key in every]))
+    sums["floor_detail_mm"], sums["floor_coarse_mm"] = float(np.mean(floor_detail)), float(np.mean(floor_coarse))
     sums["detail_over_coarse"] = sums["detail_mm"] / sums["coarse_sim_mm"]
     sums["detail_over_coarse_mean"] = sums["detail_mean_mm"] / sums["coarse_sim_mean_mm"]
     print(json.dumps({k: round(v, 2) for k, v in sums.items()}), flush=True)

@@ -323,32 +323,32 @@ def cmd_bands(args) -> None:
     signal = float(np.mean([rmse(0 * truth[1], truth[1]) for truth in truths.values()]))  # no wrinkles at all
     results: dict = {"store": args.data, "sequences": tests, "high_signal_mm": signal, "runs": {}, "variants": {}}
     for run in runs:
-        rows = {}
+        rows, animators = {}, {}
         for name in tests:
             seq = store.sequence(name)
-            pred = Animator(run, garment=store.garment(seq.garment), body=body).animate(store.motion(seq.motion))
+            if seq.garment not in animators:
+                animators[seq.garment] = Animator(run, garment=store.garment(seq.garment), body=body)
+            pred = animators[seq.garment].animate(store.motion(seq.motion))
             low, high = splits[seq.garment](pred)
             rows[name] = {"low": rmse(low, truths[name][0]), "high": rmse(high, truths[name][1])}
         mean = {band: float(np.mean([r[band] for r in rows.values()])) for band in ("low", "high")}
         results["runs"][run.name] = {"sequences": rows, **mean}
         print(run.name, {k: round(v, 3) for k, v in mean.items()}, flush=True)
         save_results(args.name, results)
-    by_variant: dict = {}
+    by_variant: dict = {}  # variant -> seed -> row
     for name, row in results["runs"].items():
-        by_variant.setdefault(name.rsplit("-seed-", 1)[0], []).append(row)
-    for variant, rows in by_variant.items():
-        results["variants"][variant] = {
-            f"{band}_{stat}": float(f([r[band] for r in rows])) for band in ("low", "high")
-            for stat, f in (("mean_mm", np.mean), ("spread_mm", np.ptp))} | {"seeds": len(rows)}
-    # the seeds move every variant alike: each variant's difference from --reference at the same seed
-    seeds = lambda variant: {n.rsplit("-seed-", 1)[1]: r for n, r in results["runs"].items()  # noqa: E731
-                             if n.rsplit("-seed-", 1)[0] == variant}
-    reference = seeds(args.reference)
-    for variant in by_variant:
-        own = seeds(variant)
+        variant, seed = name.rsplit("-seed-", 1)
+        by_variant.setdefault(variant, {})[seed] = row
+    reference = by_variant.get(args.reference, {})
+    for variant, seeds in by_variant.items():
+        rows = list(seeds.values())
+        summary = {f"{band}_{stat}": float(f([r[band] for r in rows])) for band in ("low", "high")
+                   for stat, f in (("mean_mm", np.mean), ("spread_mm", np.ptp))} | {"seeds": len(rows)}
+        # the seeds move every variant alike: each variant's difference from --reference at the same seed
         for band in ("low", "high"):
-            results["variants"][variant][f"{band}_minus_reference_mm"] = {
-                seed: own[seed][band] - reference[seed][band] for seed in sorted(set(own) & set(reference))}
+            summary[f"{band}_minus_reference_mm"] = {seed: seeds[seed][band] - reference[seed][band]
+                                                     for seed in sorted(set(seeds) & set(reference))}
+        results["variants"][variant] = summary
     save_results(args.name, results)
 
 
