@@ -14,7 +14,8 @@ here with ``--bones`` virtual bones, which resumes and skips what is done):
    :func:`loosefit.metrics.report.evaluate` (RMSE, mean vertex error, Hausdorff, STED, collision with
    the posed body); VirtualBones' low-frequency mesh alone is a row of its own ("virtualbones-lf").
    The training and validation motions are animated too: the RMSE per motion kind (``walk``, ``spin``...,
-   the procedural generator's name; ``file`` for motion files) and split, side by side, is
+   the procedural generator's name; for motion files the plan name's prefix, ``ballet`` for ``ballet-005_02-1``)
+   and split, side by side, is
    ``garments/<garment>/<method>/errors_by_kind/<kind>/{train,val,test}_rmse_mm`` in the JSON.
    A test sequence with reference runs in the store (the plan's ``references``: the same simulation started
    10 micrometres apart, :mod:`loosefit.metrics.reference`) is also scored against the mean of its runs, beside
@@ -175,7 +176,7 @@ def errors_by_kind(store: DatasetStore, animator, splits: dict[str, list[str]], 
             seq = store.sequence(name)
             motion = store.motion(seq.motion)
             err = rmse_mm(animator.animate(motion, output=output), np.asarray(seq.verts[:]))
-            entry = sums.setdefault(motion_kind(motion.name), {}).setdefault(split, [0.0, 0, 0])
+            entry = sums.setdefault(motion_kind(motion.name, seq.motion), {}).setdefault(split, [0.0, 0, 0])
             entry[0] += err**2 * motion.num_frames
             entry[1] += motion.num_frames
             entry[2] += 1

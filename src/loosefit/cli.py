@@ -204,12 +204,16 @@ def cmd_simulate(args):
             raise InputError(f"options for one sequence (--garment, --motion), not for a plan: {', '.join(given)}; "
                              f"write them into the plan instead: {where}", args.plan)
         writable(args.out, folder=True)
-        summary = run_plan(args.plan, args.out, workers=args.workers, address=args.address)
+        summary = run_plan(args.plan, args.out, workers=args.workers, address=args.address,
+                           splits=tuple(args.splits) if args.splits else None,
+                           garments=tuple(args.garments) if args.garments else None)
         print(json.dumps({k: v for k, v in summary.items() if k != "sequences"}, indent=2))
         print(summary_line(summary, args.out))
         return
     if not (args.garment and args.motion):
         raise LoosefitError("simulate needs PLAN.yaml, or --garment G.obj and --motion M.npz")
+    if args.splits or args.garments:
+        raise LoosefitError("--splits and --garments choose sequences of a plan; give PLAN.yaml")
     sets = args.set or []
     params = SimParams.load(args.params, sets) if args.params else SimParams().with_overrides(sets)
     writable(args.out, folder=False)  # before the simulation, not after it
@@ -485,6 +489,10 @@ def build_parser() -> argparse.ArgumentParser:
     joint_map_option(sp)
     sp.add_argument("--workers", type=int_at_least(1), default=1, help="parallel Blender workers (Ray) for a plan")
     sp.add_argument("--address", default=None, help="an existing Ray cluster's address")
+    sp.add_argument("--splits", nargs="+", choices=["train", "val", "test"], default=None,
+                    help="a plan's sequences of these splits only (reference runs only with test)")
+    sp.add_argument("--garments", nargs="+", default=None, metavar="NAME",
+                    help="a plan's sequences of these garments only (one garment finished before the next)")
     sp.set_defaults(func=cmd_simulate)
 
     sp = sub.add_parser("prepare", help="virtual bones, descriptors, fit attributes and statistics of a dataset")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from loosefit.errors import InputError
-from loosefit.metrics.reference import BandedReferences, References, floor_m, mean_run, rmse_m
+from loosefit.metrics.reference import BandedReferences, References, corrected_rmse, floor_m, mean_run, rmse_m
 
 T, V = 5, 7
 
@@ -51,6 +51,30 @@ def test_no_prediction_beats_the_floor_over_the_runs():
         over_runs = np.mean([rmse_m(p, r) ** 2 for r in runs])
         assert over_runs == pytest.approx(rmse_m(p, refs.mean) ** 2 + refs.floor_m ** 2, rel=1e-9)
         assert np.sqrt(over_runs) >= refs.floor_m
+
+
+@pytest.mark.parametrize("runs", [2, 5])
+def test_corrected_rmse_is_the_distance_to_the_simulators_mean(runs):
+    """Runs mu + noise (sigma 10 mm a coordinate), a prediction mu + c (|c| = 6 mm): against the mean of the runs
+    the prediction scores sqrt(36 + 3 sigma^2 / N) mm, and the correction takes it back to |c| = 6 mm. The true
+    mean scores 0 once corrected (the plain figure says sqrt(3 / N) sigma). Many vertices make the estimate tight."""
+    rng = np.random.default_rng(runs)
+    mu = rng.normal(0.0, 0.3, (2, 20000, 3))
+    noise = rng.normal(0.0, 0.010, (runs, 2, 20000, 3))
+    refs = References(mu + noise[0], mu + noise[1:])
+    c = np.array([0.006, 0.0, 0.0])
+    score = refs.score(mu + c)
+    assert score.rmse_vs_mean_mm == pytest.approx(np.sqrt(36.0 + 300.0 / runs), rel=0.02)
+    assert score.rmse_vs_mean_corrected_mm == pytest.approx(6.0, rel=0.05)
+    assert refs.score(mu).rmse_vs_mean_corrected_mm < 0.1 * refs.score(mu).rmse_vs_mean_mm
+    assert score.as_dict()["rmse_vs_mean_corrected_mm"] == score.rmse_vs_mean_corrected_mm
+
+
+def test_corrected_rmse_closed_form_and_its_limits():
+    assert corrected_rmse(5.0, 4.0, 5) == pytest.approx(np.sqrt(25.0 - 4.0))
+    assert corrected_rmse(1.0, 4.0, 5) == 0.0  # below the mean's own spread: clipped, never imaginary
+    with pytest.raises(InputError, match="at least 2 runs"):
+        corrected_rmse(1.0, 1.0, 1)
 
 
 def vertex_mean_split(x):
@@ -123,5 +147,13 @@ def test_evaluate_reports_rmse_vs_mean_and_floor_where_runs_exist():
     runs = np.concatenate([np.concatenate([g1[None], r1]), np.concatenate([g2[None], r2])], axis=1)
     assert ev.overall["floor_mm"] == pytest.approx(1000 * floor_m(runs), rel=1e-6)
     assert ev.overall["references"] == 2
+    # corrected, per sequence and pooled: the mean square less floor^2 / K, over both sequences' frames x vertices
+    assert a["rmse_vs_mean_corrected_mm"] == pytest.approx(
+        np.sqrt(max(0.0, a["rmse_vs_mean_mm"] ** 2 - a["floor_mm"] ** 2 / 3)), rel=1e-9)
+    weights = np.array([p1.shape[0], p2.shape[0]]) * p1.shape[1]
+    squares = np.array([r["rmse_vs_mean_mm"] ** 2 - r["floor_mm"] ** 2 / 3 for r in (a, b)])
+    assert ev.overall["rmse_vs_mean_corrected_mm"] == pytest.approx(
+        np.sqrt(max(0.0, (squares * weights).sum() / weights.sum())), rel=1e-9)
+    assert c["rmse_vs_mean_corrected_mm"] is None
     assert "RMSE vs mean mm" in ev.table() and "floor mm" in ev.table()
     assert "floor mm" not in evaluate(pairs[2:], progress=False).table()  # no runs: the table as before

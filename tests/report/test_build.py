@@ -111,7 +111,7 @@ def test_reference_runs_put_the_floor_beside_rmse(report, tiny_store, tmp_path):
                                                    rel=1e-5)
     assert doc["methods"][0]["pooled"]["floor_mm"] == pytest.approx(refs.floor_mm, rel=1e-6)
     md = (tmp_path / "out" / "report.md").read_text()
-    assert "RMSE vs mean mm | floor mm |" in md and f"{row['floor_mm']:.2f}" in md and "reference runs" in md
+    assert "RMSE vs mean mm | vs mean, corrected mm | floor mm |" in md and f"{row['floor_mm']:.2f}" in md and "reference runs" in md
 
 
 def test_figures_are_real_images(report, tiny_store):

@@ -2,6 +2,7 @@ import pytest
 import yaml
 
 from loosefit.errors import InputError
+from loosefit.motion.procedural import KINDS
 from loosefit.sim.plan import FileMotion, Hold, ProceduralMotion, TemplateGarment, load_plan
 
 PLAN = {
@@ -69,6 +70,26 @@ def test_errors_name_the_plan(tmp_path, change, message):
     assert "plan.yaml" in str(err.value)
 
 
+def test_optional_file_motions_leave_the_plan_when_their_files_are_missing(tmp_path):
+    """An optional file motion whose file is missing takes its sequences out of every group and split (listed in
+    ``missing_motions``); one whose file is there, or a required one, stays."""
+    (tmp_path / "here.bvh").write_text("not read when the plan loads")
+    plan = {"garments": {"g": {"template": "skirt"}},
+            "motions": {"walk": {"procedural": "walk", "seconds": 1},
+                        "here": {"file": "here.bvh", "optional": True},
+                        "gone": {"file": "gone.bvh", "optional": True},
+                        "needed": {"file": "needed.bvh"}},
+            "sequences": [{"motions": ["walk", "gone"]}, {"motions": ["here", "needed"]}, {"motions": ["gone"]}],
+            "split": {"test": {"motions": ["gone", "here"]}, "val": {"motions": ["needed"]}}}
+    loaded = load_plan(_write(tmp_path, plan))
+    assert loaded.missing_motions == ["gone"] and "gone" not in loaded.motions
+    assert {j.motion: j.split for j in loaded.jobs} == {"walk": "train", "here": "test", "needed": "val"}
+    with pytest.raises(InputError, match="select no sequence"):
+        load_plan(_write(tmp_path, {**plan, "sequences": [{"motions": ["gone"]}]}))
+    with pytest.raises(InputError, match="optional"):
+        load_plan(_write(tmp_path, {**plan, "motions": {**plan["motions"], "gone": {"file": "x", "optional": "yes"}}}))
+
+
 def test_unreadable_plan(tmp_path):
     with pytest.raises(InputError, match="missing.yaml.*cannot read"):
         load_plan(tmp_path / "missing.yaml")
@@ -90,6 +111,14 @@ def test_shipped_plans():
     kinds = {m["procedural"] for m in bench.motions.values()}
     assert kinds >= {"walk", "run", "spin", "jump", "kick", "sway", "mix"}
     assert len({j.motion for j in bench.jobs if j.split == "test"}) >= 4
+    real = plans["bench-real"]  # whole subjects per split, pieces of at most 10 s, the floor of every test piece
+    assert real.garments == bench.garments and real.references.count >= 4
+    subject = {name: m["file"].split("/")[-1][:3] for name, m in real.motions.items() if "file" in m}
+    by_split = {s: {subject[j.motion] for j in real.jobs if j.split == s and j.motion in subject} for s in ("train", "val", "test")}
+    assert by_split == {"train": {"001", "005", "007"}, "val": {"006"}, "test": {"002", "003"}}
+    assert all(1 <= m["frames"] <= 300 for m in real.motions.values() if "file" in m)
+    assert {m["procedural"] for m in real.motions.values() if "procedural" in m} == set(KINDS)
+    assert {j.garment for j in real.jobs} == {"skirt", "dress"}
     mocap = plans["bench-mocap"]
     assert mocap.garments == bench.garments
     assert all(mocap.resolve(m["file"]).is_file() for m in mocap.motions.values())

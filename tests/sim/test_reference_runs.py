@@ -8,6 +8,7 @@ import pytest
 import yaml
 
 from loosefit.data.store import DatasetStore
+from loosefit.errors import InputError
 from loosefit.sim import runner
 from loosefit.sim.params import SimParams
 from loosefit.sim.plan import load_plan
@@ -194,3 +195,23 @@ def test_plan_key_leaves_job_hashes_alone(tmp_path):
     job = b.reference_jobs()[0]
     hashes = {b.references.run_hash(job, k) for k in (1, 2, 3)} | {a.references.run_hash(job, 1)}
     assert len(hashes) == 4
+
+
+def test_garments_simulate_one_garment_of_a_plan_with_its_reference_runs(root, tmp_path):
+    """``garments``: only that garment's sequences and reference runs; the other garment's come with a later run,
+    and a garment the plan lacks is refused before anything is written."""
+    plan = yaml.safe_load(write_plan(root, {"count": 1, "noise": 1.0e-5}).read_text())
+    plan["garments"]["other"] = {"file": "skirt.obj"}
+    path = root / "two-garments.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    out = tmp_path / "garments.zarr"
+    with pytest.raises(InputError, match="no garment 'coat' in the plan"):
+        run_plan(path, out, progress=False, garments=("coat",))
+    assert not out.exists()
+    first = run_plan(path, out, progress=False, garments=("other",))
+    store = DatasetStore.open(out)
+    assert sorted(store.sequence_names()) == ["other+average+jump+quick", "other+average+walk+quick"]
+    assert (first["jobs"], first["references"]["jobs"]) == (2, 1) and store.reference_runs("other+average+jump+quick")
+    second = run_plan(path, out, progress=False)
+    assert (second["skipped"], second["ok"], second["references"]["skipped"], second["references"]["ok"]) == (2, 2, 1, 1)
+    assert DatasetStore.open(out).reference_runs(TEST)

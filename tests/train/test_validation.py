@@ -125,3 +125,6 @@ def test_a_training_fraction_on_a_store(tiny_store):
         train_on_fraction(store, chosen, 1.5)
     assert str(tiny_store) in str(err.value)
     assert motion_kind("walk:seed=3") == "walk" and motion_kind("clip") == "file"
+    assert motion_kind("walk:seed=3", "spin-2") == "walk"  # a procedural motion is its generator's, whatever its key
+    assert motion_kind("005_02", "ballet-005_02-1") == "ballet" and motion_kind("005_02", "clip") == "file"
+    assert motion_kind("x", "-odd-") == "file" and motion_kind("x", "-") == "file"

@@ -10,18 +10,24 @@ With ``m = mean_k runs[k]`` (the mean run) and ``|.|`` the Euclidean norm of a v
 - floor (m) = ``sqrt(mean_{k,t,i} |runs[k,t,i] - m[t,i]|^2)``: the runs' RMS spread around their mean.
 - RMSE against the base (m) = ``sqrt(mean_{t,i} |pred[t,i] - runs[0,t,i]|^2)``, as every benchmark reports.
 - RMSE against the mean (m) = ``sqrt(mean_{t,i} |pred[t,i] - m[t,i]|^2)``.
+- RMSE against the mean, corrected (m) = ``sqrt(max(0, e^2 - floor^2 / (N - 1)))`` with ``e`` the RMSE against
+  the mean: the same with the mean's own spread removed (below).
 
 Why the floor bounds a deterministic predictor: a model sees the motion, never the invisible start
 noise, so for each input it outputs one mesh ``p`` while the ground truth is any of the runs. For every
 ``p`` the mean squared error over the runs splits exactly as
 ``mean_k |p - runs[k]|^2 = |p - m|^2 + floor^2`` (the cross term sums to zero about the mean), so the mean
 run minimises it, and no ``p`` scores below the floor on average over the runs. A network trained on
-single runs learns that conditional mean; its RMSE against one run therefore cannot go much below the
-floor however long it trains, while its RMSE against the mean can go to zero. Each figure is thus
-reported beside the floor, and RMSE against the mean says how close a model is to the best it can do.
+single runs learns the conditional mean of the simulator, ``mu``, and its RMSE against one run cannot go
+much below the floor however long it trains.
 
-The floor is the plug-in spread of ``N`` samples: the spread of the simulator's runs around their true
-mean is larger by ``sqrt(N / (N - 1))`` on average (1.12 for 4 reference runs and the base).
+The mean of ``N`` runs is not ``mu`` itself: with ``sigma^2`` the variance of one run about ``mu``,
+``E|m - mu|^2 = sigma^2 / N``, while the plug-in spread has ``E floor^2 = (N - 1) / N sigma^2``. So the ideal
+predictor ``p = mu`` scores ``sqrt(floor^2 / (N - 1))`` on average against the mean, not zero (0.5 floor for the
+base and 4 reference runs), and ``E e^2 = |p - mu|^2 + floor^2 / (N - 1)`` for any ``p`` that does not see the
+noise. The corrected figure subtracts that term: an unbiased estimate of the squared distance to ``mu``, clipped
+at zero; it says how close a model is to the best it can do. For the same reason the spread of the runs around
+``mu`` is larger than the floor by ``sqrt(N / (N - 1))`` on average (1.12 for 4 reference runs and the base).
 """
 
 from __future__ import annotations
@@ -66,6 +72,15 @@ def floor_m(runs, mean: np.ndarray | None = None) -> float:
     return float(np.sqrt(np.mean([_mean_square(run, mean) for run in runs])))
 
 
+def corrected_rmse(rmse_vs_mean, floor, runs: int) -> float:
+    """The RMSE against the mean of ``runs`` runs with the mean's own spread removed:
+    ``sqrt(max(0, rmse_vs_mean^2 - floor^2 / (runs - 1)))``, in the unit of its arguments (see the module
+    docstring); ``runs`` >= 2 (the base and at least one reference run)."""
+    if runs < 2:
+        raise InputError(f"the correction needs at least 2 runs, got {runs}")
+    return float(np.sqrt(max(0.0, rmse_vs_mean**2 - floor**2 / (runs - 1))))
+
+
 def rmse_m(pred, target) -> float:
     """RMSE (metres) of ``pred`` against ``target`` ``(T, V, 3)``: the root of the mean squared Euclidean
     distance over frames and vertices."""
@@ -79,15 +94,20 @@ def rmse_m(pred, target) -> float:
 class ReferenceScore:
     """A prediction scored against a sequence's runs, millimetres: ``rmse_mm`` against the base run,
     ``rmse_vs_mean_mm`` against the mean run, ``floor_mm`` of the runs; ``references``: reference runs
-    beside the base (``N - 1``)."""
+    beside the base (``N - 1``); ``rmse_vs_mean_corrected_mm``: :func:`corrected_rmse`."""
 
     rmse_mm: float
     rmse_vs_mean_mm: float
     floor_mm: float
     references: int
 
+    @property
+    def rmse_vs_mean_corrected_mm(self) -> float:
+        return corrected_rmse(self.rmse_vs_mean_mm, self.floor_mm, self.references + 1)
+
     def as_dict(self) -> dict:
-        return {"rmse_mm": self.rmse_mm, "rmse_vs_mean_mm": self.rmse_vs_mean_mm, "floor_mm": self.floor_mm,
+        return {"rmse_mm": self.rmse_mm, "rmse_vs_mean_mm": self.rmse_vs_mean_mm,
+                "rmse_vs_mean_corrected_mm": self.rmse_vs_mean_corrected_mm, "floor_mm": self.floor_mm,
                 "references": self.references}
 
 

@@ -10,15 +10,18 @@ Metrics per sequence (see each module for the formula): ``rmse_mm``, ``mean_vert
 prediction against the simulation, over every vertex and frame: how far the prediction's local surface
 structure is from the simulated one. With reference runs of a sequence (perturbed simulations, stored
 with it: :meth:`loosefit.data.store.DatasetStore.references`), ``rmse_vs_mean_mm`` (against the mean of the
-base and its reference runs) and ``floor_mm`` (their spread around that mean, below which no deterministic
-model scores against one run): :mod:`~loosefit.metrics.reference`; ``None`` for a sequence without runs.
+base and its reference runs), ``rmse_vs_mean_corrected_mm`` (the same with the mean's own spread removed,
+``sqrt(max(0, e^2 - floor^2 / K))`` for K reference runs) and ``floor_mm`` (their spread around that mean, below
+which no deterministic model scores against one run): :mod:`~loosefit.metrics.reference`; ``None`` for a
+sequence without runs.
 
 Overall values pool every frame of every sequence, so long sequences weigh more: RMSE is the root
 of the pooled mean square; mean errors, STED_s, Laplacian consistency and collision are weighted by frames x vertices,
 STED_t by frame pairs x vertices, Hausdorff by frames, E_norm by frames x faces; the overall STED
 combines the overall STED_s and STED_t. A sequence of one frame has no temporal STED (``None``).
 RMSE against the mean and the floor pool their mean squares by frames x vertices over the sequences that
-have reference runs only (``references``: how many sequences that is).
+have reference runs only (``references``: how many sequences that is); the corrected figure pools
+``e^2 - floor^2 / K`` the same way and clips at zero only once pooled.
 
 Inputs: mesh-sequence ``.npz`` files (:class:`~loosefit.io.mesh_sequence.MeshSequence`; a GT file may
 carry the posed body as ``body_verts`` / ``body_faces``), directories of them matched by file name,
@@ -50,6 +53,7 @@ COLUMNS = (
     ("vertices", "verts", "{:d}"),
     ("rmse_mm", "RMSE mm", "{:.2f}"),
     ("rmse_vs_mean_mm", "RMSE vs mean mm", "{:.2f}"),
+    ("rmse_vs_mean_corrected_mm", "vs mean, corrected mm", "{:.2f}"),
     ("floor_mm", "floor mm", "{:.2f}"),
     ("mean_vertex_error_mm", "mean err mm", "{:.2f}"),
     ("hausdorff_mm", "Hausdorff mm", "{:.2f}"),
@@ -166,6 +170,7 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         "vertices": int(V),
         "rmse_mm": float(1000 * np.sqrt(np.mean(err * err))),
         "rmse_vs_mean_mm": None if against is None else against.rmse_vs_mean_mm,
+        "rmse_vs_mean_corrected_mm": None if against is None else against.rmse_vs_mean_corrected_mm,
         "floor_mm": None if against is None else against.floor_mm,
         "references": None if against is None else against.references,
         "mean_vertex_error_mm": float(1000 * err.mean()),
@@ -200,6 +205,8 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
     with_refs = [r for r in rows if r.get("floor_mm") is not None]
     ms_mean = _weighted([{**r, "ms": r["rmse_vs_mean_mm"] ** 2} for r in with_refs], "ms", tv)
     ms_floor = _weighted([{**r, "ms": r["floor_mm"] ** 2} for r in with_refs], "ms", tv)
+    ms_corrected = _weighted([{**r, "ms": r["rmse_vs_mean_mm"] ** 2 - r["floor_mm"] ** 2 / r["references"]}
+                              for r in with_refs], "ms", tv)
     spatial = _weighted(rows, "sted_spatial", tv)
     temporal = _weighted(rows, "sted_temporal", lambda r: (r["frames"] - 1) * r["vertices"])
     return {
@@ -209,6 +216,7 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
         "faces": None,
         "rmse_mm": None if ms is None else float(np.sqrt(ms)),
         "rmse_vs_mean_mm": None if ms_mean is None else float(np.sqrt(ms_mean)),
+        "rmse_vs_mean_corrected_mm": None if ms_corrected is None else float(np.sqrt(max(0.0, ms_corrected))),
         "floor_mm": None if ms_floor is None else float(np.sqrt(ms_floor)),
         "references": len(with_refs) or None,
         "mean_vertex_error_mm": _weighted(rows, "mean_vertex_error_mm", tv),

@@ -37,7 +37,7 @@ DEFAULT_RESULTS = _REPO_RESULTS if _REPO_RESULTS.is_dir() else None
 #: Metric columns of the report (the keys of :data:`loosefit.metrics.report.COLUMNS` but the sizes).
 METRIC_COLUMNS = tuple(c for c in COLUMNS if c[0] not in ("frames", "vertices"))
 #: Columns of sequences with reference runs (:mod:`loosefit.metrics.reference`): beside RMSE when present.
-REFERENCE_KEYS = ("rmse_vs_mean_mm", "floor_mm")
+REFERENCE_KEYS = ("rmse_vs_mean_mm", "rmse_vs_mean_corrected_mm", "floor_mm")
 
 
 def _fmt(value, fmt: str) -> str:

@@ -13,6 +13,7 @@ Plan format (paths are relative to the plan file)::
     motions:                       # procedural (loosefit.motion.procedural) or a file
       walk: {procedural: walk, seconds: 4, seed: 1}
       clip: {file: ../mocap/005_02.bvh, joint_map: cc, start: 1, frames: 300}
+      extra: {file: ../mocap/007_01.bvh, joint_map: cc, optional: true}   # missing file: its sequences dropped
       slow: {procedural: walk, seconds: 6, seed: 1, slowdown: 4}   # 1.5 s of a walk over 6 s
       held: {procedural: walk, seconds: 6, seed: 1, hold: {every: 15, transition: 10, frames: 30, in_place: true}}
                                    # every 15th pose, reached in 10 frames then held for 30, on the spot
@@ -166,7 +167,10 @@ class ProceduralMotion:
 @dataclass(frozen=True)
 class FileMotion:
     """A plan motion read from a file (relative to the plan): ``frames`` frames (None: all) from ``start``,
-    counted after the motion is played ``slowdown`` times slower; then, with ``hold``, as held key poses."""
+    counted after the motion is played ``slowdown`` times slower; then, with ``hold``, as held key poses.
+    ``optional``: when the file is not there, the motion and its sequences leave the plan
+    (:attr:`Plan.missing_motions`) instead of stopping it: for data kept outside the project, such as the demo's
+    motion capture."""
 
     file: str
     joint_map: Optional[str] = None
@@ -174,6 +178,7 @@ class FileMotion:
     frames: Optional[int] = None
     slowdown: float = 1.0
     hold: Optional[Hold] = None
+    optional: bool = False
 
     def __post_init__(self):
         _check_slowdown(self.slowdown)
@@ -214,7 +219,8 @@ MotionSpec = Union[ProceduralMotion, FileMotion]
 
 @dataclass
 class Plan:
-    """A parsed simulation plan (see the module docstring for the file format)."""
+    """A parsed simulation plan (see the module docstring for the file format); ``missing_motions``: the optional
+    file motions left out because their files are not there."""
 
     name: str
     path: Path
@@ -225,6 +231,7 @@ class Plan:
     gate: QualityGate
     jobs: list[SequenceJob] = field(default_factory=list)
     references: ReferencePlan = field(default_factory=ReferencePlan)
+    missing_motions: list[str] = field(default_factory=list)
 
     def reference_jobs(self) -> list[SequenceJob]:
         """The jobs that get reference runs (the test sequences; none when ``references.count`` is 0)."""
@@ -242,8 +249,13 @@ class Plan:
 
     def resolve(self, value: str) -> Path:
         """A path from the plan, relative to the plan's folder."""
-        path = Path(value).expanduser()
-        return path if path.is_absolute() else self.path.parent / path
+        return _plan_file(self.path, value)
+
+
+def _plan_file(plan_path: Path, value: str) -> Path:
+    """``value``, a path written in the plan ``plan_path``, relative to the plan's folder."""
+    path = Path(value).expanduser()
+    return path if path.is_absolute() else plan_path.parent / path
 
 
 def _mapping(value, what: str, path: Path) -> dict:
@@ -334,6 +346,8 @@ def load_plan(path: str | Path) -> Plan:
     garments = {n: _garment_spec(n, s, path) for n, s in garments.items()}
     motions = _named(_mapping(raw.get("motions"), "motions", path), "motion", path)
     motions = {n: _motion_spec(n, s, path) for n, s in motions.items()}
+    missing = [n for n, s in motions.items() if s.get("optional") is True and not _plan_file(path, s["file"]).is_file()]
+    motions = {n: s for n, s in motions.items() if n not in missing}
     params_raw = _named(_mapping(raw.get("sim_params"), "sim_params", path), "sim_params", path) or {"default": {}}
     sim_params = {n: SimParams.from_dict(_mapping(v, f"sim_params {n!r}", path), path) for n, v in params_raw.items()}
     if not garments or not motions:
@@ -350,6 +364,7 @@ def load_plan(path: str | Path) -> Plan:
         sim_params=sim_params,
         gate=QualityGate.from_dict(_mapping(raw.get("gate"), "gate", path), path),
         references=_references(raw.get("references"), path),
+        missing_motions=missing,
     )
     plan.jobs = _expand(plan, raw.get("sequences"), _mapping(raw.get("split"), "split", path))
     return plan
@@ -371,6 +386,8 @@ def _expand(plan: Plan, groups, split: dict) -> list[SequenceJob]:
         _check_keys(lists, set(_GROUP_KEYS), f"split {which!r}", path)
         for key, names in lists.items():
             for name in names or []:
+                if key == "motions" and name in plan.missing_motions:
+                    continue
                 if name not in available[key]:
                     raise InputError(f"split {which!r}: {key} {name!r} is not defined in the plan", path)
                 held_out.setdefault((key, name), which)
@@ -383,6 +400,8 @@ def _expand(plan: Plan, groups, split: dict) -> list[SequenceJob]:
             names = group.get(key, list(available[key]))
             if not isinstance(names, list) or not names:
                 raise InputError(f"sequences[{i}].{key} must be a non-empty list of names", path)
+            if key == "motions":
+                names = [n for n in names if n not in plan.missing_motions]  # may leave the group empty
             for name in names:
                 if name not in available[key]:
                     what = key if key == "sim_params" else key[:-1]

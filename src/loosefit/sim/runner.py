@@ -203,6 +203,7 @@ def run_plan(
     address: str | None = None,
     progress: bool = True,
     splits: tuple[str, ...] | None = None,
+    garments: tuple[str, ...] | None = None,
 ) -> dict[str, Any]:
     """Simulate a plan into a dataset store, resuming what an earlier run left.
 
@@ -215,6 +216,8 @@ def run_plan(
         splits: simulate only the sequences of these splits (``None``: all); the reference runs only with
             ``"test"`` among them. The demo simulates the training motions first and the held-out one while
             it trains.
+        garments: simulate only the sequences of these plan garments (``None``: all), so that one garment of a
+            long plan is complete, its reference runs included, before the next starts.
 
     Returns:
         Summary: ``jobs``, ``skipped`` (already done), ``ok``, ``failed``, ``crashed``, ``wall_s``
@@ -227,6 +230,10 @@ def run_plan(
         raise InputError(f"workers must be a positive integer, got {workers!r}")
     start = time.perf_counter()
     plan = load_plan(plan_path)
+    unknown = sorted(set(garments or ()) - set(plan.garments))
+    if unknown:
+        raise InputError(f"no garment {', '.join(map(repr, unknown))} in the plan (it has {', '.join(plan.garments)})",
+                         plan_path)
     in_process = workers == 1 and address is None
     for params in plan.sim_params.values():  # a missing simulator is an error, not a crashed sequence each
         if in_process:
@@ -237,7 +244,7 @@ def run_plan(
         require("ray", "parallel simulation (--workers / --address)")
     store = DatasetStore.open_or_create(Path(out))  # holds the store's write lock until the run ends
     try:
-        return _run_jobs(plan, store, workers, address, progress, start, splits)
+        return _run_jobs(plan, store, workers, address, progress, start, splits, garments)
     except BaseException:
         if store.created:  # a first run that fails before storing any sequence leaves no store behind
             store.remove_if_empty()
@@ -274,9 +281,11 @@ def summary_line(summary: dict[str, Any], store) -> str:
 
 
 def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bool, start: float,
-              splits: tuple[str, ...] | None = None) -> dict[str, Any]:
-    """Simulate the plan's jobs (of ``splits``) that are not done into the open ``store``; see :func:`run_plan`."""
-    jobs = [job for job in plan.jobs if splits is None or job.split in splits]
+              splits: tuple[str, ...] | None = None, garments: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Simulate the plan's jobs (of ``splits`` and ``garments``) that are not done into the open ``store``; see
+    :func:`run_plan`."""
+    jobs = [job for job in plan.jobs if (splits is None or job.split in splits)
+            and (garments is None or job.garment in garments)]
     todo = [job for job in jobs if not _done(store, job)]
     summary: dict[str, Any] = {"plan": plan.name, "jobs": len(jobs), "skipped": len(jobs) - len(todo),
                                "ok": 0, "failed": 0, "crashed": 0, "sequences": {}}
@@ -305,7 +314,7 @@ def _run_jobs(plan: Plan, store, workers: int, address: str | None, progress: bo
     try:
         _dispatch([todo[k] for k in test], [payloads[k] for k in test], workers, address, record)
         if splits is None or "test" in splits:
-            summary["references"] = _run_references(plan, store, workers, address, progress)
+            summary["references"] = _run_references(plan, store, workers, address, progress, garments)
         _dispatch([todo[k] for k in rest], [payloads[k] for k in rest], workers, address, record)
     finally:
         bar.close()
@@ -348,11 +357,15 @@ def _reference_done(store, job: SequenceJob, index: int, run_hash: str) -> bool:
     return True
 
 
-def _run_references(plan: Plan, store, workers: int, address: str | None, progress: bool) -> dict[str, Any]:
-    """Simulate the reference runs the plan asks for and the store lacks (see the module docstring); their summary."""
+def _run_references(plan: Plan, store, workers: int, address: str | None, progress: bool,
+                    garments: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Simulate the reference runs the plan asks for and the store lacks (of ``garments``, ``None``: all; see the
+    module docstring); their summary."""
     refs = plan.references
     todo, total = [], 0
     for job in plan.reference_jobs():
+        if garments is not None and job.garment not in garments:
+            continue
         if not store.has_sequence(job.id):
             continue
         base = store.sequence(job.id)

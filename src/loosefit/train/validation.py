@@ -173,10 +173,14 @@ def choose_validation(store, keep: Callable[[str], bool], val_split: Optional[st
     return result
 
 
-def motion_kind(name: str) -> str:
+def motion_kind(name: str, key: str | None = None) -> str:
     """The family of a motion from its name (:attr:`Motion.name`): the procedural generator's (``walk`` for
-    ``walk:seed=3``), ``"file"`` for any other motion."""
-    return name.split(":")[0] if ":seed=" in name else "file"
+    ``walk:seed=3``); for any other motion the part of its store ``key`` (the plan's motion name) before the first
+    ``-`` (``ballet`` for ``ballet-005_02-1``: plans name capture pieces ``<kind>-<clip>-<piece>``), else
+    ``"file"``."""
+    if ":seed=" in name:
+        return name.split(":")[0]
+    return key.split("-")[0] if key and "-" in key.strip("-") else "file"
 
 
 def keep_fraction(kind_of: dict[str, str], fraction: float) -> list[str]:
@@ -203,7 +207,7 @@ def train_on_fraction(store, validation: Validation, fraction: float) -> Validat
     if fraction == 1:
         return validation
     motion_of = {n: store.sequence(n).motion for n in validation.train}
-    kept = set(keep_fraction({m: motion_kind(store.motion(m).name) for m in set(motion_of.values())}, fraction))
+    kept = set(keep_fraction({m: motion_kind(store.motion(m).name, m) for m in set(motion_of.values())}, fraction))
     train = [n for n in validation.train if motion_of[n] in kept]
     note = (f"{validation.note}; training on {len(kept)} of {len(set(motion_of.values()))} training motions "
             f"(fraction {fraction:g} of each kind: {len(train)} sequences)")
