@@ -14,13 +14,17 @@ type-checked like a file.
 
 YAML 1.1 reads ``1e-3`` (no dot) as a string; this module's loader reads it as a float, in files and
 in overrides alike. Every YAML file loosefit reads goes through :func:`load_yaml`: a key given twice in one
-mapping is an error naming the file, the key and its lines (plain YAML keeps the last value silently).
+mapping is an error naming the file, the key and its lines (plain YAML keeps the last value silently). It
+refuses hostile documents before building them: more than :data:`MAX_YAML_CHARS` characters, nesting deeper
+than :data:`MAX_YAML_DEPTH`, or aliases that expand to more than :data:`MAX_YAML_VALUES` values (a "billion
+laughs" bomb) or refer to themselves.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import re
+import reprlib
 import types
 import typing
 from pathlib import Path
@@ -41,6 +45,7 @@ __all__ = [
     "save_config",
     "parse_override",
     "load_yaml",
+    "read_yaml_text",
 ]
 
 
@@ -52,9 +57,94 @@ class _DuplicateKey(yaml.YAMLError):
         super().__init__(f"duplicate key {key!r} on line {line} (first on line {first})")
 
 
+#: The longest YAML document read (characters); loosefit's largest plans are about 10 KB.
+MAX_YAML_CHARS = 4 * 1024 * 1024
+#: The deepest nesting of mappings and lists in a YAML document, and in what its aliases expand to.
+MAX_YAML_DEPTH = 64
+#: The most values (scalars, lists and mappings) a YAML document may hold once its aliases are expanded.
+MAX_YAML_VALUES = 200_000
+
+
+class _TooLarge(yaml.YAMLError):
+    """A document beyond one of the reader's limits (its message names the limit)."""
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
+def _check_expansion(root: yaml.Node) -> None:
+    """Refuse a node graph whose aliases expand beyond :data:`MAX_YAML_VALUES` values or :data:`MAX_YAML_DEPTH`
+    levels, or refer to themselves; each node is visited once (no expansion, no recursion)."""
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    open_: set[int] = set()  # the nodes whose subtree is being visited (ancestors of the current one)
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, closing = stack.pop()
+        key = id(node)
+        if closing:
+            open_.discard(key)
+            kids = _children(node)
+            size[key] = 1 + sum(size[id(k)] for k in kids)
+            depth[key] = 1 + max((depth[id(k)] for k in kids), default=0)
+            if size[key] > MAX_YAML_VALUES:
+                raise _TooLarge(f"its aliases expand to more than {MAX_YAML_VALUES:,} values (a YAML bomb?); "
+                                f"the limit is loosefit.config.MAX_YAML_VALUES")
+            if depth[key] > MAX_YAML_DEPTH:
+                raise _TooLarge(f"its aliases expand to more than {MAX_YAML_DEPTH} levels of nesting; the limit is "
+                                "loosefit.config.MAX_YAML_DEPTH")
+            continue
+        if key in size:
+            continue
+        if key in open_:
+            raise _TooLarge(f"an alias refers to the value it is in (line {node.start_mark.line + 1}): a value "
+                            "that contains itself")
+        open_.add(key)
+        stack.append((node, True))
+        stack.extend((k, False) for k in _children(node) if id(k) not in size)
+
+
 class _Loader(yaml.SafeLoader):
-    """Safe YAML loader that also reads exponent floats without a dot (``1e-3``) as floats, and refuses
-    a mapping that names a key twice."""
+    """Safe YAML loader that also reads exponent floats without a dot (``1e-3``) as floats, refuses a mapping
+    that names a key twice, and refuses nesting and alias expansion beyond the module's limits."""
+
+    _depth = 0
+
+    def _too_deep(self, levels: int) -> None:
+        if levels > MAX_YAML_DEPTH:  # checked while scanning: the scanner reads ahead through unclosed brackets
+            raise _TooLarge(f"nested more than {MAX_YAML_DEPTH} levels deep (line {self.get_mark().line + 1}); the "
+                            "limit is loosefit.config.MAX_YAML_DEPTH")
+
+    def fetch_flow_collection_start(self, TokenClass):
+        self._too_deep(self.flow_level + 1)
+        super().fetch_flow_collection_start(TokenClass)
+
+    def add_indent(self, column):
+        added = super().add_indent(column)
+        self._too_deep(len(self.indents))
+        return added
+
+    def compose_node(self, parent, index):
+        self._depth += 1
+        try:
+            if self._depth > MAX_YAML_DEPTH:
+                mark = self.peek_event().start_mark
+                raise _TooLarge(f"nested more than {MAX_YAML_DEPTH} levels deep (line {mark.line + 1}); the limit is "
+                                "loosefit.config.MAX_YAML_DEPTH")
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def compose_document(self):
+        node = super().compose_document()
+        if node is not None:
+            _check_expansion(node)
+        return node
 
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
@@ -83,13 +173,36 @@ _Loader.add_implicit_resolver(
 def load_yaml(text: str, source: str | Path | None = None) -> Any:
     """Parse YAML text with the config loader (safe: plain data only); a syntax error or a key given twice
     in one mapping is an :class:`InputError` naming ``source`` (and the key and its lines)."""
+    if len(text) > MAX_YAML_CHARS:
+        raise InputError(f"the YAML document has {len(text):,} characters, more than loosefit reads "
+                         f"({MAX_YAML_CHARS:,}: loosefit.config.MAX_YAML_CHARS)", source)
     try:
         return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader derives from SafeLoader
+    except _TooLarge as e:
+        raise InputError(f"YAML document refused: {e}", source) from None
+    except RecursionError:
+        raise InputError(f"YAML document refused: nested too deeply to read (limit {MAX_YAML_DEPTH} levels)",
+                         source) from None
     except _DuplicateKey as e:
         raise InputError(f"{e}: a key may appear once in a mapping (YAML would keep only the last value)",
                          source) from None
     except yaml.YAMLError as e:
         raise InputError(f"invalid YAML: {e}", source) from None
+
+
+def read_yaml_text(path: str | Path, what: str) -> str:
+    """The text of the YAML file ``path`` (``what`` it is, for errors), of which no more than
+    :data:`MAX_YAML_CHARS` characters are read: a longer one is refused."""
+    path = Path(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read(MAX_YAML_CHARS + 1)
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"cannot read {what}: {getattr(e, 'strerror', None) or e}", path) from None
+    if len(text) > MAX_YAML_CHARS:
+        raise InputError(f"the {what} file is longer than loosefit reads ({MAX_YAML_CHARS:,} characters: "
+                         "loosefit.config.MAX_YAML_CHARS)", path)
+    return text
 
 
 class _Mismatch(Exception):
@@ -101,8 +214,13 @@ class _Mismatch(Exception):
         super().__init__(f"{key}: {problem}" if key else problem)
 
 
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel, _SHORT.maxstring, _SHORT.maxother = 3, 60, 60
+_SHORT.maxlist = _SHORT.maxtuple = _SHORT.maxdict = _SHORT.maxset = 4
+
+
 def _describe(value: Any) -> str:
-    text = repr(value)
+    text = _SHORT.repr(value)  # bounded: never the whole of a large (or shared, alias-built) value
     if len(text) > 60:
         text = text[:57] + "..."
     return f"{type(value).__name__} {text}"
@@ -285,11 +403,7 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Iterabl
     values: Any = None
     if path is not None:
         path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as e:
-            raise InputError(f"cannot read config: {e.strerror or e}", path) from None
-        values = load_yaml(text, path)
+        values = load_yaml(read_yaml_text(path, "config"), path)
     return apply_overrides(config_from_dict(cls, values, path), overrides)
 
 

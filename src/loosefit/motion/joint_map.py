@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from loosefit.config import load_yaml
+from loosefit.config import load_yaml, read_yaml_text
 from loosefit.errors import InputError
 from loosefit.motion.axes import parse_axis
 from loosefit.motion.rig import TargetRig
@@ -111,10 +111,7 @@ class JointMap:
 def load_joint_map(path: str | Path) -> JointMap:
     """Read a YAML joint map (format in :class:`JointMap`)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"cannot read joint map: {e}", path) from None
+    text = read_yaml_text(path, "joint map")
     try:
         data = load_yaml(text, path)  # safe, and a key given twice (a joint mapped twice) is an error
     except InputError as e:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from loosefit.config import apply_overrides, config_from_dict, load_yaml
+from loosefit.config import apply_overrides, config_from_dict, load_yaml, read_yaml_text
 from loosefit.errors import InputError
 
 COLLIDERS = ("proxy", "full")
@@ -152,10 +152,7 @@ class SimParams:
     def load(cls, path: str | Path, overrides: list[str] | dict[str, Any] | None = None) -> "SimParams":
         """Read a YAML mapping of parameters (missing ones keep their defaults), then apply overrides."""
         path = Path(path)
-        try:
-            values = load_yaml(path.read_text(), path)
-        except OSError as e:
-            raise InputError(f"cannot read simulation parameters: {e}", path) from None
+        values = load_yaml(read_yaml_text(path, "simulation parameters"), path)
         if values is not None and not isinstance(values, dict):
             raise InputError("simulation parameters must be a YAML mapping of NAME: VALUE", path)
         return cls.from_dict(values, path).with_overrides(overrides)
