@@ -223,6 +223,12 @@ def retarget_bvh(
 # ----------------------------------------------------------------------------------------- reading
 
 
+#: The most joints (end sites included) a BVH hierarchy may have; mocap skeletons have 20-300.
+MAX_BVH_JOINTS = 1024
+#: The deepest chain of joints from the root (the root is 1); a mocap hand is about 15 deep.
+MAX_BVH_DEPTH = 128
+
+
 class _Tokens:
     """Whitespace tokens of the HIERARCHY section with their line numbers, for error messages."""
 
@@ -294,11 +300,17 @@ def read_bvh(path: str | Path) -> BvhData:
     return BvhData(names, np.array(parents), np.array(offsets), channels, frames, frame_time, mode, path)
 
 
-def _parse_joint(tokens: _Tokens, parent: int, names, parents, offsets, channels) -> None:
-    """Parse ``NAME { OFFSET .. CHANNELS .. children }`` after the ROOT/JOINT keyword."""
+def _parse_joint(tokens: _Tokens, parent: int, names, parents, offsets, channels, depth: int = 1) -> None:
+    """Parse ``NAME { OFFSET .. CHANNELS .. children }`` after the ROOT/JOINT keyword (``depth``: 1 for the root)."""
     name, line = tokens.next("a joint name")
     if name == "{":
         raise tokens.error("joint without a name", line)
+    if depth > MAX_BVH_DEPTH:
+        raise tokens.error(f"joint {name!r} is {depth} joints deep in the hierarchy, deeper than loosefit reads "
+                           f"({MAX_BVH_DEPTH}: loosefit.motion.bvh.MAX_BVH_DEPTH)", line)
+    if len(names) >= MAX_BVH_JOINTS:
+        raise tokens.error(f"the hierarchy has more than {MAX_BVH_JOINTS} joints and end sites, more than loosefit "
+                           "reads (loosefit.motion.bvh.MAX_BVH_JOINTS)", line)
     if name in names:
         raise tokens.error(f"duplicate joint name {name!r}", line)
     index = len(names)
@@ -330,8 +342,11 @@ def _parse_joint(tokens: _Tokens, parent: int, names, parents, offsets, channels
         if key == "}":
             return
         if key == "JOINT":
-            _parse_joint(tokens, index, names, parents, offsets, channels)
+            _parse_joint(tokens, index, names, parents, offsets, channels, depth + 1)
         elif key == "END":
+            if len(names) >= MAX_BVH_JOINTS:
+                raise tokens.error(f"the hierarchy has more than {MAX_BVH_JOINTS} joints and end sites, more than "
+                                   "loosefit reads (loosefit.motion.bvh.MAX_BVH_JOINTS)", line)
             tokens.expect("Site")
             tokens.expect("{")
             tokens.expect("OFFSET")
