@@ -23,6 +23,7 @@ from loosefit.models.motion_features import FeatureStream, heading_frames, motio
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
 from loosefit.motion_range import range_warnings
+from loosefit.pretrained import resolve_run
 from loosefit.threads import torch_threads
 from loosefit.training import METHOD_CONFIG, MODEL_META
 from loosefit.train.run import RunDir, load_weights
@@ -34,9 +35,10 @@ def load_run(run_dir: str | Path, checkpoint: str = "best"):
     """The trained model of a run folder: ``(meta (model.json), model with the checkpoint's weights, config)``.
 
     ``checkpoint``: ``"best"`` (the epoch the validation chose; ``"last"`` when the run validated on nothing),
-    ``"last"`` (the end of training) or a checkpoint path.
+    ``"last"`` (the end of training) or a checkpoint path. ``run_dir`` may name a shipped garment,
+    ``pretrained:skirt`` (:mod:`loosefit.pretrained`).
     """
-    run = RunDir(run_dir)
+    run = RunDir(resolve_run(run_dir))
     meta = read_run_meta(run.path)
     try:
         cls = model_class(meta["method"])
@@ -63,9 +65,10 @@ def read_run_meta(run_dir: str | Path) -> dict:
             ``method`` (a string) or ``sizes`` (a mapping); the message names the file, as for a corrupt
             checkpoint.
     """
-    path = Path(run_dir) / MODEL_META
+    run_dir = resolve_run(run_dir)
+    path = run_dir / MODEL_META
     if not path.is_file():
-        raise InputError(f"not a loosefit run folder (no {MODEL_META})", Path(run_dir))
+        raise InputError(f"not a loosefit run folder (no {MODEL_META})", run_dir)
     try:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as e:
@@ -83,7 +86,8 @@ class Animator:
     """A trained garment model ready to animate.
 
     Args:
-        run_dir: a folder written by :func:`loosefit.training.train_model`.
+        run_dir: a folder written by :func:`loosefit.training.train_model`, or a shipped garment
+            (``pretrained:skirt``, ``pretrained:dress/jointnet``: :mod:`loosefit.pretrained`).
         checkpoint: ``"best"`` (the best validation epoch; ``"last"`` when the run validated on nothing),
             ``"last"`` (the end of training) or a checkpoint path. Validation never sees a test motion unless
             the run was told to (:mod:`loosefit.train.validation`), so the best epoch flatters no test score.

@@ -533,7 +533,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_train)
 
     sp = sub.add_parser("animate", help="animate a trained garment on new motions")
-    sp.add_argument("run", help="run folder written by loosefit train")
+    sp.add_argument("run", help="run folder written by loosefit train, or a shipped garment: pretrained:skirt, "
+                    "pretrained:dress/jointnet (loosefit.pretrained)")
     sp.add_argument("--motion", required=True, action="append", help="motion .npz / .bvh / AMASS .npz (repeatable)")
     joint_map_option(sp)
     sp.add_argument("--garment", default=None, help="fitgar and swingar runs: the garment .obj to animate (any vertex "

@@ -1,0 +1,71 @@
+"""Shipped garments: a run reduced to what animation reads animates exactly as the run; names resolve or are refused
+with the list of what is shipped; every shipped garment loads, stays under the size limit and animates a motion."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from loosefit import pretrained
+from loosefit.animate import Animator
+from loosefit.data.store import DatasetStore
+from loosefit.errors import InputError
+from loosefit.training import train_model
+
+
+@pytest.fixture(scope="module")
+def lbs_run(tiny_store, tmp_path_factory):
+    run = tmp_path_factory.mktemp("pretrained") / "lbs"
+    train_model("body-lbs", tiny_store, "skirt+average", run)
+    return run
+
+
+def test_a_shipped_run_animates_as_the_run_itself(lbs_run, tiny_store, tmp_path, monkeypatch):
+    monkeypatch.setattr(pretrained, "ROOT", tmp_path)
+    out = pretrained.ship(lbs_run, tmp_path / "skirt-body-lbs", {"trained_on": "tiny"})
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()) == sorted(pretrained.FILES)
+    state = torch.load(out / "checkpoints" / "best.pt", weights_only=True)
+    assert state["optimizer"] is None and state["scheduler"] is None
+    info = json.loads((out / "pretrained.json").read_text())
+    assert info["trained_on"] == "tiny" and info["checkpoint_bytes"] == (out / "checkpoints" / "best.pt").stat().st_size
+    assert pretrained.available() == ["skirt/body-lbs"]
+    assert pretrained.resolve_run("pretrained:skirt/body-lbs") == out
+    store = DatasetStore.open(tiny_store)
+    motion = store.motion(store.sequence(store.sequence_names(split="test")[0]).motion)
+    np.testing.assert_array_equal(Animator("pretrained:skirt/body-lbs").animate(motion),
+                                  Animator(lbs_run, checkpoint="last").animate(motion))
+
+
+def test_names_that_are_not_shipped_are_refused_with_the_list(tmp_path, monkeypatch):
+    monkeypatch.setattr(pretrained, "ROOT", tmp_path)
+    (tmp_path / "skirt-virtualbones").mkdir()
+    (tmp_path / "skirt-virtualbones" / "model.json").write_text("{}")
+    assert pretrained.resolve_run("pretrained:skirt") == tmp_path / "skirt-virtualbones"  # VirtualBones by default
+    assert pretrained.resolve_run("runs/vb") == pretrained.Path("runs/vb")  # a folder stays a folder
+    for name in ("pretrained:coat", "pretrained:", "pretrained:skirt/jointnet", "pretrained:skirt/a/b"):
+        with pytest.raises(InputError, match="shipped: pretrained:skirt/virtualbones"):
+            pretrained.resolve_run(name)
+
+
+def test_shipping_refuses_what_is_not_a_finished_run(tmp_path):
+    with pytest.raises(InputError, match="checkpoint not found"):
+        pretrained.ship(tmp_path, tmp_path / "out", {})
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("name", pretrained.available() or [pytest.param("none", marks=pytest.mark.skip("none shipped"))])
+def test_every_shipped_garment_animates_a_motion_under_the_size_limit(name, body):
+    from loosefit.motion.procedural import generate
+
+    folder = pretrained.resolve_run(pretrained.PREFIX + name)
+    assert (folder / "checkpoints" / "best.pt").stat().st_size <= pretrained.MAX_BYTES
+    info = json.loads((folder / "pretrained.json").read_text())
+    assert {"trained_on", "test"} <= set(info)
+    animator = Animator(pretrained.PREFIX + name)
+    motion = generate("walk", 1.0, 0, body)
+    verts = animator.animate(motion)
+    assert verts.shape == (motion.num_frames, len(np.unique(animator.faces)), 3) and np.isfinite(verts).all()
+    # worn on the body: the garment's centre stays within 0.5 m of the root, horizontally, every frame
+    offset = verts.mean(1)[:, :2] - motion.translation[:, :2]
+    assert np.linalg.norm(offset, axis=-1).max() < 0.5
