@@ -10,8 +10,8 @@ import signal
 import sys
 from pathlib import Path
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, int_at_least, joint_map_option, nonnegative_float, piece_choice,
-                               positive_float, writable)
+from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, int_at_least, joint_map_option, nonnegative_float,
+                               piece_choice, positive_float, writable)
 from loosefit.errors import InputError, LoosefitError
 
 
@@ -435,8 +435,8 @@ def build_parser() -> argparse.ArgumentParser:
     garment = sub.add_parser("garment", help="make or import garments").add_subparsers(dest="garment_command", required=True)
     sp = garment.add_parser("make", help="a garment template fitted to the body")
     sp.add_argument("--kind", required=True, choices=["skirt", "dress", "long_shirt", "jumpsuit"])
-    sp.add_argument("--length", type=float, default=None)
-    sp.add_argument("--flare", type=float, default=None)
+    sp.add_argument("--length", type=finite_float, default=None)
+    sp.add_argument("--flare", type=finite_float, default=None)
     sp.add_argument("--seed", type=int, default=0)
     sp.add_argument("--edge-length", type=positive_float, default=0.02,
                     help="target edge length, metres (sets the resolution)")
@@ -578,9 +578,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--split", default="test", help="dataset split evaluated when no --sequence is given")
     sp.add_argument("--out", default=".", help="folder for metrics.csv and metrics.json")
     sp.add_argument("--sted-rings", type=int, default=None, help="STED neighbourhood rings (default in loosefit.metrics.sted)")
-    sp.add_argument("--sted-dt", type=float, default=None, help="STED temporal distance")
-    sp.add_argument("--sted-c", type=float, default=None, help="STED temporal weight")
-    sp.add_argument("--tolerance", type=float, default=None, help="collision tolerance, metres (default 1 mm)")
+    sp.add_argument("--sted-dt", type=finite_float, default=None, help="STED temporal distance")
+    sp.add_argument("--sted-c", type=finite_float, default=None, help="STED temporal weight")
+    sp.add_argument("--tolerance", type=finite_float, default=None, help="collision tolerance, metres (default 1 mm)")
     sp.set_defaults(func=cmd_evaluate)
 
     sp = sub.add_parser("report", help="compare trained runs on a dataset: HTML + Markdown report with metrics, "

@@ -5,6 +5,7 @@ help texts several verbs share."""
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from loosefit.paths import check_writable
@@ -33,6 +34,17 @@ def _finite_float(text: str, zero_allowed: bool, rule: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not (0 <= value if zero_allowed else 0 < value) or not value < float("inf"):
         raise argparse.ArgumentTypeError(f"must be {rule}, got {text}")
+    return value
+
+
+def finite_float(text: str) -> float:
+    """An argparse ``type=``: any finite number (never NaN or infinite)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
     return value
 
 

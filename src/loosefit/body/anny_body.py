@@ -58,6 +58,8 @@ class AnnyShape:
             key = key.strip()
             if not sep or key not in cls.names():
                 raise InputError(f"bad shape item {item!r}: expected NAME=VALUE with NAME in {cls.names()}")
+            if key in values:
+                raise InputError(f"bad shape {text!r}: {key} is given twice (each shape value once)")
             try:
                 values[key] = float(val)
             except ValueError:

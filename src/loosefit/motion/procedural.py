@@ -92,17 +92,23 @@ def _extend(perf: Performance, n: int) -> Performance:
     return Performance(**{f.name: getattr(perf, f.name)[idx] for f in fields(Performance)})
 
 
+#: The longest motion :func:`generate` makes, seconds (an hour: 108,000 frames at 30 fps).
+MAX_SECONDS = 3600.0
+#: The frame rates :func:`generate` makes.
+MIN_FPS, MAX_FPS = 1.0, 240.0
+
+
 def generate(kind: str, seconds: float, seed: int, body, fps: float = DEFAULT_FPS) -> Motion:
     """A procedural motion.
 
     Args:
         kind: one of :data:`KINDS`.
-        seconds: duration; the motion has ``round(seconds * fps)`` frames (at least 2).
+        seconds: duration, at most :data:`MAX_SECONDS`; the motion has ``round(seconds * fps)`` frames (at least 2).
         seed: non-negative integer; the same ``(kind, seed, seconds, fps, body)`` always gives the
             same motion.
         body: a body on rig ``cmu_mb`` (e.g. :class:`~loosefit.body.AnnyBody`); its proportions set
             the stride, reach and heights.
-        fps: frames per second.
+        fps: frames per second, :data:`MIN_FPS` to :data:`MAX_FPS`.
 
     Returns:
         a :class:`~loosefit.motion.Motion` (``rotations (T, J, 3)`` float32 axis-angle, ``translation
@@ -114,6 +120,12 @@ def generate(kind: str, seconds: float, seed: int, body, fps: float = DEFAULT_FP
         raise InputError(f"motion length must be a positive number of seconds, got {seconds!r}")
     if not (_is_number(fps) and fps > 0):
         raise InputError(f"fps must be a positive number, got {fps!r}")
+    if seconds > MAX_SECONDS:
+        raise InputError(f"motion length {seconds:g} s is longer than loosefit generates ({MAX_SECONDS:g} s: "
+                         "loosefit.motion.procedural.MAX_SECONDS); generate pieces and simulate them one by one")
+    if not MIN_FPS <= fps <= MAX_FPS:
+        raise InputError(f"fps {fps:g} is outside the frame rates loosefit generates ({MIN_FPS:g} to {MAX_FPS:g}: "
+                         "loosefit.motion.procedural.MIN_FPS / MAX_FPS)")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"seed must be a non-negative integer, got {seed!r}")
     skel = Skeleton.from_body(body)
