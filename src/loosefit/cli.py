@@ -263,6 +263,13 @@ def cmd_train(args):
     from loosefit.train.distributed import is_main, launch
 
     from loosefit.models.registry import run_config_class
+    from loosefit.train.run import RunDir
+    from loosefit.training import METHOD_CONFIG
+
+    run = RunDir(args.out)
+    if args.resume and not (run.has_checkpoint() or (run.path / METHOD_CONFIG).is_file()):
+        raise InputError(f"--resume: this folder holds no run to resume (no {METHOD_CONFIG}, no checkpoints/last.pt); "
+                         "drop --resume to start a new run here", args.out)
 
     overrides = list(args.set or ())
     if args.device and hasattr(run_config_class(args.method)(), "train"):  # body-lbs has nothing to train

@@ -12,6 +12,10 @@ garment, sizes, dataset, the training and validation sequences and how the valid
 :mod:`loosefit.motion_range`) and ``method.yaml`` (the method's full config: model, train and data
 sections), so that :mod:`loosefit.animate` rebuilds the model from the folder alone.
 
+While it trains, the main process holds the run folder's write lock (``.lock``, :func:`run_lock`): a second
+``train`` into the folder is refused naming the holder. A resume with settings other than the run's own is
+refused before anything in the folder is written.
+
 Validation never sees a test motion unless asked to: the store's ``val`` split, or training motions
 carved out by name, or none (:func:`loosefit.train.validation.choose_validation`). It selects
 ``checkpoints/best.pt``, which animation uses by default.
@@ -19,10 +23,14 @@ carved out by name, or none (:func:`loosefit.train.validation.choose_validation`
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 from pathlib import Path
+from typing import Iterator
 
-from loosefit.config import load_config, save_config
+from loosefit.config import config_to_dict, load_config, save_config
+from loosefit.data import lock
 from loosefit.data.mirror import MIRRORED
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
@@ -37,7 +45,9 @@ from loosefit.train.run import RunDir, save_checkpoint
 from loosefit.train.seeding import rng_state, seed_everything
 from loosefit.train.settings import TrainResult
 from loosefit.train.validation import Validation, choose_validation, train_on_fraction
-from loosefit.train.trainer import StaleRunError, train  # noqa: F401 - StaleRunError re-exported
+from loosefit.train.trainer import RESUME_MAY_CHANGE, StaleRunError, train  # noqa: F401 - StaleRunError re-exported
+
+log = logging.getLogger(__name__)
 
 MODEL_META = "model.json"
 METHOD_CONFIG = "method.yaml"
@@ -87,6 +97,79 @@ def train_model(
     if config is None and resume and saved.exists():
         config = saved
     cfg = load_config(run_config_class(method), config, overrides)
+    if resume and run.has_checkpoint() and saved.exists():  # before anything in the run folder is written
+        _check_same_settings(saved, cfg)
+    with run_lock(run):
+        return _train_model(method, cls, cfg, data, garment, run, resume, val_split, sim_params, val_motions,
+                            val_fraction, train_fraction)
+
+
+@contextlib.contextmanager
+def run_lock(run: RunDir) -> Iterator[None]:
+    """Hold the write lock of the run folder (``.lock``, as a dataset store's: :mod:`loosefit.data.lock`) while
+    training writes it: a second ``train`` into it is refused naming the holder; the lock of a process that
+    is gone is taken over. The main process of a distributed job holds it. A folder made here for the
+    lock alone is removed again when nothing was written into it."""
+    if not distributed.is_main():
+        yield
+        return
+    created = not run.path.exists()
+    run.path.mkdir(parents=True, exist_ok=True)
+    try:
+        key, stale = lock.acquire(run.path, what="run folder")
+    except BaseException:
+        if created:
+            _remove_if_empty(run.path)
+        raise
+    if stale:
+        log.warning("%s: %s", run.path, stale)
+    try:
+        yield
+    finally:
+        lock.release(key)
+        if created:
+            _remove_if_empty(run.path)
+
+
+def _remove_if_empty(path: Path) -> None:
+    try:
+        path.rmdir()
+    except OSError:  # not empty (what was written stays), or gone
+        pass
+
+
+def _settings(cfg) -> dict:
+    """A run config as ``{"section.key": value}`` without the keys a resume may change."""
+    flat: dict = {}
+
+    def walk(value, key: str) -> None:
+        if isinstance(value, dict) and value:
+            for k, v in value.items():
+                walk(v, f"{key}.{k}" if key else str(k))
+        else:
+            flat[key] = value
+
+    walk(config_to_dict(cfg), "")
+    return {k: v for k, v in flat.items() if not (k.startswith("train.") and k.split(".", 1)[1] in RESUME_MAY_CHANGE)}
+
+
+def _check_same_settings(saved: Path, cfg) -> None:
+    """Refuse to resume the run whose ``method.yaml`` is ``saved`` with other settings than its own (except the
+    keys :data:`~loosefit.train.trainer.RESUME_MAY_CHANGE`): its checkpoint would not fit, or train on
+    differently. Reads only."""
+    before, now = _settings(load_config(type(cfg), saved)), _settings(cfg)
+    changed = sorted(k for k in set(before) | set(now) if before.get(k, "(none)") != now.get(k, "(none)"))
+    if changed:
+        shown = "; ".join(f"{k}: {before.get(k, '(none)')!r} in the run, {now.get(k, '(none)')!r} now" for k in changed[:5])
+        more = f"; and {len(changed) - 5} more" if len(changed) > 5 else ""
+        raise InputError(f"--resume with settings other than the run's own ({shown}{more}): a run resumes with "
+                         f"the settings in {saved.name}; drop the --set / --config that change them, or train into "
+                         "a new folder; nothing was changed", saved.parent)
+
+
+def _train_model(method, cls, cfg, data, garment, run: RunDir, resume: bool, val_split, sim_params, val_motions,
+                 val_fraction, train_fraction) -> TrainResult | None:
+    """:func:`train_model` once its settings are checked, with the run folder locked."""
     if isinstance(val_motions, str):
         val_motions = [m.strip() for m in val_motions.split(",") if m.strip()]
     carve = {"val_split": val_split, "val_motions": val_motions, "val_fraction": val_fraction}

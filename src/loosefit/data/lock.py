@@ -1,4 +1,4 @@
-"""The write lock of a dataset store, and the litter of interrupted store creations.
+"""The write lock of a dataset store (and of a training run folder), and the litter of interrupted store creations.
 
 One process writes a store at a time: it holds ``<store>/.lock``, a file with its pid, host and
 start time, locked with ``flock`` while the store is open for writing. The kernel drops the flock
@@ -6,7 +6,9 @@ when the holder exits however it ends, so a lock file whose holder is gone (a st
 is simply taken over by the next writer; a second writer while the holder runs is refused with an
 :class:`~loosefit.errors.InputError` naming the store and the holder's pid and host. Within one
 process the lock is re-entrant (several store objects may write one store). Readers take no lock.
-The holder deletes the file when it lets go.
+The holder deletes the file when it lets go. A lock file that is a symbolic link is refused, never
+followed (``O_NOFOLLOW``): a writer would otherwise write and delete whatever it points to. Training
+locks its run folder the same way (``what="run folder"``).
 
 A store is created beside its final place as ``.<name>.creating-<pid>@<host>`` and renamed into
 place; a process killed during creation leaves that directory, which :func:`clean_creating_litter`
@@ -20,6 +22,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import threading
 import time
 from dataclasses import dataclass
@@ -66,19 +69,29 @@ def _parse(text: str) -> Holder | None:
         return None
 
 
+#: Opening a lock file never follows a symbolic link, nor waits on a FIFO.
+_NOFOLLOW = os.O_NOFOLLOW | os.O_NONBLOCK
+
+
 def read_holder(root: Path) -> Holder | None:
     """The pid, host and time written in the lock file of the store at ``root`` (None: none readable)."""
     try:
-        return _parse((root / LOCK_FILE).read_text())
+        fd = os.open(root / LOCK_FILE, os.O_RDONLY | _NOFOLLOW)
     except OSError:
         return None
+    try:
+        return _parse(os.read(fd, 4096).decode(errors="replace"))
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
 
 
 def current_holder(root: Path) -> Holder | None:
     """The process holding the store's write lock now, or None when no process holds it (a stale
     lock file of a dead writer counts as free). Takes no lock."""
     try:
-        fd = os.open(root / LOCK_FILE, os.O_RDONLY)
+        fd = os.open(root / LOCK_FILE, os.O_RDONLY | _NOFOLLOW)
     except OSError:
         return None
     try:
@@ -113,7 +126,7 @@ def _forget_in_child() -> None:
 os.register_at_fork(after_in_child=_forget_in_child)
 
 
-def _busy(root: Path) -> InputError:
+def _busy(root: Path, what: str) -> InputError:
     holder = None
     for _ in range(20):  # the holder writes its pid just after taking the lock
         holder = read_holder(root)
@@ -127,31 +140,38 @@ def _busy(root: Path) -> InputError:
     else:
         who = f"{holder.describe()}, which has exited while a process it started still holds the lock"
     return InputError(
-        f"dataset store is locked for writing by {who}; one process writes a store at a time: "
+        f"{what} is locked for writing by {who}; one process writes a {what} at a time: "
         "wait for it to finish (or stop it) and run again",
         root,
     )
 
 
-def _take(path: Path, root: Path) -> tuple[int, Holder | None]:
-    """Lock the file ``path`` (created if missing) for this process; returns its descriptor and the
-    previous holder written in it."""
+def _take(path: Path, root: Path, what: str = "dataset store") -> tuple[int, Holder | None]:
+    """Lock the file ``path`` (created if missing, never followed if a symbolic link) for this process;
+    returns its descriptor and the previous holder written in it."""
     for _ in range(50):
         try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | _NOFOLLOW, 0o644)
         except OSError as e:
-            raise InputError(f"cannot lock the dataset store for writing: {e.strerror or e}", root) from None
+            if path.is_symlink():
+                raise InputError(f"cannot lock the {what} for writing: its lock file {path.name} is a symbolic link "
+                                 "(a lock is never followed); delete the link and run again", root) from None
+            raise InputError(f"cannot lock the {what} for writing: {e.strerror or e}", root) from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise InputError(f"cannot lock the {what} for writing: its lock file {path.name} is not a regular file; "
+                             "delete it and run again", root)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise _busy(root) from None
+            raise _busy(root, what) from None
         except OSError as e:
             os.close(fd)
-            raise InputError(f"cannot lock the dataset store for writing ({e.strerror or e}); "
+            raise InputError(f"cannot lock the {what} for writing ({e.strerror or e}); "
                              "its file system does not support file locks", root) from None
         try:  # the previous holder may have deleted the file between our open and flock: retry
-            same = os.stat(path).st_ino == os.fstat(fd).st_ino
+            same = os.lstat(path).st_ino == os.fstat(fd).st_ino
         except FileNotFoundError:
             same = False
         if not same:
@@ -163,11 +183,12 @@ def _take(path: Path, root: Path) -> tuple[int, Holder | None]:
         os.pwrite(fd, record, 0)
         os.fsync(fd)
         return fd, previous
-    raise InputError("cannot lock the dataset store for writing: its lock file keeps changing", root)
+    raise InputError(f"cannot lock the {what} for writing: its lock file keeps changing", root)
 
 
-def acquire(root: Path) -> tuple[str, str | None]:
-    """Take the write lock of the store at ``root`` for this process (re-entrant).
+def acquire(root: Path, what: str = "dataset store") -> tuple[str, str | None]:
+    """Take the write lock of the store (or other folder: ``what`` it is, for messages) at ``root`` for this
+    process (re-entrant).
 
     Returns:
         The key to pass to :func:`release`, and a sentence when a stale lock was taken over.
@@ -180,7 +201,7 @@ def acquire(root: Path) -> tuple[str, str | None]:
         if held is not None:
             held.count += 1
             return key, None
-        fd, previous = _take(root / LOCK_FILE, root)
+        fd, previous = _take(root / LOCK_FILE, root, what)
         _held[key] = _Held(fd, root / LOCK_FILE, 1)
     if previous is None or (previous.pid, previous.host) == (os.getpid(), this_host()):
         return key, None
@@ -210,7 +231,7 @@ def release(key: str) -> None:
             return
         del _held[key]
         try:  # delete only our own lock file, then unlock by closing
-            if os.stat(held.path).st_ino == os.fstat(held.fd).st_ino:
+            if os.lstat(held.path).st_ino == os.fstat(held.fd).st_ino:
                 os.unlink(held.path)
         except OSError:
             pass

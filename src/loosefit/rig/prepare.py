@@ -39,6 +39,7 @@ from the start. Frame ``i`` of ``frames/<s>`` is frame ``i`` of sequence ``<s>``
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,7 +52,7 @@ from loosefit.data.mirror import MIRRORED, GarmentMirror, MirroredSequence
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_axis_angle
-from loosefit.geometry.smoothing import frequency_split
+from loosefit.geometry.smoothing import frequency_split, get_preset
 from loosefit.rig.fit_attribute import DEFAULT_FACTORS, FitAttributeModel, distance_vector
 from loosefit.rig.normalization import NormalizationStats, RunningStats
 from loosefit.rig.spectral import DEFAULT_SAMPLES, DEFAULT_SIGMA, spectral_descriptor
@@ -133,7 +134,19 @@ def prepare_settings(values: dict | None = None, source: str | Path | None = Non
     unknown = sorted(set(values or {}) - set(names))
     if unknown:
         raise InputError(f"unknown prepare settings {unknown}; known: {names}", source)
-    return config_from_dict(PrepareSettings, values, source)
+    s = config_from_dict(PrepareSettings, values, source)
+    get_preset(s.smoothing)  # an unknown preset names the known ones
+    bad = [f"{k}={getattr(s, k)!r} (must be {rule})" for k, ok, rule in (
+        ("influences", s.influences >= 1, "at least 1"), ("iterations", s.iterations >= 0, ">= 0"),
+        ("transform_iterations", s.transform_iterations >= 0, ">= 0"),
+        ("max_solve_frames", s.max_solve_frames >= 1, "at least 1"),
+        ("trans_affine", math.isfinite(s.trans_affine) and s.trans_affine >= 0, "a finite number >= 0"),
+        ("descriptor_samples", s.descriptor_samples >= 1, "at least 1"),
+        ("descriptor_sigma", math.isfinite(s.descriptor_sigma) and s.descriptor_sigma > 0, "a finite number > 0"),
+        ("threads", s.threads >= 1, "at least 1")) if not ok]
+    if bad:
+        raise InputError(f"bad prepare settings: {'; '.join(bad)}", source)
+    return s
 
 
 def prepare(
