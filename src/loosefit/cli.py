@@ -100,6 +100,20 @@ def _garment_params(items: list[str]) -> dict:
     return params
 
 
+def _at_model_rate(motion, path):
+    """``motion`` at the frame rate garment models learn at (30 fps, as every dataset is simulated): a motion file
+    at another rate is resampled (its duration kept), and a line says so."""
+    from loosefit.motion.motion import DEFAULT_FPS
+    from loosefit.motion.resample import resample
+
+    if abs(motion.fps - DEFAULT_FPS) <= 1e-6 * DEFAULT_FPS:
+        return motion
+    resampled = resample(motion, DEFAULT_FPS)
+    print(f"{path}: {motion.num_frames} frames at {motion.fps:g} fps, resampled to the model's {DEFAULT_FPS:g} fps "
+          f"({resampled.num_frames} frames)", file=sys.stderr)
+    return resampled
+
+
 def _shape_text(shape: dict) -> str:
     return ",".join(f"{k}={v:g}" for k, v in shape.items())
 
@@ -180,9 +194,13 @@ def cmd_evaluate(args):
     given = dict(sted_rings=args.sted_rings, sted_dt=args.sted_dt, sted_c=args.sted_c, collision_tolerance=args.tolerance)
     settings = EvaluationSettings(**{k: v for k, v in given.items() if v is not None})
     writable(args.out, folder=True)
+    out = Path(args.out)
+    is_run = (out / "method.yaml").is_file() or (out / "checkpoints").is_dir()
+    if is_run and (out / "metrics.csv").exists() and not args.force:
+        raise InputError("this is a training run folder and its metrics.csv is the run's training log: choose "
+                         "another --out, or give --force to replace it", out / "metrics.csv")
     result = evaluate(load_pairs(args.pred, args.gt, args.body, args.sequence, args.split), settings)
     print(result.table())
-    out = Path(args.out)
     result.write_csv(out / "metrics.csv")
     result.write_json(out / "metrics.json")
     print(f"wrote {out / 'metrics.csv'} and {out / 'metrics.json'}")
@@ -294,7 +312,7 @@ def cmd_animate(args):
 
     writable(args.out, folder=True if len(args.motion) > 1 else None)
     body = _body(args)
-    motions = [load_motion(path, body, joint_map=args.joint_map) for path in args.motion]
+    motions = [_at_model_rate(load_motion(path, body, joint_map=args.joint_map), path) for path in args.motion]
     if is_static_run(args.run):
         from loosefit.garment import Garment
         from loosefit.garment.body_fit import refit
@@ -355,7 +373,7 @@ def cmd_export_rig(args):
 
     writable(args.out, folder=False)
     body = _body(args)
-    motion = load_motion(args.motion, body, joint_map=args.joint_map)
+    motion = _at_model_rate(load_motion(args.motion, body, joint_map=args.joint_map), args.motion)
     summary = export_rig(args.run, motion, args.out, body=None if args.no_body else body, influences=args.influences,
                          checkpoint=args.checkpoint, threads=args.threads)
     print(f"wrote {args.out}: {summary['bytes']} bytes, {summary['frames']} frames at {summary['fps']:g} fps, "
@@ -588,6 +606,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--sted-dt", type=finite_float, default=None, help="STED temporal distance")
     sp.add_argument("--sted-c", type=finite_float, default=None, help="STED temporal weight")
     sp.add_argument("--tolerance", type=finite_float, default=None, help="collision tolerance, metres (default 1 mm)")
+    sp.add_argument("--force", action="store_true", help="replace the training log metrics.csv of a run folder "
+                    "given as --out")
     sp.set_defaults(func=cmd_evaluate)
 
     sp = sub.add_parser("report", help="compare trained runs on a dataset: HTML + Markdown report with metrics, "

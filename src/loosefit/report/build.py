@@ -16,6 +16,7 @@ from a source checkout that is the repository's folder, otherwise give ``results
 
 from __future__ import annotations
 
+import html
 import json
 import sys
 import time
@@ -52,6 +53,13 @@ def _shown_columns(evaluations: list[dict]) -> tuple:
     """The metric columns to show: RMSE against the mean and the floor only when some sequence has reference runs."""
     runs = any(r.get("floor_mm") is not None for e in evaluations for r in e["rows"])
     return tuple(c for c in METRIC_COLUMNS if runs or c[0] not in REFERENCE_KEYS)
+
+
+def markdown_text(value) -> str:
+    """``value`` as plain text in a Markdown table cell or heading: HTML is escaped (a run named
+    ``<img onerror=...>`` shows as written, as in ``index.html``), a ``|`` cannot end the cell, a newline the row."""
+    text = html.escape(str(value), quote=False)
+    return text.replace("\\", "\\\\").replace("|", "\\|").replace("`", "\\`").replace("\r", " ").replace("\n", " ")
 
 
 def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequences: list[str] | None = None,
@@ -142,6 +150,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
     env = Environment(loader=PackageLoader("loosefit.report", "templates"), undefined=StrictUndefined,
                       autoescape=select_autoescape(enabled_extensions=("html.j2",), default_for_string=False),
                       trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    env.filters["md"] = markdown_text
     doc = {"data": context["data"], "collision_handling": handling, "methods": evaluations, "sequences": context["sequences"], "plots": plots,
            "speed": speed, "claims": claims}
     with atomic_path(out / "metrics.json") as tmp:

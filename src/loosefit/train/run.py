@@ -149,7 +149,17 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
             f"epoch {state['epoch']}, step {state['global_step']})",
             path,
         )
+    _check_finite(state["model"], path)
     return state
+
+
+def _check_finite(weights: dict, path: Path) -> None:
+    """Refuse model weights or statistics (buffers) holding NaN or infinite values, naming the first tensor."""
+    for name, value in weights.items():
+        if isinstance(value, torch.Tensor) and value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            bad = int((~torch.isfinite(value)).sum())
+            raise InputError(f"checkpoint tensor {name!r} {tuple(value.shape)} holds {bad} NaN or infinite value(s); "
+                             "a model from it would be wrong everywhere: use another checkpoint or train again", path)
 
 
 def load_weights(model: torch.nn.Module, path: str | Path) -> dict[str, Any]:
