@@ -3,7 +3,7 @@
 simulate the training and validation motions of ``configs/datasets/demo.yaml`` (a skirt on short procedural
 motions and, when ``../shared/mocap`` is beside the project, pieces of CMU capture) -> prepare (virtual bones) ->
 train VirtualBones and JointNet briefly, choosing their checkpoints on the validation motions, while the held-out
-motions (a spin and a capture walk of a subject nothing trains on) are simulated on the other core -> animate them
+motions (a spin and a capture walk on uneven terrain of a subject nothing trains on) are simulated on the other core -> animate them
 with both and the body-LBS baseline -> a metrics table per held-out motion (the report is built beside it) ->
 ``demo_out/``: a side-by-side MP4 of the capture walk (the spin without the capture files: ground truth |
 VirtualBones | JointNet, coloured by error), a PNG of one frame, the metrics as CSV / JSON per motion, the JointNet
