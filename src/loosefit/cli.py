@@ -349,11 +349,12 @@ def cmd_animate(args):
         posed = body.pose(motion) if args.with_body or out.suffix.lower() == ".npz" else None
         export_animation(out, verts, faces, fps=motion.fps,
                          body_verts=None if posed is None else posed.verts, body_faces=None if posed is None else body.faces)
-        inside = inside_body_report(verts, body, motion)
+        inside = inside_body_report(verts, body, motion, faces=faces)
         print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method}, collision handling "
               f"{args.collision}); inside the body by more than {inside['depth_m'] * 1e3:g} mm: {inside['mean_percent']:.1f} % "
-              f"of the vertices, {inside['worst_percent']:.1f} % in the worst frame (measured on {inside['frames']} of "
-              f"{inside['of_frames']} frames)")
+              f"of the vertices (worst frame {inside['worst_percent']:.1f} %), {inside['surface_mean_percent']:.1f} % of "
+              f"surface points between them (worst {inside['surface_worst_percent']:.1f} %), deepest "
+              f"{inside['deepest_mm']:.0f} mm (measured on {inside['frames']} of {inside['of_frames']} frames)")
 
 
 def cmd_report(args):
