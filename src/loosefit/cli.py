@@ -191,7 +191,8 @@ def cmd_render(args):
 def cmd_evaluate(args):
     from loosefit.metrics.report import EvaluationSettings, evaluate, load_pairs
 
-    given = dict(sted_rings=args.sted_rings, sted_dt=args.sted_dt, sted_c=args.sted_c, collision_tolerance=args.tolerance)
+    given = dict(sted_rings=args.sted_rings, sted_dt=args.sted_dt, sted_c=args.sted_c, collision_tolerance=args.tolerance,
+                 surface_depth=args.surface_depth)
     settings = EvaluationSettings(**{k: v for k, v in given.items() if v is not None})
     writable(args.out, folder=True)
     out = Path(args.out)
@@ -607,6 +608,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--sted-dt", type=finite_float, default=None, help="STED temporal distance")
     sp.add_argument("--sted-c", type=finite_float, default=None, help="STED temporal weight")
     sp.add_argument("--tolerance", type=finite_float, default=None, help="collision tolerance, metres (default 1 mm)")
+    sp.add_argument("--surface-depth", type=nonnegative_float, default=None,
+                    help="depth inside the body, metres, beyond which a point of the garment's surface (edge midpoint, "
+                         "triangle centroid) counts in the surface column (default 5 mm)")
     sp.add_argument("--force", action="store_true", help="replace the training log metrics.csv of a run folder "
                     "given as --out")
     sp.set_defaults(func=cmd_evaluate)

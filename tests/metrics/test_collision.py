@@ -16,6 +16,7 @@ from loosefit.metrics.collision import (
     penetrations,
     surface_samples,
 )
+from tests.metrics.conftest import TRIANGLE, box_depth, sheet
 
 BOX = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
 BV, BF = np.asarray(BOX.vertices), np.asarray(BOX.faces)
@@ -90,17 +91,6 @@ def test_posed_frames_share_the_edge_map_and_give_the_same_distances():
         collision_ratio_per_frame(garment, [BodySDF(v, faces) for v in frames]).tolist())
 
 
-def sheet(half: float, n: int, z: float):
-    """A flat square ``[-half, half]^2`` at height ``z``, ``n x n`` squares of two triangles each."""
-    x = np.linspace(-half, half, n + 1)
-    gx, gy = np.meshgrid(x, x, indexing="ij")
-    verts = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)], 1)
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    a = (i * (n + 1) + j).ravel()
-    faces = np.concatenate([np.stack([a, a + n + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + 1], 1)])
-    return verts, faces
-
-
 def test_a_sheet_through_a_sphere():
     """A square sheet 0.1 m above the centre of a sphere of radius r = 0.3 m: the points deeper than d = 5 mm are
     those within r - d of the centre, a disk of radius sqrt((r - d)^2 - 0.1^2) on the sheet. Counted from the
@@ -132,19 +122,6 @@ def test_a_sheet_through_a_sphere():
         at_samples, at_vertices = -body.query(surface_samples(frame, faces)), -body.query(frame)
         assert found.surface_percent[t] == pytest.approx(100.0 * (at_samples > d).mean(), rel=1e-12)
         assert found.deepest_m[t] == max(at_samples.max(), at_vertices.max())
-
-
-# A triangle across the unit box (half-width 0.5) in the plane z = 0.2, its centroid (0.1, 0.05, 0.2) 0.3 m deep
-# (nearest face z = 0.5), its corners 1.05 m from the centroid at 0, 120 and 240 degrees: all three outside the
-# box, two of its three edge midpoints inside.
-CENTROID = np.array([0.1, 0.05, 0.2])
-ANGLES = np.radians([0.0, 120.0, 240.0])
-TRIANGLE = CENTROID + 1.05 * np.stack([np.cos(ANGLES), np.sin(ANGLES), 0 * ANGLES], 1)
-
-
-def box_depth(points: np.ndarray) -> np.ndarray:
-    """Depth inside the unit box centred at the origin (negative outside the slab of one axis at least)."""
-    return (0.5 - np.abs(points)).min(-1)
 
 
 def test_a_triangle_across_a_box_between_its_vertices():

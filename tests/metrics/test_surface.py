@@ -20,6 +20,7 @@ from loosefit.metrics.surface import (
     roughness_deg,
     roughness_per_edge_deg,
 )
+from tests.metrics.conftest import fold, strip
 
 TRI = np.array([[0, 1, 2]])
 
@@ -68,27 +69,6 @@ def test_laplacian_consistency_against_libigl_diagonals():
     assert mean_laplacian_consistency(v, after, f) == pytest.approx(ref.mean())
     with pytest.raises(InputError, match="empty"):
         mean_laplacian_consistency(v, after, f, np.zeros(len(v), bool))
-
-
-def strip(n: int):
-    """A flat strip of ``n`` unit squares along x in the plane z = 0, two triangles each: bottom vertices
-    ``b_i = (i, 0, 0)`` (index i), top ``t_i = (i, 1, 0)`` (index n + 1 + i); square i holds
-    ``(b_i, b_i+1, t_i+1)`` then ``(b_i, t_i+1, t_i)``. Its 2n - 1 interior edges: n diagonals and n - 1 rungs."""
-    i = np.arange(n + 1)
-    verts = np.concatenate([np.stack([i, 0 * i, 0 * i], 1), np.stack([i, 0 * i + 1, 0 * i], 1)]).astype(np.float64)
-    b, t = np.arange(n), n + 1 + np.arange(n)
-    faces = np.stack([np.stack([b, b + 1, t + 1], 1), np.stack([b, t + 1, t], 1)], 1).reshape(-1, 3)
-    return verts, faces
-
-
-def fold(verts: np.ndarray, at: float, degrees: float) -> np.ndarray:
-    """``verts`` with everything beyond x = ``at`` turned by ``degrees`` about the line x = at, z = 0 (along y)."""
-    a = np.radians(degrees)
-    out = verts.copy()
-    beyond = verts[:, 0] > at
-    x = verts[beyond, 0] - at
-    out[beyond, 0], out[beyond, 2] = at + x * np.cos(a), x * np.sin(a)
-    return out
 
 
 def test_interior_edges_of_a_strip():
