@@ -122,10 +122,16 @@ def test_animate_handles_collisions_by_default_and_reports_what_is_inside(lbs_ru
         fixed = z["verts"]
     expected = handle_motion_collisions(raw, Animator(lbs_run).faces, body, motion, "exact")
     assert np.abs(fixed - expected).max() < 1e-6
-    before, after = inside_body_report(raw, body, motion), inside_body_report(fixed, body, motion)
+    faces = Animator(lbs_run).faces
+    before, after = (inside_body_report(v, body, motion, faces=faces) for v in (raw, fixed))
     assert before["mean_percent"] > 0.1 and after["mean_percent"] < 0.5 * before["mean_percent"]
     assert f"{before['mean_percent']:.1f} % of the vertices" in raw_line and "collision handling none" in raw_line
     assert f"{after['mean_percent']:.1f} % of the vertices" in line and "collision handling exact" in line
+    # and on the surface between the vertices (edge midpoints, centroids), with the deepest point
+    for report, text in ((before, raw_line), (after, line)):
+        assert (f"{report['surface_mean_percent']:.1f} % of surface points between them (worst "
+                f"{report['surface_worst_percent']:.1f} %), deepest {report['deepest_mm']:.0f} mm") in text
+    assert before["surface_mean_percent"] > 0 and before["deepest_mm"] > 5.0  # measured 0.09 %, 34 mm
 
 
 def test_inside_body_report_counts_what_is_deeper_than_the_depth(body):

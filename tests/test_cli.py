@@ -62,6 +62,28 @@ def test_evaluate_writes_tables(tmp_path, capsys):
     assert "17.32" in capsys.readouterr().out and (tmp_path / "metrics.csv").exists()
 
 
+def test_evaluate_measures_the_surface_inside_a_body_at_a_given_depth(tmp_path, capsys):
+    """A triangle across a unit box (its corners outside, its centroid 0.3 m deep, two edge midpoints 75 and 95 mm
+    deep): at --surface-depth 0.08 one midpoint and the centroid count, half the samples."""
+    from tests.metrics.conftest import TRIANGLE
+
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    faces = np.array([[0, 1, 2]])
+    MeshSequence(np.repeat(TRIANGLE[None], 2, 0).astype(np.float32), faces).save(tmp_path / "tri.npz")
+    MeshSequence(np.repeat(np.asarray(box.vertices)[None], 2, 0).astype(np.float32), np.asarray(box.faces)).save(
+        tmp_path / "box.npz")
+    assert main(["evaluate", str(tmp_path / "tri.npz"), str(tmp_path / "tri.npz"), "--body", str(tmp_path / "box.npz"),
+                 "--surface-depth", "0.08", "--out", str(tmp_path)]) == 0
+    doc = json.loads((tmp_path / "metrics.json").read_text())
+    assert doc["settings"]["surface_depth"] == 0.08
+    assert doc["overall"]["collision_pct"] == 0.0 and doc["overall"]["surface_inside_pct"] == pytest.approx(50.0)
+    assert doc["overall"]["deepest_mm"] == pytest.approx(300.0, abs=0.01)
+    assert "surface >80mm %" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluate", str(tmp_path / "tri.npz"), str(tmp_path / "tri.npz"), "--surface-depth", "-1"])
+    assert exc.value.code == 2 and "--surface-depth: must be a number >= 0" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [

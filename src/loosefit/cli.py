@@ -191,7 +191,8 @@ def cmd_render(args):
 def cmd_evaluate(args):
     from loosefit.metrics.report import EvaluationSettings, evaluate, load_pairs
 
-    given = dict(sted_rings=args.sted_rings, sted_dt=args.sted_dt, sted_c=args.sted_c, collision_tolerance=args.tolerance)
+    given = dict(sted_rings=args.sted_rings, sted_dt=args.sted_dt, sted_c=args.sted_c, collision_tolerance=args.tolerance,
+                 surface_depth=args.surface_depth)
     settings = EvaluationSettings(**{k: v for k, v in given.items() if v is not None})
     writable(args.out, folder=True)
     out = Path(args.out)
@@ -349,11 +350,12 @@ def cmd_animate(args):
         posed = body.pose(motion) if args.with_body or out.suffix.lower() == ".npz" else None
         export_animation(out, verts, faces, fps=motion.fps,
                          body_verts=None if posed is None else posed.verts, body_faces=None if posed is None else body.faces)
-        inside = inside_body_report(verts, body, motion)
+        inside = inside_body_report(verts, body, motion, faces=faces)
         print(f"wrote {out}: {verts.shape[0]} frames, {verts.shape[1]} vertices ({animator.method}, collision handling "
               f"{args.collision}); inside the body by more than {inside['depth_m'] * 1e3:g} mm: {inside['mean_percent']:.1f} % "
-              f"of the vertices, {inside['worst_percent']:.1f} % in the worst frame (measured on {inside['frames']} of "
-              f"{inside['of_frames']} frames)")
+              f"of the vertices (worst frame {inside['worst_percent']:.1f} %), {inside['surface_mean_percent']:.1f} % of "
+              f"surface points between them (worst {inside['surface_worst_percent']:.1f} %), deepest "
+              f"{inside['deepest_mm']:.0f} mm (measured on {inside['frames']} of {inside['of_frames']} frames)")
 
 
 def cmd_report(args):
@@ -606,6 +608,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--sted-dt", type=finite_float, default=None, help="STED temporal distance")
     sp.add_argument("--sted-c", type=finite_float, default=None, help="STED temporal weight")
     sp.add_argument("--tolerance", type=finite_float, default=None, help="collision tolerance, metres (default 1 mm)")
+    sp.add_argument("--surface-depth", type=nonnegative_float, default=None,
+                    help="depth inside the body, metres, beyond which a point of the garment's surface (edge midpoint, "
+                         "triangle centroid) counts in the surface column (default 5 mm)")
     sp.add_argument("--force", action="store_true", help="replace the training log metrics.csv of a run folder "
                     "given as --out")
     sp.set_defaults(func=cmd_evaluate)

@@ -1,4 +1,5 @@
-"""Evaluation report: pooled overall values, table, CSV / JSON files, file and dataset inputs."""
+"""Evaluation report: pooled overall values, table, CSV / JSON files, file and dataset inputs; penetration on the
+surface and the bounded surface quality against closed forms."""
 
 import csv
 import json
@@ -12,8 +13,16 @@ from loosefit.data import DatasetStore
 from loosefit.errors import InputError
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.metrics.errors import hausdorff_mm, rmse_mm
-from loosefit.metrics.report import SequencePair, evaluate, load_pairs, pairs_from_files, pairs_from_store
+from loosefit.metrics.report import (
+    EvaluationSettings,
+    SequencePair,
+    evaluate,
+    load_pairs,
+    pairs_from_files,
+    pairs_from_store,
+)
 from loosefit.metrics.sted import sted
+from tests.metrics.conftest import TRIANGLE, box_depth, fold, strip
 
 SPHERE = trimesh.creation.icosphere(1, radius=0.3)
 V, F = np.asarray(SPHERE.vertices), np.asarray(SPHERE.faces)
@@ -106,7 +115,72 @@ def test_methods_on_one_posed_body_share_its_distance_field():
     preds = [sequence(4, seed, noise=0.03) for seed in range(3)]
     pairs = [SequencePair(f"m{k}", p, g, F, body, faces) for k, (p, g) in enumerate(preds)]
     pairs.append(SequencePair("other body", preds[0][0], preds[0][1], F, body.copy(), faces))
-    together = [r["collision_pct"] for r in evaluate(pairs, progress=False).rows]
-    alone = [evaluate([p], progress=False).rows[0]["collision_pct"] for p in pairs]
+    keys = ("collision_pct", "surface_inside_pct", "deepest_mm")
+    together = [[r[k] for k in keys] for r in evaluate(pairs, progress=False).rows]
+    alone = [[evaluate([p], progress=False).rows[0][k] for k in keys] for p in pairs]
     assert together == alone and together[0] == together[3]
-    assert len(set(together[:3])) == 3 and all(0 < c < 100 for c in together)  # the noise moves vertices across
+    collision = [c for c, _, _ in together]
+    assert len(set(collision[:3])) == 3 and all(0 < c < 100 for c in collision)  # the noise moves vertices across
+
+
+BOX = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+
+
+def test_surface_penetration_columns_of_a_triangle_across_a_box(tmp_path):
+    """The triangle's corners are outside the box, two edge midpoints and its centroid inside (0.3 m deep): collision
+    0, the surface share that of the 4 samples deeper than the depth (by the box's depth formula), deepest 300 mm.
+    A second sequence, lifted off the box, pools by frames x samples; the deepest is the deepest of all."""
+    from loosefit.metrics.collision import surface_samples
+
+    faces = np.array([[0, 1, 2]])
+    tri = np.repeat(TRIANGLE[None], 3, 0)
+    body = np.repeat(np.asarray(BOX.vertices)[None], 3, 0)
+    samples = surface_samples(TRIANGLE, faces)
+    for depth in (0.005, 0.1):
+        ev = evaluate([SequencePair("across", tri, tri, faces, body, np.asarray(BOX.faces))],
+                      EvaluationSettings(surface_depth=depth), progress=False)
+        (row,) = ev.rows
+        assert row["collision_pct"] == 0.0 and row["surface_samples"] == 4
+        assert row["surface_inside_pct"] == pytest.approx(100.0 * (box_depth(samples) > depth).mean())  # 75, 25
+        assert row["deepest_mm"] == pytest.approx(300.0, abs=1e-3)
+        assert f"surface >{1000 * depth:g}mm %" in ev.table()
+    lifted = SequencePair("lifted", tri[:1] + [0, 0, 2.0], tri[:1], faces, body[:1], np.asarray(BOX.faces))
+    ev = evaluate([SequencePair("across", tri, tri, faces, body, np.asarray(BOX.faces)), lifted], progress=False)
+    assert ev.rows[1]["surface_inside_pct"] == 0.0 and ev.rows[1]["deepest_mm"] == 0.0
+    assert ev.overall["surface_inside_pct"] == pytest.approx((3 * 75.0 + 1 * 0.0) / 4)
+    assert ev.overall["deepest_mm"] == pytest.approx(300.0, abs=1e-3)
+    ev.write_json(tmp_path / "m.json")
+    doc = json.loads((tmp_path / "m.json").read_text())
+    assert doc["settings"]["surface_depth"] == 0.005 and doc["overall"]["deepest_mm"] == pytest.approx(300.0, abs=1e-3)
+    # without a body there is nothing to be inside
+    plain = evaluate([SequencePair("no body", tri, tri, faces)], progress=False).rows[0]
+    assert plain["surface_inside_pct"] is None and plain["deepest_mm"] is None
+
+
+def test_collapsed_and_roughness_columns_pool_by_faces_and_interior_edges():
+    """A strip of 3 squares (6 triangles, 5 interior edges) with one triangle flipped in one of its 2 frames, and a
+    strip of 5 (10 triangles, 9 interior edges) folded by 60 degrees along a rung in each of its 4 frames:
+    collapsed 1 / 12 and 0 %, roughness 180 / 10 (the flipped triangle folds its diagonal flat onto its neighbour) and
+    60 / 9 degrees; pooled by frames x faces and frames x interior edges."""
+    flat3, faces3 = strip(3)
+    flipped = flat3.copy()
+    flipped[3 + 1] = [1.0, 0.0, 0.0]  # t_0 mirrored across the diagonal b_0-t_1
+    flat5, faces5 = strip(5)
+    folded = fold(flat5, 2.0, 60.0)
+    pairs = [SequencePair("flip", np.stack([flipped, flat3]), np.stack([flat3, flat3]), faces3),
+             SequencePair("fold", np.repeat(folded[None], 4, 0), np.repeat(flat5[None], 4, 0), faces5)]
+    ev = evaluate(pairs, progress=False)
+    flip, fold_row = ev.rows
+    assert flip["collapsed_pct"] == pytest.approx(100.0 / 12) and fold_row["collapsed_pct"] == 0.0
+    assert flip["interior_edges"] == 5 and fold_row["interior_edges"] == 9
+    assert fold_row["roughness_deg"] == pytest.approx(60.0 / 9)
+    # the flipped triangle's one interior edge, the diagonal b_0-t_1, folds by 180 degrees in one of two frames
+    assert flip["roughness_deg"] == pytest.approx(180.0 / (2 * 5))
+    assert ev.overall["collapsed_pct"] == pytest.approx(100.0 * 1 / (2 * 6 + 4 * 10))
+    assert ev.overall["roughness_deg"] == pytest.approx((2 * 5 * flip["roughness_deg"] + 4 * 9 * 60.0 / 9) / (2 * 5 + 4 * 9))
+    table = ev.table()
+    assert "collapsed %" in table and "rough. deg" in table
+    same = evaluate([SequencePair("same", flat5[None], flat5[None], faces5)], progress=False).rows[0]
+    assert same["collapsed_pct"] == 0.0 and same["roughness_deg"] == 0.0
+    single = evaluate([SequencePair("one", TRIANGLE[None], TRIANGLE[None], np.array([[0, 1, 2]]))], progress=False)
+    assert single.rows[0]["roughness_deg"] is None and single.overall["roughness_deg"] is None

@@ -58,8 +58,11 @@ def _direct_metrics(store_path, run, name):
     d = np.linalg.norm(pred - gt, axis=-1)
     lap = np.mean([np.abs(igl.cotmatrix(p, faces).diagonal() - igl.cotmatrix(g, faces).diagonal())
                    for p, g in zip(pred, gt)])
+    # collapsed: under a fifth of the simulated area, or the normal turned against the simulated one
+    n_p, n_g = (np.cross(v[:, faces[:, 1]] - v[:, faces[:, 0]], v[:, faces[:, 2]] - v[:, faces[:, 0]]) for v in (pred, gt))
+    collapsed = (np.linalg.norm(n_p, axis=-1) < 0.2 * np.linalg.norm(n_g, axis=-1)) | ((n_p * n_g).sum(-1) < 0)
     return {"rmse_mm": 1000 * np.sqrt(np.mean(d**2)), "mean_vertex_error_mm": 1000 * d.mean(),
-            "e_dist_cm": 100 * d.mean(), "laplacian_consistency": lap}
+            "e_dist_cm": 100 * d.mean(), "laplacian_consistency": lap, "collapsed_pct": 100 * collapsed.mean()}
 
 
 def test_tables_hold_the_directly_computed_metrics(report, tiny_store):
@@ -74,14 +77,20 @@ def test_tables_hold_the_directly_computed_metrics(report, tiny_store):
         for row in entry["rows"]:
             direct = _direct_metrics(tiny_store, run, row["name"])
             for key, value in direct.items():
-                assert row[key] == pytest.approx(value, rel=1e-4), key
-            for key in ("hausdorff_mm", "sted", "e_norm_deg", "collision_pct"):  # all seven metrics present
+                assert row[key] == pytest.approx(value, rel=1e-4, abs=1e-9), key
+            for key in ("hausdorff_mm", "sted", "e_norm_deg", "collision_pct", "surface_inside_pct", "deepest_mm",
+                        "roughness_deg"):  # every metric present
                 assert row[key] is not None and np.isfinite(row[key])
         # one test sequence: the pooled row is that sequence's
         assert entry["pooled"]["rmse_mm"] == pytest.approx(entry["rows"][0]["rmse_mm"], rel=1e-9)
         shown = f"{entry['pooled']['rmse_mm']:.2f}"
         assert re.search(rf"<td>{entry['method']}</td><td>pooled</td>.*?{re.escape(shown)}", html)
         assert f"| **{entry['method']}** | **pooled** |" in md and f"**{shown}**" in md
+        # the body and surface columns in the HTML's second table (one would not fit a 1280-pixel window)
+        collapsed = f"{entry['pooled']['collapsed_pct']:.3f}"
+        surface = html[html.index('<table id="surface"'):]
+        assert re.search(rf"<td>{entry['method']}</td><td>pooled</td>.*?{re.escape(collapsed)}", surface)
+    assert "surface &gt;5mm %" in html and "surface >5mm % | deepest mm |" in md
     # the two methods differ: the table does not repeat one number
     assert doc["methods"][0]["pooled"]["rmse_mm"] != pytest.approx(doc["methods"][1]["pooled"]["rmse_mm"], rel=1e-3)
 

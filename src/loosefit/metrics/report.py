@@ -4,7 +4,13 @@ a text table, and CSV / JSON files (written atomically).
 Metrics per sequence (see each module for the formula): ``rmse_mm``, ``mean_vertex_error_mm``,
 ``hausdorff_mm`` (:mod:`~loosefit.metrics.errors`); ``sted_spatial``, ``sted_temporal``, ``sted``
 (:mod:`~loosefit.metrics.sted`); ``e_dist_cm``, ``e_norm_deg`` (:mod:`~loosefit.metrics.surface`);
-``collision_pct`` when a posed body is known (:mod:`~loosefit.metrics.collision`);
+``collision_pct`` when a posed body is known (:mod:`~loosefit.metrics.collision`), and with it
+``surface_inside_pct`` (the share of the surface samples, edge midpoints and triangle centroids, deeper inside
+the body than ``EvaluationSettings.surface_depth``, 5 mm by default: a limb passing between vertices) and
+``deepest_mm`` (the deepest point inside the body, vertices and samples, 0 when none is):
+:func:`~loosefit.metrics.collision.penetration`; ``collapsed_pct`` (triangles under 20 % of their simulated area
+or flipped) and ``roughness_deg`` (mean dihedral-angle difference over interior edges), the bounded surface
+quality of :mod:`~loosefit.metrics.surface` (``None`` for a mesh without interior edges);
 ``laplacian_consistency``: SwinGar's Laplacian consistency deviation ``|diag(L_pred) - diag(L_gt)|``
 (:func:`~loosefit.metrics.surface.laplacian_consistency`, half-cotangent weights, dimensionless) of the
 prediction against the simulation, over every vertex and frame: how far the prediction's local surface
@@ -17,8 +23,10 @@ sequence without runs.
 
 Overall values pool every frame of every sequence, so long sequences weigh more: RMSE is the root
 of the pooled mean square; mean errors, STED_s, Laplacian consistency and collision are weighted by frames x vertices,
-STED_t by frame pairs x vertices, Hausdorff by frames, E_norm by frames x faces; the overall STED
-combines the overall STED_s and STED_t. A sequence of one frame has no temporal STED (``None``).
+STED_t by frame pairs x vertices, Hausdorff by frames, E_norm and the collapsed share by frames x faces, the surface
+share by frames x surface samples (a row's ``surface_samples``), roughness by frames x interior edges (a row's
+``interior_edges``); the deepest point is the deepest of all; the overall STED combines the overall STED_s and
+STED_t. A sequence of one frame has no temporal STED (``None``).
 RMSE against the mean and the floor pool their mean squares by frames x vertices over the sequences that
 have reference runs only (``references``: how many sequences that is); the corrected figure pools
 ``e^2 - floor^2 / K`` the same way and clips at zero only once pooled.
@@ -41,10 +49,15 @@ from tqdm import tqdm
 from loosefit.errors import InputError
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.metrics import sted as sted_mod
-from loosefit.metrics.collision import DEFAULT_TOLERANCE, collision_mask, collision_ratio
+from loosefit.metrics.collision import DEFAULT_TOLERANCE, REPORT_DEPTH, Penetration, penetration, penetrations
 from loosefit.metrics.errors import check_pair, hausdorff_per_frame, vertex_errors
 from loosefit.metrics.reference import References
-from loosefit.metrics.surface import face_normal_deviation_deg, mean_laplacian_consistency
+from loosefit.metrics.surface import (
+    collapsed_faces,
+    face_normal_deviation_deg,
+    mean_laplacian_consistency,
+    roughness_per_edge_deg,
+)
 from loosefit.paths import atomic_path
 
 #: Reported columns in order: key, table header, format.
@@ -63,7 +76,11 @@ COLUMNS = (
     ("e_dist_cm", "E_dist cm", "{:.3f}"),
     ("e_norm_deg", "E_norm deg", "{:.2f}"),
     ("collision_pct", "collision %", "{:.3f}"),
+    ("surface_inside_pct", "surface >5mm %", "{:.3f}"),
+    ("deepest_mm", "deepest mm", "{:.1f}"),
     ("laplacian_consistency", "Lap. cons.", "{:.4f}"),
+    ("collapsed_pct", "collapsed %", "{:.3f}"),
+    ("roughness_deg", "rough. deg", "{:.2f}"),
 )
 
 
@@ -84,12 +101,21 @@ class SequencePair:
 
 @dataclass
 class EvaluationSettings:
-    """STED parameters (see :mod:`loosefit.metrics.sted`) and the collision tolerance in metres."""
+    """STED parameters (see :mod:`loosefit.metrics.sted`), the collision tolerance of the vertices in metres and
+    the depth in metres a surface sample must be inside the body to count in ``surface_inside_pct``."""
 
     sted_rings: int = sted_mod.DEFAULT_RINGS
     sted_dt: float = sted_mod.DEFAULT_DT
     sted_c: float = sted_mod.DEFAULT_C
     collision_tolerance: float = DEFAULT_TOLERANCE
+    surface_depth: float = REPORT_DEPTH
+
+
+def column_header(key: str, header: str, settings: EvaluationSettings | None = None) -> str:
+    """The table header of column ``key``: the surface share's names its depth (``surface >5mm %``)."""
+    if key == "surface_inside_pct" and settings is not None:
+        return f"surface >{1000 * settings.surface_depth:g}mm %"
+    return header
 
 
 @dataclass
@@ -108,7 +134,7 @@ class Evaluation:
         """A fixed-width text table: one line per sequence, then ``overall`` (leave it out with
         ``overall=False`` when the rows are not one population, e.g. several methods on one sequence)."""
         cols = self._columns()
-        header = ["sequence"] + [h for _, h, _ in cols]
+        header = ["sequence"] + [column_header(k, h, self.settings) for k, h, _ in cols]
         lines = []
         for row in self.rows + ([self.overall] if overall else []):
             lines.append([row["name"]] + [_fmt(row.get(k), f) for k, _, f in cols])
@@ -144,10 +170,10 @@ def _fmt(value, fmt: str) -> str:
 
 
 def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = None,
-                      collision: float | None = None) -> dict:
-    """All metrics of one pair as a row dict (``name``, ``faces`` and the :data:`COLUMNS` keys; ``None`` where n/a).
-    ``collision``: the pair's collision percentage when it is already known (:func:`evaluate` measures the methods
-    of one motion together)."""
+                      inside: Penetration | None = None) -> dict:
+    """All metrics of one pair as a row dict (``name``, ``faces``, ``surface_samples``, ``interior_edges`` and the
+    :data:`COLUMNS` keys; ``None`` where n/a). ``inside``: the pair's penetration of the body when it is already
+    measured (:func:`evaluate` measures the methods of one motion together)."""
     s = settings or EvaluationSettings()
     try:
         pred, gt = check_pair(pair.pred, pair.gt)
@@ -157,8 +183,11 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         temporal = sted_mod.sted_temporal(pred, gt, s.sted_dt) if T >= 2 else None
         normals = face_normal_deviation_deg(pred, gt, pair.faces)
         laplacian = mean_laplacian_consistency(gt, pred, pair.faces)
-        if collision is None and pair.body_verts is not None:
-            collision = collision_ratio(pred, pair.body_verts, pair.body_faces, s.collision_tolerance)
+        collapsed = collapsed_faces(pred, gt, pair.faces)
+        rough = roughness_per_edge_deg(pred, gt, pair.faces)
+        if inside is None and pair.body_verts is not None:
+            inside = penetration(pred, pair.faces, pair.body_verts, pair.body_faces, s.collision_tolerance,
+                                 s.surface_depth)
         against = None
         if pair.references is not None and len(pair.references):
             against = References(gt, pair.references).score(pred)
@@ -180,9 +209,15 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         "sted": None if temporal is None else sted_mod.combine(spatial, temporal, s.sted_c),
         "e_dist_cm": float(100 * err.mean()),
         "e_norm_deg": None if np.isnan(normals).all() else float(np.nanmean(normals)),
-        "collision_pct": collision,
+        "collision_pct": None if inside is None else float(inside.vertex_percent.mean()),
+        "surface_inside_pct": None if inside is None else float(inside.surface_percent.mean()),
+        "deepest_mm": None if inside is None else float(1000 * inside.deepest_m.max()),
         "laplacian_consistency": laplacian,
+        "collapsed_pct": float(100 * collapsed.mean()),
+        "roughness_deg": float(rough.mean()) if rough.shape[1] else None,
         "faces": int(len(pair.faces)),
+        "surface_samples": None if inside is None else inside.samples,
+        "interior_edges": int(rough.shape[1]),
     }
 
 
@@ -208,6 +243,7 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
     ms_corrected = _weighted([{**r, "ms": r["rmse_vs_mean_mm"] ** 2 - r["floor_mm"] ** 2 / r["references"]}
                               for r in with_refs], "ms", tv)
     spatial = _weighted(rows, "sted_spatial", tv)
+    deepest = [r["deepest_mm"] for r in rows if r.get("deepest_mm") is not None]
     temporal = _weighted(rows, "sted_temporal", lambda r: (r["frames"] - 1) * r["vertices"])
     return {
         "name": "overall",
@@ -227,7 +263,13 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
         "e_dist_cm": _weighted(rows, "e_dist_cm", tv),
         "e_norm_deg": _weighted(rows, "e_norm_deg", lambda r: r["frames"] * r["faces"]),
         "collision_pct": _weighted(rows, "collision_pct", tv),
+        "surface_inside_pct": _weighted(rows, "surface_inside_pct", lambda r: r["frames"] * (r["surface_samples"] or 0)),
+        "deepest_mm": max(deepest) if deepest else None,
         "laplacian_consistency": _weighted(rows, "laplacian_consistency", tv),
+        "collapsed_pct": _weighted(rows, "collapsed_pct", lambda r: r["frames"] * r["faces"]),
+        "roughness_deg": _weighted(rows, "roughness_deg", lambda r: r["frames"] * r["interior_edges"]),
+        "surface_samples": None,
+        "interior_edges": None,
     }
 
 
@@ -236,16 +278,16 @@ def evaluate(pairs: list[SequencePair], settings: EvaluationSettings | None = No
     if not pairs:
         raise InputError("nothing to evaluate: no sequence pairs")
     s = settings or EvaluationSettings()
-    shared = _shared_body_collisions(pairs, s.collision_tolerance)
+    shared = _shared_body_penetrations(pairs, s)
     rows = [evaluate_sequence(p, s, shared.get(k))
             for k, p in enumerate(tqdm(pairs, desc="evaluate", unit="seq", disable=not progress))]
     return Evaluation(rows, overall_row(rows, s), s)
 
 
-def _shared_body_collisions(pairs: list[SequencePair], tolerance: float) -> dict[int, float]:
-    """Collision percentages of the pairs that share one posed body (the same ``body_verts`` array: several methods
-    on one motion), keyed by pair index: the body's exact distance field is built once a frame for all of them
-    (most of an evaluation's time: about 58 ms a frame for the Anny body)."""
+def _shared_body_penetrations(pairs: list[SequencePair], settings: EvaluationSettings) -> dict[int, Penetration]:
+    """Penetrations of the pairs that share one posed body (the same ``body_verts`` array: several methods on one
+    motion), keyed by pair index: the body's exact distance field is built once a frame for all of them, their
+    vertices and surface samples (most of an evaluation's time: about 58 ms a frame for the Anny body)."""
     groups: dict[int, list[int]] = {}
     for k, p in enumerate(pairs):
         if p.body_verts is not None:
@@ -259,12 +301,11 @@ def _shared_body_collisions(pairs: list[SequencePair], tolerance: float) -> dict
             preds = [check_pair(pairs[k].pred, pairs[k].gt)[0] for k in members]
             if len({pred.shape[0] for pred in preds}) != 1:
                 continue
-            mask = collision_mask(np.concatenate(preds, axis=1), first.body_verts, first.body_faces, tolerance)
+            found = penetrations([(pred, pairs[k].faces) for pred, k in zip(preds, members)], first.body_verts,
+                                 first.body_faces, settings.collision_tolerance, settings.surface_depth)
         except InputError:
             continue  # evaluate_sequence measures each pair alone and names the bad one
-        bounds = np.cumsum([0] + [pred.shape[1] for pred in preds])
-        for k, a, b in zip(members, bounds[:-1], bounds[1:]):
-            shared[k] = float((100.0 * mask[:, a:b].mean(1)).mean())  # as collision_ratio averages
+        shared.update(zip(members, found))
     return shared
 
 

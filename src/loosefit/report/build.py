@@ -39,6 +39,12 @@ DEFAULT_RESULTS = _REPO_RESULTS if _REPO_RESULTS.is_dir() else None
 METRIC_COLUMNS = tuple(c for c in COLUMNS if c[0] not in ("frames", "vertices"))
 #: Columns of sequences with reference runs (:mod:`loosefit.metrics.reference`): beside RMSE when present.
 REFERENCE_KEYS = ("rmse_vs_mean_mm", "rmse_vs_mean_corrected_mm", "floor_mm")
+#: Columns of the HTML report's second metrics table (the body and the surface: collisions, penetration between the
+#: vertices, surface quality); the first holds the accuracy against the simulation. One table of every metric (20
+#: columns with the reference runs) measured 1,728 pixels in Chromium with four-digit millimetres, cut off in a
+#: 1280-pixel window; two fit (``tests/report/test_layout.py``).
+SURFACE_KEYS = ("collision_pct", "surface_inside_pct", "deepest_mm", "laplacian_consistency", "collapsed_pct",
+                "roughness_deg")
 
 
 def _fmt(value, fmt: str) -> str:
@@ -53,6 +59,45 @@ def _shown_columns(evaluations: list[dict]) -> tuple:
     """The metric columns to show: RMSE against the mean and the floor only when some sequence has reference runs."""
     runs = any(r.get("floor_mm") is not None for e in evaluations for r in e["rows"])
     return tuple(c for c in METRIC_COLUMNS if runs or c[0] not in REFERENCE_KEYS)
+
+
+def metric_tables(columns, methods: list[dict]) -> list[dict]:
+    """The HTML report's metrics tables: ``{"id", "title", "headers", "methods"}`` for the accuracy columns, then for
+    :data:`SURFACE_KEYS` (a table with no column left out).
+
+    Args:
+        columns: the shown ``(key, header, format)`` columns.
+        methods: the template context's methods, each row's ``cells`` in the order of ``columns``.
+    """
+    accuracy = [i for i, c in enumerate(columns) if c[0] not in SURFACE_KEYS]
+    surface = [i for i, c in enumerate(columns) if c[0] in SURFACE_KEYS]
+    groups = (("metrics", "Accuracy against the simulation", accuracy), ("surface", "Collisions and surface quality", surface))
+    tables = []
+    for name, title, picked in groups:
+        if not picked:
+            continue
+
+        def cut(row: dict) -> dict:
+            return {**row, "cells": [row["cells"][i] for i in picked]}
+
+        tables.append({"id": name, "title": title, "headers": [columns[i][1] for i in picked],
+                       "methods": [{**m, "rows": [cut(r) for r in m["rows"]], "pooled": cut(m["pooled"])}
+                                   for m in methods]})
+    return tables
+
+
+def speed_rows(speed: list[dict]) -> list[dict]:
+    """The rows of :func:`loosefit.report.claims.speed_table` with the speed table's formatted ``cells``."""
+    return [{**r, "cells": [r["garment"], str(r["vertices"]), r["method"], _fmt(r["parameters"], "{:,}"),
+                            _fmt(r["simulator_ms"], "{:.0f}"), _fmt(r["stream_fps"], "{:.1f}"),
+                            _fmt(r["batch_fps"], "{:.1f}"), _fmt(r["stream_speedup"], "{:.1f}x"),
+                            _fmt(r["batch_speedup"], "{:.1f}x")]} for r in speed]
+
+
+def claim_rows(claims: list[dict]) -> list[dict]:
+    """The rows of :func:`loosefit.report.claims.claims_table` with the claims table's formatted texts."""
+    return [{**r, "ours_text": _fmt(r["ours"], "{:.3f}"), "limit_text": _fmt(r["limit"], "{:g}"),
+             "verdict": "not run" if r["pass"] is None else ("pass" if r["pass"] else "FAIL")} for r in claims]
 
 
 def markdown_text(value) -> str:
@@ -77,7 +122,6 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
 
     require("jinja2", "loosefit report")
     require("matplotlib", "loosefit report's plots")
-    from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
 
     data, out = Path(data), Path(out)
     if not (data / ".zgroup").is_file():
@@ -139,25 +183,31 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         "sequences": [{"name": s.name, "garment": s.garment, "frames": len(s.gt), "vertices": s.gt.shape[1],
                        "references": len(s.references) if s.references is not None else 0} for s in seqs],
         "plots": plots,
-        "speed": [{**r, "cells": [r["garment"], str(r["vertices"]), r["method"], _fmt(r["parameters"], "{:,}"),
-                                  _fmt(r["simulator_ms"], "{:.0f}"), _fmt(r["stream_fps"], "{:.1f}"),
-                                  _fmt(r["batch_fps"], "{:.1f}"), _fmt(r["stream_speedup"], "{:.1f}x"),
-                                  _fmt(r["batch_speedup"], "{:.1f}x")]} for r in speed],
-        "claims": [{**r, "ours_text": _fmt(r["ours"], "{:.3f}"), "limit_text": _fmt(r["limit"], "{:g}"),
-                    "verdict": "not run" if r["pass"] is None else ("pass" if r["pass"] else "FAIL")} for r in claims],
+        "speed": speed_rows(speed),
+        "claims": claim_rows(claims),
         "view_command": f"loosefit view {data}:{seqs[0].name}" if seqs else "",
     }
-    env = Environment(loader=PackageLoader("loosefit.report", "templates"), undefined=StrictUndefined,
-                      autoescape=select_autoescape(enabled_extensions=("html.j2",), default_for_string=False),
-                      trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
-    env.filters["md"] = markdown_text
+    context["tables"] = metric_tables(columns, context["methods"])
+    page, md = render_pages(context)
     doc = {"data": context["data"], "collision_handling": handling, "methods": evaluations, "sequences": context["sequences"], "plots": plots,
            "speed": speed, "claims": claims}
     with atomic_path(out / "metrics.json") as tmp:
         tmp.write_text(json.dumps(doc, indent=2) + "\n")
     with atomic_path(out / "report.md") as tmp:
-        tmp.write_text(env.get_template("report.md.j2").render(**context))
+        tmp.write_text(md)
     index = out / "index.html"
     with atomic_path(index) as tmp:
-        tmp.write_text(env.get_template("index.html.j2").render(**context))
+        tmp.write_text(page)
     return index
+
+
+def render_pages(context: dict) -> tuple[str, str]:
+    """``index.html`` and ``report.md`` of a report from its template ``context`` (what :func:`build_report` fills:
+    the tables' rows as formatted cells)."""
+    from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
+
+    env = Environment(loader=PackageLoader("loosefit.report", "templates"), undefined=StrictUndefined,
+                      autoescape=select_autoescape(enabled_extensions=("html.j2",), default_for_string=False),
+                      trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    env.filters["md"] = markdown_text
+    return env.get_template("index.html.j2").render(**context), env.get_template("report.md.j2").render(**context)
