@@ -13,6 +13,7 @@ from pathlib import Path
 from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, int_at_least, motion_file_options, nonnegative_float,
                                piece_choice, positive_float, writable)
 from loosefit.errors import InputError, LoosefitError
+from loosefit.quiet import quiet_third_party
 
 
 def _body(args):
@@ -413,7 +414,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="loosefit",
         description="Learning-based animation of loose-fitting garments: simulate, prepare, train, animate, evaluate.")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="log progress details, and let libraries print their own start-up lines (Warp's banner)")
     sub = p.add_subparsers(dest="command", required=True)
 
     def body_options(sp, resolution=False):
@@ -696,7 +698,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:  # not the main thread: leave SIGTERM alone
         previous = None
     try:
-        args.func(args)
+        with quiet_third_party(quiet=not args.verbose):  # Warp's start-up banner and load timings: with -v only
+            args.func(args)
     except LoosefitError as e:
         print(f"loosefit {args.command}: error: {e}", file=sys.stderr)
         return 2
