@@ -154,6 +154,14 @@ def test_every_verb_that_imports_motions_has_the_flag():
                  ["view", "run:m.bvh"]):
         assert parser.parse_args(argv + ["--keep-first-frame"]).keep_first_frame, argv
         assert not parser.parse_args(argv).keep_first_frame, argv
+    from loosefit.cli_args import keep_first_frame_option
+
+    class Help:
+        def add_argument(self, *names, help="", **kw):
+            self.text = help
+
+    keep_first_frame_option(spy := Help())
+    assert f"> {MAX_ROOT_SPEED:g} m/s" in spy.text  # the help states the importer's threshold
 
 
 def test_plan_refuses_the_flag(tmp_path):
