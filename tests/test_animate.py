@@ -194,3 +194,34 @@ def test_view_takes_the_joint_map_of_a_bvh_motion(lbs_run, tmp_path, body):
                  "--out", str(tmp_path / "a.npz")]) == 0
     with np.load(tmp_path / "a.npz") as z:
         assert np.abs(shown - z["verts"]).max() < 1e-6
+
+
+def test_animate_fps_gives_the_rate_of_a_motion_file_without_one(lbs_run, test_sequence, tmp_path, capsys):
+    """A motion ``.npz`` without ``fps`` is refused naming the file and the option; ``--fps`` gives its rate (any
+    rate is resampled to the model's 30 fps, as a file's own rate is); a file whose own rate disagrees is refused."""
+    from loosefit.cli import main
+
+    motion, _ = test_sequence
+    bare = tmp_path / "bare.npz"
+    np.savez(bare, rotations=motion.rotations, translation=motion.translation)  # no fps, as some tools write
+    args = ["animate", str(lbs_run), "--motion", str(bare), "--collision", "none", "--out"]
+    assert main(args + [str(tmp_path / "none.npz")]) == 2
+    err = capsys.readouterr().err
+    assert str(bare) in err and "no frame rate" in err and "--fps" in err and "Traceback" not in err
+    assert not (tmp_path / "none.npz").exists()
+
+    assert main(args + [str(tmp_path / "a30.npz"), "--fps", "30"]) == 0
+    with np.load(tmp_path / "a30.npz") as z:
+        assert z["verts"].shape[0] == motion.num_frames and float(z["fps"]) == 30.0
+        assert np.abs(z["verts"] - Animator(lbs_run).animate(motion)).max() < 1e-5
+    capsys.readouterr()
+    assert main(args + [str(tmp_path / "a60.npz"), "--fps", "60"]) == 0  # played twice as fast
+    assert "resampled to the model's 30 fps" in capsys.readouterr().err
+    with np.load(tmp_path / "a60.npz") as z:
+        assert z["verts"].shape[0] == (motion.num_frames + 1) // 2
+
+    motion.save(tmp_path / "own.npz")  # stores 30 fps
+    assert main(["animate", str(lbs_run), "--motion", str(tmp_path / "own.npz"), "--fps", "60", "--out",
+                 str(tmp_path / "b.npz")]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "own.npz") in err and "frame rate is 30 fps, --fps says 60" in err

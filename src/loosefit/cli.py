@@ -10,9 +10,10 @@ import signal
 import sys
 from pathlib import Path
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, int_at_least, joint_map_option, nonnegative_float,
+from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, int_at_least, motion_file_options, nonnegative_float,
                                piece_choice, positive_float, writable)
 from loosefit.errors import InputError, LoosefitError
+from loosefit.quiet import quiet_third_party
 
 
 def _body(args):
@@ -36,7 +37,8 @@ def cmd_body(args):
 
     writable(args.out, folder=False)
     body = _body(args)
-    motion = load_motion(args.motion, body, joint_map=args.joint_map) if args.motion else body.rest_motion(1)
+    motion = (load_motion(args.motion, body, joint_map=args.joint_map, keep_first_frame=args.keep_first_frame)
+              if args.motion else body.rest_motion(1))
     posed = body.pose(motion)
     out = Path(args.out)
     if out.suffix == ".obj":
@@ -82,7 +84,7 @@ def cmd_motion_import(args):
     writable(args.out, folder=False)
     body = _body(args)
     motion = load_motion(args.file, body, joint_map=args.joint_map, source_fps=args.fps, start=args.start,
-                         seconds=args.seconds)
+                         seconds=args.seconds, keep_first_frame=args.keep_first_frame)
     motion.save(args.out)
     print(f"wrote {args.out}: {motion.num_frames} frames at {motion.fps:g} fps on rig {motion.rig}")
 
@@ -218,7 +220,8 @@ def cmd_simulate(args):
         in_plan = {"--set": "sim_params (a named set, e.g. sim_params: {default: {bending: 1.0e-4}})",
                    "--params": "sim_params", "--shape": "shapes (e.g. shapes: {tall: {height: 0.8}})",
                    "--fit": "a garment file made on another shape (its sidecar's body_shape; drape happens anyway)",
-                   "--joint-map": "the joint_map of a file motion (motions: {clip: {file: ..., joint_map: cc}})"}
+                   "--joint-map": "the joint_map of a file motion (motions: {clip: {file: ..., joint_map: cc}})",
+                   "--keep-first-frame": "start (a plan reads every frame of a file; start: 1 skips its frame 0)"}
         given = [option for option in in_plan if getattr(args, option[2:].replace("-", "_"))]
         if given:
             where = "; ".join(f"{option} -> {in_plan[option]}" for option in given)
@@ -239,7 +242,8 @@ def cmd_simulate(args):
     params = SimParams.load(args.params, sets) if args.params else SimParams().with_overrides(sets)
     writable(args.out, folder=False)  # before the simulation, not after it
     result = simulate_file(args.garment, args.motion, args.out, params=params, shape=args.shape,
-                           joint_map=args.joint_map, fit=True if args.fit else None)
+                           joint_map=args.joint_map, fit=True if args.fit else None,
+                           keep_first_frame=args.keep_first_frame)
     print(json.dumps(result.stats, indent=2, default=str))
     fitted = result.stats.get("garment_fit")
     if fitted is not None and "from_shape" in fitted:
@@ -313,7 +317,8 @@ def cmd_animate(args):
 
     writable(args.out, folder=True if len(args.motion) > 1 else None)
     body = _body(args)
-    motions = [_at_model_rate(load_motion(path, body, joint_map=args.joint_map), path) for path in args.motion]
+    motions = [_at_model_rate(load_motion(path, body, joint_map=args.joint_map, source_fps=args.fps,
+                                          keep_first_frame=args.keep_first_frame), path) for path in args.motion]
     if is_static_run(args.run):
         from loosefit.garment import Garment
         from loosefit.garment.body_fit import refit
@@ -375,7 +380,8 @@ def cmd_export_rig(args):
 
     writable(args.out, folder=False)
     body = _body(args)
-    motion = _at_model_rate(load_motion(args.motion, body, joint_map=args.joint_map), args.motion)
+    motion = _at_model_rate(load_motion(args.motion, body, joint_map=args.joint_map,
+                                        keep_first_frame=args.keep_first_frame), args.motion)
     summary = export_rig(args.run, motion, args.out, body=None if args.no_body else body, influences=args.influences,
                          checkpoint=args.checkpoint, threads=args.threads)
     print(f"wrote {args.out}: {summary['bytes']} bytes, {summary['frames']} frames at {summary['fps']:g} fps, "
@@ -393,7 +399,8 @@ def cmd_view(args):
     if args.export is not None:
         writable(args.export, folder=True)  # before the scene is built
     result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
-                  collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map)
+                  collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map,
+                  keep_first_frame=args.keep_first_frame)
     if args.export is not None:
         print(f"wrote {result}: open it in a browser (from disk or any web server)")
 
@@ -409,7 +416,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="loosefit",
         description="Learning-based animation of loose-fitting garments: simulate, prepare, train, animate, evaluate.")
-    p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="log progress details, and let libraries print their own start-up lines (Warp's banner)")
     sub = p.add_subparsers(dest="command", required=True)
 
     def body_options(sp, resolution=False):
@@ -421,7 +429,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("body", help="pose the body along a motion and write it")
     body_options(sp, resolution=True)
     sp.add_argument("--motion", default=None, help="motion .npz / .bvh (default: the rest pose)")
-    joint_map_option(sp)
+    motion_file_options(sp)
     sp.add_argument("--frame", type=int, default=0, help="frame written to an .obj")
     sp.add_argument("--out", required=True, help="body.obj (one frame) or body.npz (mesh sequence)")
     sp.set_defaults(func=cmd_body)
@@ -450,7 +458,7 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Import a BVH or AMASS (SMPL-H .npz) motion onto the body's rig.\n\n"
                                        + JOINT_MAP_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
     sp.add_argument("file")
-    joint_map_option(sp)
+    motion_file_options(sp)
     sp.add_argument("--fps", type=positive_float, default=None, help="the file's frame rate, for AMASS / SMPL-H files "
                     "that store none (mocap_framerate); the motion is written at 30 fps")
     sp.add_argument("--start", type=nonnegative_float, default=None, help="keep the motion from START seconds on")
@@ -515,7 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--fit", action="store_true",
                     help="a garment mesh made for another body: find the Anny shape it fits and drape it onto --shape "
                          "(done anyway when it has no plausible placement on it)")
-    joint_map_option(sp)
+    motion_file_options(sp)
     sp.add_argument("--workers", type=int_at_least(1), default=1, help="parallel Blender workers (Ray) for a plan")
     sp.add_argument("--address", default=None, help="an existing Ray cluster's address")
     sp.add_argument("--splits", nargs="+", choices=["train", "val", "test"], default=None,
@@ -563,7 +571,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("run", help="run folder written by loosefit train, or a shipped garment: pretrained:skirt, "
                     "pretrained:dress/jointnet (loosefit.pretrained)")
     sp.add_argument("--motion", required=True, action="append", help="motion .npz / .bvh / AMASS .npz (repeatable)")
-    joint_map_option(sp)
+    motion_file_options(sp)
+    sp.add_argument("--fps", type=positive_float, default=None,
+                    help="the frame rate of motion files that store none (a loosefit .npz without 'fps', AMASS "
+                         "without mocap_framerate); a file that stores one must agree. Any rate is resampled to "
+                         "the model's 30 fps")
     sp.add_argument("--garment", default=None, help="fitgar and swingar runs: the garment .obj to animate (any vertex "
                     "count), in the rest pose of --shape; a loosefit garment made on another shape is draped onto it")
     body_options(sp)
@@ -587,7 +599,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(its virtual bones animated along a motion) with the skinned body: .glb or .usdc")
     sp.add_argument("run", help="run folder written by loosefit train (virtualbones or jointnet)")
     sp.add_argument("--motion", required=True, help="motion .npz / .bvh / AMASS .npz")
-    sp.add_argument("--joint-map", default=None, help="joint map for a BVH motion")
+    motion_file_options(sp)
     body_options(sp)
     sp.add_argument("--out", required=True, help="dress.glb (skinned glTF) or dress.usdc / .usda (UsdSkel)")
     sp.add_argument("--influences", type=int, choices=[4, 8], default=4, help="skinning weights kept per vertex")
@@ -638,7 +650,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "of serving it (opens from disk)")
     sp.add_argument("--collision", choices=["exact", "pushout", "none"], default="exact",
                     help="collision handling of the runs' animations, as loosefit animate (default exact)")
-    joint_map_option(sp)
+    motion_file_options(sp)
     sp.add_argument("--no-collisions", action="store_true", help="skip the per-frame collision ratio")
     sp.add_argument("--collision-frames", type=int_at_least(0), default=100, help="compute the collision ratio at this many "
                     "evenly spaced frames (0: every frame; ~0.5 s a frame for a 13.7k-vertex body)")
@@ -691,7 +703,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:  # not the main thread: leave SIGTERM alone
         previous = None
     try:
-        args.func(args)
+        with quiet_third_party(quiet=not args.verbose):  # Warp's start-up banner and load timings: with -v only
+            args.func(args)
     except LoosefitError as e:
         print(f"loosefit {args.command}: error: {e}", file=sys.stderr)
         return 2

@@ -102,3 +102,17 @@ def joint_map_option(sp) -> None:
                     help="joint map for a BVH skeleton without a built-in map (cmu, mixamo, cc): a YAML file or a "
                          "built-in name; `loosefit motion map --help` shows the format, `loosefit motion map "
                          "FILE.bvh --out MAP.yaml` writes a starting one")
+
+
+def keep_first_frame_option(sp) -> None:
+    """The ``--keep-first-frame`` option of every verb that imports a BVH or AMASS motion file."""
+    sp.add_argument("--keep-first-frame", action="store_true",
+                    help="keep a motion file's first frame when the root jumps from it to the next faster than a "
+                         "person moves (> 10 m/s: a rest pose a converter put before the motion); by default it is "
+                         "dropped, and a line on stderr says so")
+
+
+def motion_file_options(sp) -> None:
+    """The options of every verb that reads motion files: ``--joint-map`` and ``--keep-first-frame``."""
+    joint_map_option(sp)
+    keep_first_frame_option(sp)

@@ -47,3 +47,19 @@ def test_errors_name_the_file(body, tmp_path):
         assert message in str(err.value) and str(tmp_path / name) in str(err.value), name
     with pytest.raises(InputError, match="a joint map applies to BVH files only"):
         load_motion(tmp_path / "other.npz", body, joint_map="cmu")
+
+
+def test_a_loosefit_motion_without_a_frame_rate(body, tmp_path):
+    """A motion ``.npz`` without ``fps`` needs the rate given (``source_fps``, ``--fps``), and is refused naming
+    the file without it; a file with its own rate keeps it, and a rate given that disagrees is refused."""
+    motion = smooth_motion(body, 30.0, seconds=0.2)
+    np.savez(tmp_path / "bare.npz", rotations=motion.rotations, translation=motion.translation)
+    with pytest.raises(InputError, match="no frame rate") as err:
+        load_motion(tmp_path / "bare.npz", body)
+    assert err.value.path == tmp_path / "bare.npz"
+    loaded = load_motion(tmp_path / "bare.npz", body, source_fps=24.0)
+    assert loaded.fps == 24.0 and np.array_equal(loaded.rotations, motion.rotations)
+    motion.save(tmp_path / "own.npz")
+    assert load_motion(tmp_path / "own.npz", body, source_fps=30.0).fps == 30.0
+    with pytest.raises(InputError, match="frame rate is 30 fps, --fps says 24"):
+        load_motion(tmp_path / "own.npz", body, source_fps=24.0)

@@ -177,10 +177,10 @@ def motion_cases() -> list[Case]:
         # BVH (a real clip: Character Creator skeleton, Y up, centimetres, 60 fps)
         ok("motion-import/bvh", clip, bvh(), check=wrote(OUT)),
         bad("motion-import/bvh-truncated-hierarchy", clip,
-            lambda t, s: craft.write(t / "clip.bvh", "\n".join((craft.MOCAP / craft.BVH_CLIP).read_text()
+            lambda t, s: craft.write(t / "clip.bvh", "\n".join(craft.mocap_clip().read_text()
                                                                 .splitlines()[:100]) + "\n"), names=("clip.bvh",)),
         bad("motion-import/bvh-no-motion-section", clip,
-            lambda t, s: craft.write(t / "clip.bvh", (craft.MOCAP / craft.BVH_CLIP).read_text().split("MOTION")[0]),
+            lambda t, s: craft.write(t / "clip.bvh", craft.mocap_clip().read_text().split("MOTION")[0]),
             names=("clip.bvh",)),
         bad("motion-import/bvh-zero-frames", clip, bvh(_no_frames), names=("clip.bvh",)),
         bad("motion-import/bvh-frame-time-zero", clip, bvh(_header("Frame Time", "Frame Time: 0")), names=("clip.bvh",)),

@@ -35,6 +35,7 @@ from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_ang
 from loosefit.geometry.vectors import unit
 from loosefit.motion.motion import DEFAULT_FPS, Motion
 from loosefit.motion.joint_map import builtin_joint_maps, resolve_joint_map
+from loosefit.motion.jumps import drop_far_first_frame
 from loosefit.motion.retarget import SourceAnimation, check_feet_on_floor, retarget, to_motion
 from loosefit.motion.rig import TargetRig
 from loosefit.paths import atomic_path
@@ -104,7 +105,8 @@ def smplh_rig() -> TargetRig:
     return TargetRig("smplh", list(SMPLH_NAMES), SMPLH_PARENTS, SMPLH_REST.astype(np.float64))
 
 
-def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS, source_fps: float | None = None) -> Motion:
+def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS, source_fps: float | None = None,
+                 keep_first_frame: bool = False) -> Motion:
     """Read an AMASS ``.npz`` and retarget it onto ``body``'s rig, standing on the floor ``z = 0``.
 
     Args:
@@ -114,6 +116,9 @@ def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS, source_fps: f
         fps: output frame rate (slerp resampling).
         source_fps: the file's frame rate, for files that store none; when the file has one, the
             two must agree.
+        keep_first_frame: keep frame 0 even when the root jumps from it to frame 1 faster than a person
+            moves (:func:`~loosefit.motion.jumps.far_first_frame`); by default such a frame is dropped
+            before the floor and the calibration are computed, and a warning names the file.
 
     Returns:
         A :class:`Motion` on ``body.rig`` named after the file.
@@ -124,6 +129,9 @@ def import_amass(path: str | Path, body, fps: float = DEFAULT_FPS, source_fps: f
     """
     path = Path(path)
     poses, trans, rate = _read(path, source_fps)
+    # The pelvis is at trans + its rest position whatever the rotations: trans is the root's path, in metres.
+    if drop_far_first_frame(trans[:2], rate, path, keep_first_frame):
+        poses, trans = poses[1:], trans[1:]
     T = poses.shape[0]
     rot = np.zeros((T, len(SMPLH_NAMES), 3))
     rot[:, :22] = poses[:, :66].reshape(T, 22, 3)

@@ -27,7 +27,8 @@ from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
 from loosefit.motion.motion import DEFAULT_FPS, Motion
 from loosefit.motion.axes import detect_axes
 from loosefit.motion.joint_map import JointMap, resolve_joint_map
-from loosefit.motion.retarget import SourceAnimation, retarget, to_motion
+from loosefit.motion.jumps import drop_far_first_frame
+from loosefit.motion.retarget import SourceAnimation, retarget, source_root_path, to_motion
 from loosefit.motion.rig import TargetRig
 from loosefit.paths import atomic_path
 
@@ -170,14 +171,17 @@ def import_bvh(
     up: str | None = None,
     front: str | None = None,
     fps: float = DEFAULT_FPS,
+    keep_first_frame: bool = False,
 ) -> Motion:
-    """Read a BVH file and retarget it onto ``body``'s rig (see :func:`retarget_bvh`).
+    """Read a BVH file and retarget it onto ``body``'s rig (see :func:`retarget_bvh`; a first frame far
+    from the motion is dropped unless ``keep_first_frame``).
 
     Returns:
         A :class:`Motion` on ``body.rig`` named after the file.
     """
     path = Path(path)
-    return retarget_bvh(read_bvh(path), body, joint_map, up=up, front=front, fps=fps, name=path.stem)
+    return retarget_bvh(read_bvh(path), body, joint_map, up=up, front=front, fps=fps, name=path.stem,
+                        keep_first_frame=keep_first_frame)
 
 
 def retarget_bvh(
@@ -189,6 +193,7 @@ def retarget_bvh(
     front: str | None = None,
     fps: float = DEFAULT_FPS,
     name: str = "",
+    keep_first_frame: bool = False,
 ) -> Motion:
     """Retarget BVH content onto ``body``'s rig.
 
@@ -201,12 +206,19 @@ def retarget_bvh(
             detected (:func:`~loosefit.motion.axes.detect_axes`).
         fps: output frame rate; the motion is resampled (slerp rotations, lerp translation).
         name: the motion's name.
+        keep_first_frame: keep frame 0 even when the root jumps from it to frame 1 faster than a person
+            moves (:func:`~loosefit.motion.jumps.far_first_frame`: converters put the rest pose there).
+            By default such a frame is dropped before anything is computed from the frames (axes,
+            calibration, floor), and a warning names the file.
     """
     target = TargetRig.from_body(body)
     resolved = resolve_joint_map(bvh.names, bvh.parents, target, joint_map, bvh.path, skip=bvh.is_end_site())
     positions, rotations = bvh.world()
-    A = detect_axes(positions, resolved, target, up or resolved.joint_map.up, front or resolved.joint_map.front, bvh.path)
     rest_pos, rest_rot = bvh.rest_world()
+    root = source_root_path(positions[:2], rest_pos, target, resolved, bvh.path)
+    if drop_far_first_frame(root, bvh.fps, bvh.path, keep_first_frame):
+        positions, rotations = positions[1:], rotations[1:]
+    A = detect_axes(positions, resolved, target, up or resolved.joint_map.up, front or resolved.joint_map.front, bvh.path)
     source = SourceAnimation(
         joint_names=bvh.names,
         parents=bvh.parents,

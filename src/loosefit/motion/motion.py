@@ -114,18 +114,25 @@ class Motion:
             )
 
     @classmethod
-    def load(cls, path: str | Path) -> "Motion":
-        """Read a Motion ``.npz`` written by :meth:`save`; errors name the file and the problem."""
+    def load(cls, path: str | Path, fps: float | None = None) -> "Motion":
+        """Read a Motion ``.npz`` written by :meth:`save`; errors name the file and the problem.
+
+        Args:
+            fps: the frame rate of a file that stores none (no ``fps`` array, as some tools write it);
+                a file that stores one keeps its own (the caller checks that they agree).
+        """
         path = Path(path)
         z = load_npz(path, "motion")  # any damage to the file: an InputError naming it
-        missing = {"rotations", "translation", "fps"} - set(z)
+        missing = {"rotations", "translation"} - set(z)
         if missing:
             raise InputError(f"not a loosefit motion, missing arrays {sorted(missing)}", path)
+        if "fps" not in z and fps is None:
+            raise InputError("the motion stores no frame rate (no 'fps' array): give it, e.g. --fps 30", path)
         try:
             return cls(
                 rotations=z["rotations"],
                 translation=z["translation"],
-                fps=float(z["fps"]),
+                fps=float(z["fps"]) if "fps" in z else float(fps),
                 rig=str(z["rig"]) if "rig" in z else "cmu_mb",
                 joint_names=[str(n) for n in z["joint_names"]] if "joint_names" in z else [],
                 name=str(z["name"]) if "name" in z else path.stem,

@@ -230,6 +230,26 @@ def _leg_length(points: np.ndarray, index, roles: Roles) -> float:
     return total / 2
 
 
+def source_root_path(positions: np.ndarray, probe: np.ndarray, target: TargetRig, resolved: ResolvedMap,
+                     path: Path | None = None) -> np.ndarray:
+    """The source's root joint path ``(T, 3)`` in the target's metres: ``positions (T, Js, 3)`` of the source
+    root (the joint paired with the target's root) scaled by the leg-length ratio, as :func:`retarget` scales
+    it; ``probe (Js, 3)``: the pose the source's legs are measured in (its rest pose, as :func:`retarget`
+    measures them). Any axes: only distances matter to the caller. ``path``: the source file, named in errors."""
+    source_of = np.full(len(target.joint_names), -1)
+    for j, s in resolved.source_of.items():
+        source_of[j] = s
+
+    def src_index(name: str) -> int:
+        return int(source_of[target.joint_names.index(name)])
+
+    leg_source = _leg_length(probe, src_index, target.roles)
+    if not leg_source > 0:
+        raise InputError("source legs have zero length", path)
+    scale = _leg_length(target.rest, target.joint_names.index, target.roles) / leg_source
+    return positions[:, src_index(target.roles.root)] * scale
+
+
 def standing(positions: np.ndarray, src_of_name, roles: Roles, max_angle: float = 45.0) -> bool:
     """Whether a Z-up pose ``positions (J, 3)`` stands: both legs hang within ``max_angle`` degrees
     of straight down and the spine rises within ``max_angle`` of straight up."""

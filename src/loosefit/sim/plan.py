@@ -12,7 +12,7 @@ Plan format (paths are relative to the plan file)::
       mine: {file: garments/mine.obj, shape: average}   # a file fits one shape only
     motions:                       # procedural (loosefit.motion.procedural) or a file
       walk: {procedural: walk, seconds: 4, seed: 1}
-      clip: {file: ../mocap/005_02.bvh, joint_map: cc, start: 1, frames: 300}
+      clip: {file: ../mocap/005_02.bvh, joint_map: cc, start: 1, frames: 300}   # counted at 30 fps from the file's frame 0
       extra: {file: ../mocap/007_01.bvh, joint_map: cc, optional: true}   # missing file: its sequences dropped
       slow: {procedural: walk, seconds: 6, seed: 1, slowdown: 4}   # 1.5 s of a walk over 6 s
       held: {procedural: walk, seconds: 6, seed: 1, hold: {every: 15, transition: 10, frames: 30, in_place: true}}
@@ -168,6 +168,10 @@ class ProceduralMotion:
 class FileMotion:
     """A plan motion read from a file (relative to the plan): ``frames`` frames (None: all) from ``start``,
     counted after the motion is played ``slowdown`` times slower; then, with ``hold``, as held key poses.
+    ``start`` counts the frames of the whole file as imported at 30 fps, frame 0 included: a plan reads every
+    frame (``keep_first_frame``), never the importer's choice, so a plan selects the same frames whatever the
+    importer's default; ``start: 1`` skips a rest pose a converter put at frame 0 (the "Imported" CMU clips)
+    and a jump left in the frames selected is warned about when the motion is made.
     ``optional``: when the file is not there, the motion and its sequences leave the plan
     (:attr:`Plan.missing_motions`) instead of stopping it: for data kept outside the project, such as the demo's
     motion capture."""

@@ -60,6 +60,7 @@ def simulate_file(
     shape: str | None = None,
     joint_map: str | None = None,
     fit: bool | None = None,
+    keep_first_frame: bool = False,
 ) -> SimResult:
     """Simulate one garment file on one motion file and write a mesh-sequence ``.npz``.
 
@@ -74,6 +75,8 @@ def simulate_file(
         joint_map: joint map for BVH files (see :func:`loosefit.motion.bvh.import_bvh`).
         fit: for a mesh without a sidecar, :func:`~loosefit.garment.import_garment`'s ``fit``: ``None`` fits it
             as a garment made for another body when the direct placement is refused, ``True`` always.
+        keep_first_frame: keep a BVH / AMASS file's first frame when it is far from the motion (a rest pose
+            put before it), which :func:`~loosefit.motion.io.load_motion` drops by default.
 
     A loosefit garment made on another Anny shape is draped onto this one first
     (:func:`loosefit.garment.body_fit.refit`); the result's ``stats["garment_fit"]`` says what was done to the
@@ -92,7 +95,7 @@ def simulate_file(
     else:
         garment = import_garment(garment_path, body, fit=fit)
         fitted = garment.params.get("fit")
-    motion = load_motion(motion_path, body, joint_map=joint_map)
+    motion = load_motion(motion_path, body, joint_map=joint_map, keep_first_frame=keep_first_frame)
     result = simulate_sequence(garment, body, motion, params)
     if fitted is not None:
         result.stats["garment_fit"] = fitted
@@ -140,7 +143,12 @@ def load_plan_motion(plan: Plan, name: str):
 
 
 def _plan_motion_played(plan: Plan, name: str, spec):
-    """Motion ``name`` as generated or read, cut and slowed down (before any hold)."""
+    """Motion ``name`` as generated or read, cut and slowed down (before any hold).
+
+    A file is read with every frame it has (``keep_first_frame``): a plan's ``start`` counts the frames of
+    the file as imported (at 30 fps, after ``slowdown``), frame 0 included, whatever it holds, so that a
+    plan selects the same frames whatever the importer's default; ``start: 1`` skips a rest pose a
+    converter put at frame 0. A root jump left in the frames selected is warned about, naming the frames."""
     from loosefit.body import AnnyShape
     from loosefit.motion.resample import slow_down
 
@@ -153,14 +161,16 @@ def _plan_motion_played(plan: Plan, name: str, spec):
         # a frame more than needed, so that the slowed motion covers ``seconds`` whatever the rounding
         motion = generate(spec.procedural, spec.seconds / spec.slowdown + 1.0 / DEFAULT_FPS, spec.seed, body)
         return slow_down(motion, spec.slowdown).slice(0, int(round(spec.seconds * motion.fps)))
-    from loosefit.motion.io import load_motion
+    from loosefit.motion.io import read_motion
+    from loosefit.motion.jumps import warn_jumps
 
     path = plan.resolve(spec.file)
-    motion = slow_down(load_motion(path, body, joint_map=spec.joint_map), spec.slowdown)
+    motion = slow_down(read_motion(path, body, joint_map=spec.joint_map, keep_first_frame=True), spec.slowdown)
     start, frames = spec.start, spec.frames
     motion = motion.slice(start, None if frames is None else start + frames)
     if motion.num_frames == 0:
         raise InputError(f"motion {name!r}: no frames left after start={start}", path)
+    warn_jumps(motion, f"{path} (plan motion {name!r}, from start={start})")
     return motion
 
 

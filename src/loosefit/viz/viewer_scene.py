@@ -123,7 +123,7 @@ def _dataset_panel(store: Path, name: str, body) -> tuple[ViewerPanel, float]:
 
 
 def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact",
-               joint_map=None) -> tuple[ViewerPanel, float]:
+               joint_map=None, keep_first_frame: bool = False) -> tuple[ViewerPanel, float]:
     from loosefit.animate import Animator
     from loosefit.animate_any import is_static_run
     from loosefit.motion.io import load_motion
@@ -137,7 +137,7 @@ def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact",
         from loosefit.body import AnnyBody
 
         body = AnnyBody()
-    motion = load_motion(motion_path, body, joint_map=joint_map)
+    motion = load_motion(motion_path, body, joint_map=joint_map, keep_first_frame=keep_first_frame)
     animator = Animator(run)
     verts = animator.animate_batch([motion])[0]
     from loosefit.models.collision import post_process
@@ -151,10 +151,12 @@ def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact",
                        warnings=animator.range_warnings(motion, motion_path)), motion.fps
 
 
-def load_input(spec: str, body=None, handling: str = "exact", joint_map=None) -> tuple[ViewerPanel, float]:
+def load_input(spec: str, body=None, handling: str = "exact", joint_map=None,
+               keep_first_frame: bool = False) -> tuple[ViewerPanel, float]:
     """One viewer input (see the module docstring) as ``(panel, fps)``; a run's animation gets collision
     handling ``handling`` (``"exact"``, ``"pushout"`` or ``"none"``, as ``loosefit animate --collision``), its
-    BVH motion the joint map ``joint_map`` (as ``loosefit animate --joint-map``).
+    BVH motion the joint map ``joint_map`` (as ``loosefit animate --joint-map``) and ``keep_first_frame``
+    (:func:`~loosefit.motion.io.load_motion`).
 
     Raises:
         InputError: a missing file, an unreadable or malformed one, an unknown kind of input.
@@ -172,7 +174,7 @@ def load_input(spec: str, body=None, handling: str = "exact", joint_map=None) ->
 
             if is_dataset_store(lpath):
                 return _dataset_panel(lpath, right, body)
-            return _run_panel(lpath, Path(right), body, handling, joint_map)
+            return _run_panel(lpath, Path(right), body, handling, joint_map, keep_first_frame)
         if not lpath.exists():
             raise InputError("no such file or directory", lpath)
     if path.is_dir():
@@ -226,7 +228,7 @@ def _collisions(panels: list[ViewerPanel], max_frames: int) -> None:
 
 def build_scene(inputs: list[str], body=None, collisions: bool = True,
                 collision_frames: int = DEFAULT_COLLISION_FRAMES, handling: str = "exact",
-                joint_map=None) -> ViewerScene:
+                joint_map=None, keep_first_frame: bool = False) -> ViewerScene:
     """The scene of ``loosefit view INPUT...``: the first input is the reference (simulation), the others
     predictions compared with it.
 
@@ -236,6 +238,7 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
         collisions: compute the per-frame collision ratio of panels that have a body.
         handling: collision handling of the runs' animations (:func:`load_input`).
         joint_map: the joint map of the runs' BVH motions (:func:`load_input`).
+        keep_first_frame: keep a far first frame of the runs' motion files (:func:`load_input`).
         collision_frames: compute it at this many evenly spaced frames (0: every frame); the others are
             NaN (one signed-distance tree of a 13.7k-vertex body and a 12k-vertex query take ~0.5 s a frame
             on the 2-core machines).
@@ -250,7 +253,7 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
     from loosefit.models.collision import check_post_process
 
     check_post_process(handling)  # before any input is loaded
-    loaded = [load_input(spec, body, handling, joint_map) for spec in inputs]
+    loaded = [load_input(spec, body, handling, joint_map, keep_first_frame) for spec in inputs]
     panels = [p for p, _ in loaded]
     fps = loaded[0][1]
     ref = panels[0]
