@@ -39,7 +39,8 @@ spin and a 10 s jump; 32 bones, the CPU preset, 40 + 15 epochs; ``benchmarks/res
 held-out RMSE spin / jump: zero-state windows of 64 every 48, 107.4 / 48.5 mm (275 steps); the state carried
 over windows of 64, 112.8 / 47.2 mm (220 steps); windows of 176 every 88 with 48 warm-up frames, 121.6 / 53.6 mm
 (110 steps). The training spins are fitted to 37-59 mm in every case: the held-out spin's error is
-generalisation from two training spins, not memory, so the zero-state windows stay the default.
+generalisation from two training spins, not memory. Those were test motions, so the comparison decides nothing;
+the zero-state windows stay the default until validation motions choose.
 """
 
 from __future__ import annotations
@@ -120,8 +121,9 @@ class VirtualBonesConfig:
             ``G - G_LF`` (Sec. 4.1's split). Measured on the bench skirt (80 bones, CPU preset): the same
             held-out RMSE either way, within 0.2 mm per test motion.
         root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
-            recent turning and velocity, exponential moving averages; ours, not in the paper). Measured on the
-            demo's held-out spin (``benchmarks/README.md``, "Motion history").
+            recent turning and velocity, exponential moving averages; ours, not in the paper). Compared on the demo's
+            spin (``benchmarks/README.md``, "Motion history"), which was then a test motion and is now the demo's
+            validation spin: the comparison is a validation one only from that change on.
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
     """
