@@ -145,9 +145,11 @@ def cmd_garment_import(args):
 
     writable(args.out, folder=False)
     garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up, fit=True if args.fit else None,
-                             piece=args.piece)
+                             piece=args.piece, repair=args.repair)
     garment.save(args.out)
     p = garment.params
+    for line in p.get("repair", {}).get("changes", []):  # --repair: one line per kind of change
+        print(f"repair: {line}")
     if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
         f = p["fit"]
         print(f"fitted as a garment made for another body ({f['why']}): made for {_shape_text(f['shape'])}, draped "
@@ -478,6 +480,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "this body with Blender cloth (done anyway when it has no plausible placement here)")
     sp.add_argument("--piece", type=piece_choice, default=None, metavar="largest|N",
                     help="keep one connected piece (1 is the largest); default: every piece, when each is attached")
+    sp.add_argument("--repair", action="store_true",
+                    help="repair a messy mesh by dropping what breaks it (faces on non-manifold edges, duplicates, "
+                         "degenerate faces, loose pieces; the largest wearable piece, or --piece, is kept) and "
+                         "print what changed")
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_garment_import)
