@@ -11,9 +11,10 @@ least first:
 1. welds coincident vertices (as the importer does);
 2. drops degenerate faces (a repeated vertex, no area) and slivers (height under 1e-3 of the longest edge);
 3. merges duplicate faces (the same three vertices) into the first of them;
-4. on each edge of more than two faces keeps the two faces of the largest sheets (faces glued along
-   two-face edges, by area) and drops the others: a fin, a pocket or a doubled panel goes, the garment's
-   own surface stays;
+4. on edges of more than two faces drops the faces of the smallest sheets (faces glued along two-face
+   edges, by area) there, smallest first, until two faces are left, and of two faces of different sheets
+   folded flat onto each other the smaller sheet's: a fin, a pocket, a doubled panel or the second
+   triangulation of a quad goes, the garment's own surface stays;
 5. splits pinched vertices (sheets touching at a point) into one copy per fan;
 6. re-winds every orientable sheet as most of its faces are wound;
 7. keeps one piece: the largest that is wearable (:func:`~loosefit.garment.importer.check_wearable`) and
@@ -30,12 +31,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from loosefit.errors import InputError
 from loosefit.garment.diagnosis import DEGENERATE_AREA, Diagnosis, diagnose
 from loosefit.garment.mesh_checks import face_areas, orientation, unique_edges, vertex_components
 from loosefit.garment.mesh_file import FileNumbers
 from loosefit.garment.seam_repair import slivers, split_nonmanifold, weld
+
+#: Two faces on an edge that open by less than this (degrees) are folded flat onto each other: two layers
+#: written over each other (two triangulations of a quad), which --repair does not glue.
+FOLDED = 10.0
 
 
 @dataclass
@@ -124,20 +131,26 @@ def repair_mesh(verts: np.ndarray, faces: np.ndarray, numbers: FileNumbers | Non
     faces, numbers = _keep_faces(faces, numbers, unique)
 
     # 4: non-manifold edges keep the faces of their two largest sheets.
-    dropped, edges_fixed, shown = 0, 0, ""
+    gone, edges_fixed, folds = [], 0, 0  # the file's numbers of the faces dropped, over the rounds
     while True:
-        drop, over = _nonmanifold_drops(verts, faces)
+        drop, over, folded = _nonmanifold_drops(verts, faces)
         if not len(drop):
             break
-        edges_fixed += over
-        dropped += len(drop)
-        shown = shown or numbers.faces(drop)  # the first round's: numbers of later rounds are the same file's
+        if not gone:  # the first round sees them all
+            edges_fixed, folds = over, folded
+        gone.append(numbers.select(face=drop))
         mask = np.ones(len(faces), bool)
         mask[drop] = False
         faces, numbers = _keep_faces(faces, numbers, mask)
-    if dropped:
-        changes["nonmanifold_faces"] = (dropped, f"dropped {dropped} faces on {edges_fixed} non-manifold edges, those "
-                                        f"of the smallest sheets on each ({word} {shown})")
+    if gone:
+        dropped = FileNumbers(numbers.vertex, np.concatenate([g.face for g in gone]),
+                              None if numbers.line is None else np.concatenate([g.line for g in gone]),
+                              numbers.base, numbers.unit)
+        n = len(dropped.face)
+        where = f"{edges_fixed} non-manifold edges" + (
+            f" and {folds} edges where faces of two layers lie folded onto each other" if folds else "")
+        changes["nonmanifold_faces"] = (n, f"dropped {n} faces on {where}, the smallest sheets' first "
+                                        f"({word} {dropped.faces(np.argsort(dropped.face))})")
 
     # 5: pinched vertices get a copy per fan (every edge has two faces at most now).
     old = faces
@@ -160,7 +173,7 @@ def repair_mesh(verts: np.ndarray, faces: np.ndarray, numbers: FileNumbers | Non
         faces[flip] = faces[flip][:, ::-1]
 
     # 7: one piece.
-    labels = vertex_components(len(verts), faces)[faces[:, 0]]
+    labels = np.unique(vertex_components(len(verts), faces)[faces[:, 0]], return_inverse=True)[1]
     area = np.bincount(labels, weights=face_areas(verts, faces))
     order = [int(k) for k in np.argsort(area, kind="stable")[::-1]]
     big = [k for k in order if area[k] >= PIECE_SHARE * area.sum()]
@@ -218,23 +231,73 @@ def _keep_faces(faces: np.ndarray, numbers: FileNumbers, mask: np.ndarray) -> tu
     return faces[index], numbers.select(face=index)
 
 
-def _nonmanifold_drops(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
-    """The faces to drop so that no edge has more than two: on each such edge, all but the two whose sheets
-    (faces glued along two-face edges) have the largest area, ties to the earlier face. Returns the sorted face
-    ids and the number of non-manifold edges."""
+def _nonmanifold_drops(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """One round of the faces to drop so that no edge has more than two faces and no two faces of different
+    sheets lie folded flat onto each other, smallest sheets first.
+
+    Sheets are faces glued along two-face edges where they open by more than :data:`FOLDED` (two faces
+    folded flat onto each other are two layers written over each other, such as two triangulations of one
+    quad, not cloth). On an edge of more than two faces, or a folded one, a sheet whose area is the smallest
+    on every such edge it touches (ties: the later in the file is the smaller, as an addition to what was
+    there) drops its faces there, the later ones first and no more than leave two (one on a folded edge);
+    the next round sees the sheets those drops have joined (once one triangulation of a quad goes, the other
+    is glued to its neighbours). An edge of more than two faces all of one sheet keeps its first two; a fold
+    within one sheet stays (a crease). Returns the sorted face ids, the numbers of edges of more than two
+    faces and of folded edges."""
     edges, face_edge, count = unique_edges(faces)
-    over = np.nonzero(count > 2)[0]
-    if not len(over):
-        return np.zeros(0, np.int64), 0
-    _, _, sheet = orientation(faces)
-    sheet_area = np.bincount(sheet, weights=face_areas(verts, faces))[sheet]
     corner_edge = face_edge.reshape(-1)
+    order = np.argsort(corner_edge, kind="stable")
+    start = np.r_[0, np.cumsum(count)[:-1]]
+    two = np.nonzero(count == 2)[0]
+    h1, h2 = order[start[two]], order[start[two] + 1]  # corner c of face f: edge from c to c + 1
+    folded = np.zeros(len(edges), bool)
+    folded[two] = _opening(verts, faces, h1, h2) < np.radians(FOLDED)
+    glued = ~folded[two]
+    over = np.nonzero((count > 2) | folded)[0]
+    if not len(over):
+        return np.zeros(0, np.int64), 0, 0
+    graph = sp.coo_matrix((np.ones(int(glued.sum())), (h1[glued] // 3, h2[glued] // 3)), shape=(len(faces),) * 2)
+    sheet = connected_components(graph, directed=False)[1]
+    area = np.bincount(sheet, weights=face_areas(verts, faces))
+    first = np.full(len(area), len(faces))
+    np.minimum.at(first, sheet, np.arange(len(faces)))
+    rank = np.empty(len(area), np.int64)  # 0: the first to go
+    rank[np.lexsort((-first, area))] = np.arange(len(area))
     on = np.isin(corner_edge, over)
-    f = np.nonzero(on)[0] // 3
-    e = corner_edge[on]
-    # Per edge: largest sheet first, then file order; everything after the second goes.
-    order = np.lexsort((f, -sheet_area[f], e))
-    e, f = e[order], f[order]
-    start = np.r_[0, np.nonzero(e[1:] != e[:-1])[0] + 1]
-    rank = np.arange(len(e)) - np.repeat(start, np.diff(np.r_[start, len(e)]))
-    return np.unique(f[rank >= 2]), len(over)
+    f, e = np.nonzero(on)[0] // 3, corner_edge[on]
+    r = rank[sheet[f]]
+    lowest = np.full(len(edges), len(area))
+    highest = np.full(len(edges), -1)
+    np.minimum.at(lowest, e, r)
+    np.maximum.at(highest, e, r)
+    mixed = lowest[e] != highest[e]  # incidences on edges of several sheets
+    losing = np.ones(len(area), bool)  # a sheet is the smallest on every mixed edge it touches
+    losing[r[mixed & (r != lowest[e])]] = False
+    # Fewest first: on each edge, only as many of the losing sheet's faces as leave two (one where folded).
+    surplus = np.where(folded, 1, count - 2)
+    candidates = np.nonzero(mixed & losing[r])[0]
+    drop = f[_first_per_edge(candidates[np.lexsort((-f[candidates], e[candidates]))], e, surplus)]
+    # Edges of more than two faces, all of one sheet: keep the first two faces in the file.
+    alone = np.nonzero(~mixed & ~folded[e])[0]
+    gone = _first_per_edge(alone[np.lexsort((-f[alone], e[alone]))], e, surplus)
+    drop = np.concatenate([drop, f[gone]])
+    return np.unique(drop), int((count > 2).sum()), int(folded.sum())
+
+
+def _opening(verts: np.ndarray, faces: np.ndarray, h1: np.ndarray, h2: np.ndarray) -> np.ndarray:
+    """Angles (radians) between the two faces of edges seen along the edge, from the corners ``h1``, ``h2``
+    (``3 f + c``: the edge runs from corner ``c`` of face ``f``): pi when flat, 0 when folded onto each other."""
+    f1, c1 = h1 // 3, h1 % 3
+    a, b = verts[faces[f1, c1]], verts[faces[f1, (c1 + 1) % 3]]
+    axis = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1, keepdims=True), 1e-300)
+    tips = [verts[faces[h // 3, (h % 3 + 2) % 3]] - a for h in (h1, h2)]
+    u, w = (t - np.einsum("ij,ij->i", t, axis)[:, None] * axis for t in tips)
+    return np.arctan2(np.linalg.norm(np.cross(u, w), axis=1), np.einsum("ij,ij->i", u, w))
+
+
+def _first_per_edge(order: np.ndarray, e: np.ndarray, how_many: np.ndarray) -> np.ndarray:
+    """The incidences of ``order`` (sorted by edge) that come among the first ``how_many[edge]`` of their edge."""
+    es = e[order]
+    start = np.r_[0, np.nonzero(es[1:] != es[:-1])[0] + 1] if len(order) else np.zeros(0, np.int64)
+    position = np.arange(len(order)) - np.repeat(start, np.diff(np.r_[start, len(order)]))
+    return order[position < how_many[es]]
