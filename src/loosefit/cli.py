@@ -179,7 +179,12 @@ def cmd_render(args):
     from loosefit.viz.scene import check_panels
 
     writable(args.out)  # a path without a suffix is a folder of PNGs
-    panels = [panel for path in args.input for panel in load_panels(path, sequence=args.sequence)]
+    meshes = [p for p in args.input if Path(p).suffix.lower() in (".obj", ".ply")]
+    if args.motion and not meshes:
+        raise InputError("--motion poses a garment mesh (.obj / .ply input); the inputs have their own frames",
+                         args.motion)
+    panels = [panel for path in args.input for panel in load_panels(
+        path, sequence=args.sequence, motion=args.motion if path in meshes else None, joint_map=args.joint_map)]
     if args.frame is None and Path(args.out).suffix.lower() == ".png":
         frames = check_panels(panels)
         if frames != 1:
@@ -496,8 +501,13 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_info)
 
     sp = sub.add_parser("render", help="render a mesh sequence, dataset sequence or motion to MP4 / GIF / PNG")
-    sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, or DATA.zarr with --sequence; several side by side")
+    sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, DATA.zarr with --sequence, or a garment "
+                    ".obj / .ply on the body (at rest, or along --motion); several side by side")
     sp.add_argument("--sequence", default=None, help="sequence name inside a dataset store")
+    sp.add_argument("--motion", default=None, metavar="FILE",
+                    help="pose the body along this motion (.npz / .bvh) and a garment .obj / .ply with it (skinned to "
+                         "the body, as the body-LBS baseline); choose a frame for a .png with --frame")
+    joint_map_option(sp)
     sp.add_argument("--out", required=True, help="out.mp4, out.gif, out.png or a folder")
     sp.add_argument("--frame", type=int_at_least(0), action="append", default=None,
                     help="render only frame K (0 is the first; repeat for several); a .png output needs exactly one")
