@@ -398,7 +398,8 @@ def cmd_view(args):
     if args.export is not None:
         writable(args.export, folder=True)  # before the scene is built
     result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
-                  collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map)
+                  collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map,
+                  reference=not args.no_reference)
     if args.export is not None:
         print(f"wrote {result}: open it in a browser (from disk or any web server)")
 
@@ -640,9 +641,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="collision handling of the animations, as loosefit animate (default exact)")
     sp.set_defaults(func=cmd_report)
 
-    sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser")
+    sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser (or animations "
+                        "alone: --no-reference)")
     sp.add_argument("input", nargs="+", help="SEQ.npz (mesh sequence), DATA.zarr:SEQUENCE or RUN:MOTION; the first "
-                    "is the simulation, the others predictions compared with it")
+                    "is the simulation, the others predictions compared with it (--no-reference: animations alone)")
+    sp.add_argument("--no-reference", action="store_true",
+                    help="no simulation: show each input by itself (animations on your own motions, any garments), "
+                         "without errors against the first")
     sp.add_argument("--port", type=int_at_least(0, 65535), default=8000,
                     help="port of the local server (127.0.0.1; 0: any free port)")
     sp.add_argument("--export", default=None, metavar="DIR", help="write the page as static files to DIR instead "
