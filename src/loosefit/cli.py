@@ -148,8 +148,9 @@ def cmd_garment_import(args):
                              piece=args.piece, repair=args.repair)
     garment.save(args.out)
     p = garment.params
-    for line in p.get("repair", {}).get("changes", []):  # --repair: one line per kind of change
-        print(f"repair: {line}")
+    if args.repair:  # one line per kind of change
+        for line in p["repair"]["changes"] or ["nothing to change"]:
+            print(f"repair: {line}")
     if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
         f = p["fit"]
         print(f"fitted as a garment made for another body ({f['why']}): made for {_shape_text(f['shape'])}, draped "

@@ -63,7 +63,7 @@ def write_ply(path, verts, faces):
     head = ["ply", "format ascii 1.0", f"element vertex {len(verts)}", "property float x", "property float y",
             "property float z", f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
     body = [f"{x!r} {y!r} {z!r}" for x, y, z in np.asarray(verts, float).tolist()]
-    body += [f"{len(f)} " + " ".join(map(str, f)) for f in np.asarray(faces).tolist()]
+    body += [f"{len(f)} " + " ".join(str(int(i)) for i in f) for f in faces]
     path.write_text("\n".join(head + body) + "\n")
     return path
 
@@ -144,8 +144,8 @@ def test_diagnosis_counts_and_file_numbers(tmp_path):
     assert f"vertices {FIN[0] + 1}-{FIN[1] + 1} with 5 faces" in text
     assert f"face {nf + 4} (line {nv + nf + 4}) repeats {DUPS[0] + 1} (line {nv + DUPS[0] + 1})" in text
     assert f"{nf + 5} (line {nv + nf + 5}) repeats {DUPS[1] + 1} (line {nv + DUPS[1] + 1})" in text
-    assert f"1 degenerate faces (faces {nf + 6} (line {nv + nf + 6}))" in text
-    assert f"1 faces wound against their neighbours (faces {FLIPPED + 1} (line {nv + FLIPPED + 1}))" in text
+    assert f"1 degenerate face (faces {nf + 6} (line {nv + nf + 6}))" in text
+    assert f"1 face wound against their neighbours (faces {FLIPPED + 1} (line {nv + FLIPPED + 1}))" in text
     assert f"vertices where a boundary is not a simple loop (vertices {FIN[0] + 1}, {FIN[1] + 1})" in text
     # PLY numbers from 0, without lines.
     v, f, numbers = read_mesh_file(write_ply(tmp_path / "messy.ply", verts, faces))
@@ -166,9 +166,9 @@ def test_repair_gives_back_the_tube(tmp_path):
     assert report.after.clean and report.after.boundary_loops == 2 and report.after.pieces == 1
     nv, nf = len(V0) + 7, len(F0)
     lines = "\n".join(report.lines())
-    assert f"dropped 3 faces on 1 non-manifold edges, the smallest sheets' first (faces {nf + 1} (line {nv + nf + 1}), " \
+    assert f"dropped 3 faces on 1 non-manifold edge, the smallest sheets' first (faces {nf + 1} (line {nv + nf + 1}), " \
            f"{nf + 2} (line {nv + nf + 2}), {nf + 3} (line {nv + nf + 3}))" in lines
-    assert f"flipped 1 faces to the winding of most of their piece (faces {FLIPPED + 1} (line {nv + FLIPPED + 1}))" in lines
+    assert f"flipped 1 face to the winding of most of their piece (faces {FLIPPED + 1} (line {nv + FLIPPED + 1}))" in lines
     assert len(report.lines()) == 6
     assert np.array_equal(report.numbers.vertex, np.arange(len(V0)))  # back to the file's vertices
 
@@ -236,7 +236,7 @@ def test_unrepairable_meshes_are_refused_with_what_is_left(tmp_path):
     v, f, numbers = read_mesh_file(path)
     assert diagnose(v, f, numbers).nonorientable_pieces == 1
     with pytest.raises(InputError, match=r"found no wearable piece: the piece of 100% of the area is not orientable\. "
-                                         r"Left after the repairs: 1 piece; .* 1 non-orientable pieces") as err:
+                                         r"Left after the repairs: 1 piece; .* 1 non-orientable piece") as err:
         repair_mesh(v, f, numbers, path=path)
     assert str(path) in str(err.value)
     # A flat grid: manifold, but no garment (one opening).
@@ -319,3 +319,20 @@ def test_cli_repair_imports_and_says_what_changed(tmp_path, body, skirt, capsys)
     assert len(g.faces) == len(skirt.faces)
     area = lambda v, f: 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()  # noqa: E731
     assert area(g.verts, g.faces) == pytest.approx(area(skirt.verts, skirt.faces), rel=0.01)
+
+
+def test_polygons_keep_their_file_numbers(tmp_path):
+    """A quad is cut into two triangles of one file face; comments, texture lines and relative indices do not
+    shift the numbers."""
+    obj = tmp_path / "quad.obj"
+    obj.write_text("# a quad, a triangle and the quad's first half again\nv 0 0 0\nv 1 0 0\nvt 0 0\nv 1 1 0\nv 0 1 0\n"
+                   "v 2 2 2\n\nf 1/1 2/1 3/1 4/1\nf 2 5 3\nf -5 -4 -3\n")
+    v, f, numbers = read_mesh_file(obj)
+    assert f.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 2], [0, 1, 2]]
+    assert numbers.face.tolist() == [0, 0, 1, 2] and numbers.line.tolist() == [9, 9, 10, 11]
+    assert "1 duplicate face (face 3 (line 11) repeats 1 (line 9))" in diagnose(v, f, numbers).text()
+    ply = tmp_path / "quad.ply"
+    write_ply(ply, v, [[0, 1, 2, 3], [1, 4, 2], [0, 1, 2]])
+    v, f, numbers = read_mesh_file(ply)
+    assert f.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 2], [0, 1, 2]] and numbers.face.tolist() == [0, 0, 1, 2]
+    assert "1 duplicate face (face 2 repeats 0)" in diagnose(v, f, numbers).text()

@@ -32,6 +32,21 @@ from loosefit.garment.mesh_file import FileNumbers
 DEGENERATE_AREA = 1e-14
 
 
+_SINGULAR = {"edges": "edge", "faces": "face", "loops": "loop", "pieces": "piece", "vertices": "vertex"}
+
+
+def counted(n: int, phrase: str) -> str:
+    """``"3 duplicate faces"``, ``"1 duplicate face"``: ``phrase`` in the plural, its first noun made singular
+    for one."""
+    if n == 1:
+        words = phrase.split(" ")
+        i = next((k for k, w in enumerate(words) if w in _SINGULAR), None)
+        if i is not None:
+            words[i] = _SINGULAR[words[i]]
+        phrase = " ".join(words)
+    return f"{n} {phrase}"
+
+
 @dataclass
 class Diagnosis:
     """Counts of what is wrong with a mesh, each with the file's numbers of its first offenders (text)."""
@@ -67,10 +82,10 @@ class Diagnosis:
         ex = self.examples or {}
 
         def item(count: int, what: str, key: str | None = None) -> str:
-            return f"{count} {what}" + (f" ({ex[key]})" if count and key in ex else "")
+            return counted(count, what) + (f" ({ex[key]})" if count and key in ex else "")
 
         parts = [
-            item(self.pieces, "piece" if self.pieces == 1 else "pieces"),
+            item(self.pieces, "pieces"),
             item(self.nonmanifold_edges, "non-manifold edges (more than 2 faces)", "nonmanifold_edges"),
             item(self.duplicate_faces, "duplicate faces", "duplicate_faces"),
             item(self.degenerate_faces, "degenerate faces", "degenerate_faces"),

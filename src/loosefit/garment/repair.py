@@ -35,7 +35,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from loosefit.errors import InputError
-from loosefit.garment.diagnosis import DEGENERATE_AREA, Diagnosis, diagnose
+from loosefit.garment.diagnosis import DEGENERATE_AREA, Diagnosis, counted, diagnose
 from loosefit.garment.mesh_checks import face_areas, orientation, unique_edges, vertex_components
 from loosefit.garment.mesh_file import FileNumbers
 from loosefit.garment.seam_repair import slivers, split_nonmanifold, weld
@@ -104,18 +104,18 @@ def repair_mesh(verts: np.ndarray, faces: np.ndarray, numbers: FileNumbers | Non
     numbers = numbers.select(vertex=kept)
     report.before = diagnose(verts, faces, numbers)
     if merged:
-        changes["merged_vertices"] = (merged, f"merged {merged} coincident vertices (panels written with their own "
+        changes["merged_vertices"] = (merged, f"merged {counted(merged, 'coincident vertices')} (panels written with their own "
                                               "seam vertices)")
 
     # 2-3: faces without area, then faces written twice.
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
     bad = repeated | (face_areas(verts, faces) <= DEGENERATE_AREA * diag ** 2)
     if bad.any():
-        changes["degenerate_faces"] = (int(bad.sum()), f"dropped {int(bad.sum())} degenerate faces (a repeated vertex "
+        changes["degenerate_faces"] = (int(bad.sum()), f"dropped {counted(int(bad.sum()), 'degenerate faces')} (a repeated vertex "
                                        f"or no area: {word} {numbers.faces(np.nonzero(bad)[0])})")
     thin = ~bad & slivers(verts, faces)
     if thin.any():
-        changes["sliver_faces"] = (int(thin.sum()), f"dropped {int(thin.sum())} sliver faces (height under 1e-3 of "
+        changes["sliver_faces"] = (int(thin.sum()), f"dropped {counted(int(thin.sum()), 'sliver faces')} (height under 1e-3 of "
                                    f"the longest edge: {word} {numbers.faces(np.nonzero(thin)[0])})")
     faces, numbers = _keep_faces(faces, numbers, ~(bad | thin))
     if len(faces) == 0:
@@ -126,7 +126,7 @@ def repair_mesh(verts: np.ndarray, faces: np.ndarray, numbers: FileNumbers | Non
     unique[first] = True
     if not unique.all():
         n = int((~unique).sum())
-        changes["duplicate_faces"] = (n, f"merged {n} duplicate faces into the first of each ({word} "
+        changes["duplicate_faces"] = (n, f"merged {counted(n, 'duplicate faces')} into the first of each ({word} "
                                       f"{numbers.faces(np.nonzero(~unique)[0])})")
     faces, numbers = _keep_faces(faces, numbers, unique)
 
@@ -147,9 +147,9 @@ def repair_mesh(verts: np.ndarray, faces: np.ndarray, numbers: FileNumbers | Non
                               None if numbers.line is None else np.concatenate([g.line for g in gone]),
                               numbers.base, numbers.unit)
         n = len(dropped.face)
-        where = f"{edges_fixed} non-manifold edges" + (
-            f" and {folds} edges where faces of two layers lie folded onto each other" if folds else "")
-        changes["nonmanifold_faces"] = (n, f"dropped {n} faces on {where}, the smallest sheets' first "
+        where = counted(edges_fixed, "non-manifold edges") + (
+            f" and {counted(folds, 'edges')} where faces of two layers lie folded onto each other" if folds else "")
+        changes["nonmanifold_faces"] = (n, f"dropped {counted(n, 'faces')} on {where}, the smallest sheets' first "
                                         f"({word} {dropped.faces(np.argsort(dropped.face))})")
 
     # 5: pinched vertices get a copy per fan (every edge has two faces at most now).
@@ -167,7 +167,7 @@ def repair_mesh(verts: np.ndarray, faces: np.ndarray, numbers: FileNumbers | Non
     nonorientable = np.unique(sheet[conflicts[:, 0]])
     flip &= ~np.isin(sheet, nonorientable)
     if flip.any():
-        changes["reoriented_faces"] = (int(flip.sum()), f"flipped {int(flip.sum())} faces to the winding of most of "
+        changes["reoriented_faces"] = (int(flip.sum()), f"flipped {counted(int(flip.sum()), 'faces')} to the winding of most of "
                                        f"their piece ({word} {numbers.faces(np.nonzero(flip)[0])})")
         faces = faces.copy()
         faces[flip] = faces[flip][:, ::-1]
@@ -205,15 +205,15 @@ def repair_mesh(verts: np.ndarray, faces: np.ndarray, numbers: FileNumbers | Non
     if len(order) > 1:
         others = labels != keep
         share = 100 * area[keep] / area.sum()
+        dropped = f"{counted(len(order) - 1, 'other pieces')} ({counted(int(others.sum()), 'faces')}"
         changes["dropped_pieces"] = (len(order) - 1, f"kept the {'largest wearable ' if piece is None else ''}piece "
                                      f"with {share:.1f}% of the area ({int((~others).sum())} faces) and dropped "
-                                     f"{len(order) - 1} other pieces ({int(others.sum())} faces; {word} "
-                                     f"{numbers.faces(np.nonzero(others)[0])})")
+                                     f"{dropped}; {word} {numbers.faces(np.nonzero(others)[0])})")
     faces, numbers = _keep_faces(faces, numbers, labels == keep)
     used = np.zeros(len(verts), bool)
     used[faces.ravel()] = True
     if not used.all():
-        changes["unused_vertices"] = (int((~used).sum()), f"removed {int((~used).sum())} vertices no face kept uses")
+        changes["unused_vertices"] = (int((~used).sum()), f"removed {counted(int((~used).sum()), 'vertices')} no face kept uses")
     remap = np.cumsum(used) - 1
     verts, faces = verts[used], remap[faces]
     numbers = numbers.select(vertex=np.nonzero(used)[0])
