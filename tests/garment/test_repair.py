@@ -218,9 +218,8 @@ def _welded(v, f, numbers):
     return v, f, numbers.select(vertex=kept)
 
 
-def test_unrepairable_meshes_are_refused_with_what_is_left(tmp_path):
-    # A Moebius strip of 12 quads: one boundary loop and no right side.
-    n = 12
+def moebius(n: int = 12):
+    """A Moebius strip of ``n`` quads: one boundary loop and no right side."""
     t = 2 * np.pi * np.arange(n) / n
     verts = []
     for ti in t:
@@ -232,7 +231,11 @@ def test_unrepairable_meshes_are_refused_with_what_is_left(tmp_path):
         a, b = 2 * i, 2 * i + 1
         c, d = (2 * i + 2, 2 * i + 3) if i < n - 1 else (1, 0)  # the last quad joins with a half twist
         faces += [[a, c, b], [b, c, d]]
-    path = write_obj(tmp_path / "moebius.obj", np.array(verts), np.array(faces))
+    return np.array(verts), np.array(faces)
+
+
+def test_unrepairable_meshes_are_refused_with_what_is_left(tmp_path):
+    path = write_obj(tmp_path / "moebius.obj", *moebius())
     v, f, numbers = read_mesh_file(path)
     assert diagnose(v, f, numbers).nonorientable_pieces == 1
     with pytest.raises(InputError, match=r"found no wearable piece: the piece of 100% of the area is not orientable\. "
@@ -336,3 +339,15 @@ def test_polygons_keep_their_file_numbers(tmp_path):
     v, f, numbers = read_mesh_file(ply)
     assert f.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 2], [0, 1, 2]] and numbers.face.tolist() == [0, 0, 1, 2]
     assert "1 duplicate face (face 2 repeats 0)" in diagnose(v, f, numbers).text()
+
+
+def test_import_of_a_one_sided_surface_says_so(tmp_path, body):
+    from loosefit.garment import import_garment
+
+    verts, faces = moebius()
+    path = write_obj(tmp_path / "moebius.obj", verts * 0.3 + [0.0, 0.0, 1.0], faces)
+    with pytest.raises(InputError, match=r"moebius.obj: the surface is not orientable \(a Moebius-like strip\) where "
+                                         r"faces \d+ \(line \d+\) meet their neighbours\. The file has .*"
+                                         r"1 non-orientable piece .* the file needs mending where it was made") as err:
+        import_garment(path, body)
+    assert "--repair" not in str(err.value)

@@ -161,9 +161,9 @@ def auto_repair(verts: np.ndarray, faces: np.ndarray, path, piece: str | int | N
                              f"seam in pairs (vertices {numbers.edges(edges[count > 2])})", path, welded_mesh)
     flip, conflicts, _ = orientation(faces)
     if len(conflicts):
+        paired = ", once the faces of each non-manifold seam are glued in pairs" if split["nonmanifold_edges"] else ""
         raise topology_error(f"the surface is not orientable (a Moebius-like strip) where {numbers.unit}s "
-                             f"{numbers.faces(conflicts[:, 0])} meet their neighbours, once the faces of each "
-                             "non-manifold seam are glued in pairs", path, welded_mesh)
+                             f"{numbers.faces(conflicts[:, 0])} meet their neighbours{paired}", path, welded_mesh)
     faces = faces.copy()
     faces[flip] = faces[flip][:, ::-1]
     repairs["reoriented_faces"] = int(flip.sum())
@@ -175,9 +175,13 @@ def topology_error(problem: str, path, file_mesh) -> InputError:
     file (``file_mesh``: its welded ``(verts, faces, numbers)``), with the way out."""
     verts, faces, numbers = file_mesh
     counting = "from 1" if numbers.base == 1 else "from 0"
-    return InputError(f"{problem}. The file has (welded; numbers as in the file, {counting}): "
-                      f"{diagnose(verts, faces, numbers).text()}. `--repair` drops the faces that make it so, keeps "
-                      "the largest wearable piece and says what it changed", path)
+    d = diagnose(verts, faces, numbers)
+    if d.nonmanifold_edges or d.duplicate_faces or d.degenerate_faces or d.pinched_vertices or d.pieces > 1:
+        way = "`--repair` drops the faces that make it so, keeps the largest wearable piece and says what it changed"
+    else:  # nothing to drop: the surface itself has one side
+        way = "A garment has an inside and an outside, so the file needs mending where it was made"
+    return InputError(f"{problem}. The file has (welded; numbers as in the file, {counting}): {d.text()}. {way}",
+                      path)
 
 
 def _pieces_problem(area: np.ndarray, order: list[int], split: dict) -> str:
