@@ -502,7 +502,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="drop the damaged sequences (and entries) that info lists as problems, keeping the rest as is")
     sp.set_defaults(func=cmd_info)
 
-    sp = sub.add_parser("render", help="render a mesh sequence, dataset sequence or motion to MP4 / GIF / PNG")
+    sp = sub.add_parser("render", help="render a mesh sequence, dataset sequence, motion or garment to MP4 / GIF / PNG")
     sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, DATA.zarr with --sequence, or a garment "
                     ".obj / .ply on the body (at rest, or along --motion); several side by side")
     sp.add_argument("--sequence", default=None, help="sequence name inside a dataset store")
