@@ -147,9 +147,12 @@ def cmd_garment_import(args):
 
     writable(args.out, folder=False)
     garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up, fit=True if args.fit else None,
-                             piece=args.piece)
+                             piece=args.piece, repair=args.repair)
     garment.save(args.out)
     p = garment.params
+    if args.repair:  # one line per kind of change
+        for line in p["repair"]["changes"] or ["nothing to change"]:
+            print(f"repair: {line}")
     if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
         f = p["fit"]
         print(f"fitted as a garment made for another body ({f['why']}): made for {_shape_text(f['shape'])}, draped "
@@ -179,7 +182,13 @@ def cmd_render(args):
     from loosefit.viz.scene import check_panels
 
     writable(args.out)  # a path without a suffix is a folder of PNGs
-    panels = [panel for path in args.input for panel in load_panels(path, sequence=args.sequence)]
+    meshes = [p for p in args.input if Path(p).suffix.lower() in (".obj", ".ply")]
+    if args.motion and not meshes:
+        raise InputError("--motion poses a garment mesh (.obj / .ply input); the inputs have their own frames",
+                         args.motion)
+    panels = [panel for path in args.input for panel in load_panels(
+        path, sequence=args.sequence, motion=args.motion if path in meshes else None, joint_map=args.joint_map,
+        keep_first_frame=args.keep_first_frame)]
     if args.frame is None and Path(args.out).suffix.lower() == ".png":
         frames = check_panels(panels)
         if frames != 1:
@@ -400,7 +409,7 @@ def cmd_view(args):
         writable(args.export, folder=True)  # before the scene is built
     result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
                   collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map,
-                  keep_first_frame=args.keep_first_frame)
+                  keep_first_frame=args.keep_first_frame, reference=not args.no_reference)
     if args.export is not None:
         print(f"wrote {result}: open it in a browser (from disk or any web server)")
 
@@ -488,6 +497,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "this body with Blender cloth (done anyway when it has no plausible placement here)")
     sp.add_argument("--piece", type=piece_choice, default=None, metavar="largest|N",
                     help="keep one connected piece (1 is the largest); default: every piece, when each is attached")
+    sp.add_argument("--repair", action="store_true",
+                    help="repair a messy mesh by dropping what breaks it (faces on non-manifold edges, duplicates, "
+                         "degenerate faces, loose pieces; the largest wearable piece, or --piece, is kept) and "
+                         "print what changed")
     body_options(sp)
     sp.add_argument("--out", required=True)
     sp.set_defaults(func=cmd_garment_import)
@@ -499,9 +512,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="drop the damaged sequences (and entries) that info lists as problems, keeping the rest as is")
     sp.set_defaults(func=cmd_info)
 
-    sp = sub.add_parser("render", help="render a mesh sequence, dataset sequence or motion to MP4 / GIF / PNG")
-    sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, or DATA.zarr with --sequence; several side by side")
+    sp = sub.add_parser("render", help="render a mesh sequence, dataset sequence, motion or garment to MP4 / GIF / PNG")
+    sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, DATA.zarr with --sequence, or a garment "
+                    ".obj / .ply on the body (at rest, or along --motion); several side by side")
     sp.add_argument("--sequence", default=None, help="sequence name inside a dataset store")
+    sp.add_argument("--motion", default=None, metavar="FILE",
+                    help="pose the body along this motion (.npz / .bvh) and a garment .obj / .ply with it (skinned to "
+                         "the body, as the body-LBS baseline); choose a frame for a .png with --frame")
+    motion_file_options(sp)
     sp.add_argument("--out", required=True, help="out.mp4, out.gif, out.png or a folder")
     sp.add_argument("--frame", type=int_at_least(0), action="append", default=None,
                     help="render only frame K (0 is the first; repeat for several); a .png output needs exactly one")
@@ -641,9 +659,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="collision handling of the animations, as loosefit animate (default exact)")
     sp.set_defaults(func=cmd_report)
 
-    sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser")
+    sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser (or animations "
+                        "alone: --no-reference)")
     sp.add_argument("input", nargs="+", help="SEQ.npz (mesh sequence), DATA.zarr:SEQUENCE or RUN:MOTION; the first "
-                    "is the simulation, the others predictions compared with it")
+                    "is the simulation, the others predictions compared with it (--no-reference: animations alone)")
+    sp.add_argument("--no-reference", action="store_true",
+                    help="no simulation: show each input by itself (animations on your own motions, any garments), "
+                         "without errors against the first")
     sp.add_argument("--port", type=int_at_least(0, 65535), default=8000,
                     help="port of the local server (127.0.0.1; 0: any free port)")
     sp.add_argument("--export", default=None, metavar="DIR", help="write the page as static files to DIR instead "

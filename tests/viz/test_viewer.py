@@ -427,3 +427,38 @@ def test_inputs_of_other_lengths_play_their_own_frames(browser, known, tmp_path,
     # The CLI prints the difference as a warning and exports the page.
     assert main(["view", *inputs, "--export", str(tmp_path / "page"), "--no-collisions"]) == 0
     assert "4 frames, the simulation" in capsys.readouterr().err
+
+
+def test_animations_alone_without_a_simulation(browser, known, tmp_path, capsys):
+    """Two animations on a user's own motion, of different garments (144 and 120 vertices) and lengths, one
+    with its body and one without: no simulation, so nothing is compared; each plays its own frames."""
+    other, other_faces = cylinder(segments=20)
+    other_verts = np.stack([other + [0.0, 0.0, 0.02 * t] for t in range(T + 2)]).astype(np.float32)
+    MeshSequence(other_verts, other_faces, 30.0).save(tmp_path / "other.npz")
+    inputs = [str(known.pred_path), str(tmp_path / "other.npz")]
+    with pytest.raises(InputError, match="120 vertices but the simulation"):
+        build_scene(inputs)  # by default the first is the simulation
+    scene = build_scene(inputs, reference=False)
+    first, second = scene.panels
+    assert scene.num_frames == T + 2 and [len(p.tracks) for p in scene.panels] == [2, 1]
+    assert all(t.errors is None for p in scene.panels for t in p.tracks)
+    assert "rmse_mm" not in first.metrics and "rmse_mm" not in second.metrics and not first.warnings
+    np.testing.assert_allclose(first.metrics["collision_pct"], known.pred_collision)
+    with ViewerServer(scene, port=0) as server:
+        page, errors = open_page(browser, server.url)
+        try:
+            assert page.evaluate("window.LOOSEFIT_MANIFEST.panels.length") == 2
+            assert page.evaluate("loosefitViewer.numFrames") == T + 2
+            for k in (0, 3, T + 1):
+                page.evaluate(f"loosefitViewer.setFrame({k})")
+                np.testing.assert_array_equal(positions(page, 0, 1), known.pred[min(k, T - 1)])
+                np.testing.assert_array_equal(positions(page, 0, 0), known.body[min(k, T - 1)])
+                np.testing.assert_array_equal(positions(page, 1, 0), other_verts[k])
+                assert page.evaluate("loosefitViewer.errorAt(0, 1, 0)") is None
+                assert page.evaluate("loosefitViewer.vertexColor(0, 1, 0)") is None  # plain colour: no heat map
+            assert page.evaluate("loosefitViewer.plotSeries()") == ["frame", "pred collision %"]
+            assert errors == []
+        finally:
+            page.close()
+    assert main(["view", *inputs, "--no-reference", "--export", str(tmp_path / "page"), "--no-collisions"]) == 0
+    assert "index.html" in capsys.readouterr().out

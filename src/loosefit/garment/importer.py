@@ -13,7 +13,10 @@ one garment when each piece could be worn by itself (:func:`check_wearable`) and
 (:func:`check_attached`: its top no lower than the lowest waistband, at most 6 cm from the body), each
 pinned at its own top.
 What is an error (:class:`~loosefit.errors.InputError` naming the file): unreadable lines, face
-indices out of range, NaN or infinite coordinates, an empty mesh, a non-orientable surface,
+indices out of range, NaN or infinite coordinates, an empty mesh, a surface these repairs leave broken
+(non-manifold edges left, a non-orientable piece: the message counts what is wrong with the file,
+:mod:`loosefit.garment.diagnosis`, naming vertices and faces as the file numbers them, and points to
+``--repair``, :mod:`loosefit.garment.repair`, which drops what breaks it),
 several pieces where one is not wearable or hangs free (the message names ``--piece``), a mesh too small
 to be worn (:func:`check_wearable`: fewer than two openings, or a largest opening of fewer than 8
 vertices), normals pointing inwards, no plausible placement on the body, a push out of the body over
@@ -57,9 +60,10 @@ from loosefit.errors import InputError
 from loosefit.garment.fitting import PUSH_MARGIN, push_out_bounded
 from loosefit.garment.garment import Garment, shape_record
 from loosefit.garment.landmarks import measure_body
-from loosefit.garment.mesh_checks import (boundary_loops, face_areas, face_components, mesh_report, unique_edges,
-                                          vertex_components)
-from loosefit.garment.obj_io import read_obj
+from loosefit.garment.diagnosis import diagnose
+from loosefit.garment.mesh_checks import (BoundaryError, boundary_loops, face_areas, face_components, mesh_report,
+                                          orientation, unique_edges, vertex_components)
+from loosefit.garment.mesh_file import FileNumbers, read_mesh_file, read_ply  # noqa: F401 - read_ply: its old home
 from loosefit.garment.placement import MAX_TOP_GAP, place, to_z_up
 from loosefit.garment.seam_repair import slivers, split_nonmanifold, weld
 from loosefit.garment.templates import CLEARANCE
@@ -80,49 +84,53 @@ MIN_OPENINGS = 2
 MIN_HEM_VERTICES = 8
 
 
-def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Read a PLY mesh through trimesh (no processing). Returns ``(verts, faces)``."""
-    import trimesh
-
-    try:
-        mesh = trimesh.load(str(path), file_type="ply", process=False, force="mesh")
-    except Exception as err:  # trimesh raises many types on malformed files
-        raise InputError(f"unreadable PLY: {err}", path) from None
-    verts = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64).reshape(-1, 3)
-    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
-    return verts, faces
-
-
-def repair(verts: np.ndarray, faces: np.ndarray, path, piece: str | int | None = None,
-           several: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
+def auto_repair(verts: np.ndarray, faces: np.ndarray, path, piece: str | int | None = None, several: bool = False,
+                numbers: FileNumbers | None = None, welded: bool = False):
     """Validate and repair a triangle soup (see the module docstring). Returns the repaired
-    ``(verts, faces)`` and counts of what was repaired.
+    ``(verts, faces)``, counts of what was repaired and the repaired mesh's
+    :class:`~loosefit.garment.mesh_file.FileNumbers` (``numbers``: the file's, default as given).
 
     ``piece``: ``"largest"`` or ``N`` (1 the largest) keeps that piece only; ``None`` keeps every piece of at
-    least :data:`PIECE_SHARE` of the area when ``several``, else refuses a file with more than one."""
+    least :data:`PIECE_SHARE` of the area when ``several``, else refuses a file with more than one.
+    ``welded``: the vertices were welded already (:func:`loosefit.garment.repair.repair_mesh`; welding again
+    could join the copies of a vertex it split).
+
+    A surface these repairs leave broken (non-manifold edges left after pairing their faces, a non-orientable
+    piece) is refused with :func:`~loosefit.garment.diagnosis.diagnose`'s counts of the file, in its own
+    numbers."""
     if len(verts) == 0 or len(faces) == 0:
         raise InputError("the mesh has no vertices or no faces", path)
+    numbers = numbers or FileNumbers.identity(len(verts), len(faces), base=1)
     bad = ~np.isfinite(verts).all(1)
     if bad.any():
-        raise InputError(f"{bad.sum()} vertices have NaN or infinite coordinates (first: vertex {np.argmax(bad) + 1})", path)
+        raise InputError(f"{bad.sum()} vertices have NaN or infinite coordinates (first: vertex "
+                         f"{numbers.vertices([np.argmax(bad)], 1)})", path)
     if faces.min() < 0 or faces.max() >= len(verts):
-        raise InputError(f"a face index is out of range 1..{len(verts)}", path)
+        raise InputError(f"a face index is out of range {numbers.base}..{len(verts) - 1 + numbers.base}", path)
     repairs = {}
     diag = float(np.linalg.norm(verts.max(0) - verts.min(0)))
-    verts, faces, repairs["merged_vertices"] = weld(verts, faces, WELD * diag)
+    if welded:
+        repairs["merged_vertices"] = 0
+    else:
+        verts, faces, repairs["merged_vertices"], kept = weld(verts, faces, WELD * diag, return_kept=True)
+        numbers = numbers.select(vertex=kept)
+    welded_mesh = (verts, faces, numbers)  # what the diagnosis of a refusal describes
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
     degenerate = repeated | (face_areas(verts, faces) <= (diag * 1e-7) ** 2)
     repairs["degenerate_faces"] = int(degenerate.sum())
-    faces = faces[~degenerate]
-    thin = slivers(verts, faces)
+    thin = ~degenerate & slivers(verts, faces)
     repairs["sliver_faces"] = int(thin.sum())
-    faces = faces[~thin]
+    kept = np.nonzero(~(degenerate | thin))[0]
+    faces, numbers = faces[kept], numbers.select(face=kept)
     _, first = np.unique(np.sort(faces, 1), axis=0, return_index=True)
     repairs["duplicate_faces"] = int(len(faces) - len(first))
-    faces = faces[np.sort(first)]
+    first = np.sort(first)
+    faces, numbers = faces[first], numbers.select(face=first)
     if len(faces) == 0:
         raise InputError("every face is degenerate", path)
+    old = faces
     verts, faces, split = split_nonmanifold(verts, faces)
+    numbers = numbers.after_faces(len(verts), old, faces)
     repairs.update(split)
     labels = face_components(faces)
     area = np.bincount(labels, weights=face_areas(verts, faces))
@@ -139,15 +147,41 @@ def repair(verts: np.ndarray, faces: np.ndarray, path, piece: str | int | None =
     else:
         keep = big
     repairs["dropped_pieces"] = int(len(order) - len(keep))
-    faces = faces[np.isin(labels, keep)]
+    kept = np.nonzero(np.isin(labels, keep))[0]
+    faces, numbers = faces[kept], numbers.select(face=kept)
     used = np.zeros(len(verts), bool)
     used[faces.reshape(-1)] = True
     repairs["unreferenced_vertices"] = int((~used).sum())
     remap = np.cumsum(used) - 1
     verts, faces = verts[used], remap[faces]
-    faces, flipped = _orient(faces, path)
-    repairs["reoriented_faces"] = flipped
-    return verts, faces, repairs
+    numbers = numbers.select(vertex=np.nonzero(used)[0])
+    edges, _, count = unique_edges(faces)
+    if (count > 2).any():  # faces of a seam that pairing left on one vertex pair: the fans around it join up
+        raise topology_error(f"{int((count > 2).sum())} non-manifold edges are left after gluing the faces of each "
+                             f"seam in pairs (vertices {numbers.edges(edges[count > 2])})", path, welded_mesh)
+    flip, conflicts, _ = orientation(faces)
+    if len(conflicts):
+        paired = ", once the faces of each non-manifold seam are glued in pairs" if split["nonmanifold_edges"] else ""
+        raise topology_error(f"the surface is not orientable (a Moebius-like strip) where {numbers.unit}s "
+                             f"{numbers.faces(conflicts[:, 0])} meet their neighbours{paired}", path, welded_mesh)
+    faces = faces.copy()
+    faces[flip] = faces[flip][:, ::-1]
+    repairs["reoriented_faces"] = int(flip.sum())
+    return verts, faces, repairs, numbers
+
+
+def topology_error(problem: str, path, file_mesh) -> InputError:
+    """The refusal of a surface the import cannot use: ``problem`` and the counts of what is wrong with the
+    file (``file_mesh``: its welded ``(verts, faces, numbers)``), with the way out."""
+    verts, faces, numbers = file_mesh
+    counting = "from 1" if numbers.base == 1 else "from 0"
+    d = diagnose(verts, faces, numbers)
+    if d.nonmanifold_edges or d.duplicate_faces or d.degenerate_faces or d.pinched_vertices or d.pieces > 1:
+        way = "`--repair` drops the faces that make it so, keeps the largest wearable piece and says what it changed"
+    else:  # nothing to drop: the surface itself has one side
+        way = "A garment has an inside and an outside, so the file needs mending where it was made"
+    return InputError(f"{problem}. The file has (welded; numbers as in the file, {counting}): {d.text()}. {way}",
+                      path)
 
 
 def _pieces_problem(area: np.ndarray, order: list[int], split: dict) -> str:
@@ -156,13 +190,17 @@ def _pieces_problem(area: np.ndarray, order: list[int], split: dict) -> str:
             + (f", after splitting {split['nonmanifold_edges']} non-manifold edges" if split["nonmanifold_edges"] else ""))
 
 
-def check_wearable(verts: np.ndarray, faces: np.ndarray, path) -> None:
+def check_wearable(verts: np.ndarray, faces: np.ndarray, path, numbers: FileNumbers | None = None) -> None:
     """Refuse a repaired mesh too small to be a garment: fewer than :data:`MIN_OPENINGS` openings
-    (boundary loops), or a largest opening of fewer than :data:`MIN_HEM_VERTICES` vertices."""
+    (boundary loops), or a largest opening of fewer than :data:`MIN_HEM_VERTICES` vertices. ``numbers``: the
+    file's numbering of ``verts``, to name a vertex as the file does."""
     try:
         loops = boundary_loops(faces)
-    except ValueError as err:  # repair leaves manifold boundaries; say so if one is not
-        raise InputError(f"the mesh's openings are not simple loops: {err}", path) from None
+    except BoundaryError as err:  # repair leaves manifold boundaries; say so if one is not
+        where = (f"vertex {numbers.vertices([err.vertex], 1)} of the file" if numbers is not None
+                 else f"vertex {err.vertex}")
+        raise InputError(f"the mesh's openings are not simple loops: more or fewer than two boundary edges meet at "
+                         f"{where}", path) from None
     size = f"{len(verts)} vertices, {len(faces)} faces"
     if len(loops) < MIN_OPENINGS:
         raise InputError(
@@ -191,7 +229,7 @@ def outward_flux(verts: np.ndarray, faces: np.ndarray) -> float:
 
 def check_outward(verts: np.ndarray, faces: np.ndarray, path) -> None:
     """Refuse a garment whose normals point inwards (:func:`outward_flux` negative): inside out, or its
-    faces wound the other way. Its faces are consistently oriented already (:func:`repair`)."""
+    faces wound the other way. Its faces are consistently oriented already (:func:`auto_repair`)."""
     labels = face_components(faces)
     for k in np.unique(labels):
         if outward_flux(verts, faces[labels == k]) < 0:
@@ -199,44 +237,6 @@ def check_outward(verts: np.ndarray, faces: np.ndarray, path) -> None:
             raise InputError(f"the garment is inside out{which}: its faces' normals point inwards, towards the body; "
                              "wind the faces the other way (counter-clockwise seen from outside) or turn it right side "
                              "out", path)
-
-
-def _orient(faces: np.ndarray, path) -> tuple[np.ndarray, int]:
-    """Make face orientation consistent by a walk over edge neighbours; error if not orientable."""
-    edges, face_edge, count = unique_edges(faces)
-    nf = len(faces)
-    # For each interior edge, its two faces and whether they traverse it in the same direction.
-    he = face_edge.reshape(-1)
-    order = np.argsort(he, kind="stable")
-    starts = np.nonzero(np.r_[True, he[order][1:] != he[order][:-1]])[0]
-    pairs = [(order[s], order[s + 1]) for s in starts if count[he[order[s]]] == 2]
-    neighbours = [[] for _ in range(nf)]
-    for h1, h2 in pairs:
-        f1, c1, f2, c2 = h1 // 3, h1 % 3, h2 // 3, h2 % 3
-        same = faces[f1, c1] == faces[f2, c2]  # both run a -> b: inconsistent
-        neighbours[f1].append((f2, same))
-        neighbours[f2].append((f1, same))
-    flip = np.full(nf, -1)
-    for seed in range(nf):  # one walk per piece; each keeps the orientation most of its faces have
-        if flip[seed] >= 0:
-            continue
-        flip[seed] = 0
-        stack, piece = [seed], [seed]
-        while stack:
-            f = stack.pop()
-            for g, same in neighbours[f]:
-                want = flip[f] ^ int(same)
-                if flip[g] < 0:
-                    flip[g] = want
-                    stack.append(g)
-                    piece.append(g)
-                elif flip[g] != want:
-                    raise InputError("the surface is not orientable (a Moebius-like strip)", path)
-        if 2 * flip[piece].sum() > len(piece):
-            flip[piece] ^= 1
-    out = faces.copy()
-    out[flip == 1] = out[flip == 1][:, ::-1]
-    return out, int((flip == 1).sum())
 
 
 def _units(verts: np.ndarray, unit: str | None, path) -> list[str]:
@@ -267,6 +267,7 @@ def _length(metres: float) -> str:
 def import_garment(
     path: str | Path, body: BodyModel, unit: str | None = None, up: str | None = None, clearance: float = CLEARANCE,
     fit: bool | None = False, fit_params=None, fit_search=None, piece: str | int | None = None,
+    repair: bool = False,
 ) -> Garment:
     """Import a garment mesh (.obj or .ply) and fit it to ``body``'s rest pose.
 
@@ -284,41 +285,44 @@ def import_garment(
         piece: ``"largest"`` or ``N`` (1 is the largest): keep that connected piece only. ``None``: keep every
             piece as one garment when each is attached to the body (:func:`check_attached`: a crop top and a
             skirt), else refuse.
+        repair: first repair the file by dropping what breaks it (:func:`loosefit.garment.repair.repair_mesh`:
+            faces on non-manifold edges, loose pieces; one piece kept, the largest wearable one or ``piece``).
 
     Returns:
         A :class:`Garment` of kind ``"imported"``; ``params`` records the unit, the
         placement (:meth:`loosefit.garment.placement.Placement.as_dict`: up axis, attachment,
         offset, top height, top gap, inside fraction; on the body found when fitted), the repairs, the push
         out of the body and, when fitted, ``params["fit"]``: why, the shape found, the drape and the share
-        of vertices more than 2 mm inside the body. The vertices within 3 cm of the garment's top are pinned.
+        of vertices more than 2 mm inside the body. With ``repair``, ``params["repair"]``: what it changed
+        (``counts``, ``changes``: a line each) and the counts of what was wrong with the file (``file``). The
+        vertices within 3 cm of the garment's top are pinned.
 
     Raises:
         InputError: the file is unreadable or broken beyond safe repair, or no placement on the
             body is plausible (see the module docstring).
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", path)
-    suffix = path.suffix.lower()
-    if suffix == ".obj":
-        verts, faces = read_obj(path)
-    elif suffix == ".ply":
-        verts, faces = read_ply(path)
-    else:
-        raise InputError(f"unsupported garment format {suffix!r}; use .obj or .ply", path)
-    verts, faces, repairs = repair(verts, faces, path, piece, several=True)
+    verts, faces, numbers = read_mesh_file(path)
+    forced = None
+    if repair:
+        from loosefit.garment.repair import repair_mesh
+
+        verts, faces, forced = repair_mesh(verts, faces, numbers, piece=piece, path=path)
+        numbers, piece = forced.numbers, None  # the piece is chosen
+    verts, faces, repairs, numbers = auto_repair(verts, faces, path, piece, several=True, numbers=numbers,
+                                                 welded=forced is not None)
     pieces = vertex_components(len(verts), faces)
     if pieces.max() > 0:  # several pieces are one garment only where each could be worn
         labels = pieces[faces[:, 0]]
         area = np.bincount(labels, weights=face_areas(verts, faces))
         for k in range(len(area)):
             try:
-                check_wearable(verts, faces[labels == k], path)
+                check_wearable(verts, faces[labels == k], path, numbers)
             except InputError as err:
                 raise InputError(f"{_pieces_problem(area, list(np.argsort(area)[::-1]), repairs)}; a piece with "
                                  f"{100 * area[k] / area.sum():.0f}% of the area is no garment by itself: "
                                  f"{err.problem}", path) from None
-    check_wearable(verts, faces, path)
+    check_wearable(verts, faces, path, numbers)
     check_outward(verts, faces, path)
     units = _units(verts, unit, path)
     lm = measure_body(body)
@@ -358,10 +362,12 @@ def import_garment(
               "over_5mm_percent": round(100.0 * float((moved > 0.005).mean()), 2)}
     report = mesh_report(verts, faces)
     if report.num_components != pieces.max() + 1 or not dataclasses.replace(report, num_components=1).ok:
-        raise InputError(f"mesh is still broken after repair: {report}", path)
+        raise InputError(f"mesh is still broken after repair: {diagnose(verts, faces, numbers).text()}", path)
     pinned = top_pins(verts, pieces)
     params = {"source": str(path), "unit": unit, **placement.as_dict(), "repairs": repairs, "pushed_out": pushed,
               "pieces": int(pieces.max() + 1)}
+    if forced is not None:
+        params["repair"] = {"counts": forced.counts(), "changes": forced.lines(), "file": forced.before.counts()}
     if fitted is not None:
         from loosefit.garment.body_fit import inside_percent
 

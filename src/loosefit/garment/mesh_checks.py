@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 
 def unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -49,10 +49,19 @@ def face_components(faces: np.ndarray) -> np.ndarray:
     return labels[faces[:, 0]]
 
 
+class BoundaryError(ValueError):
+    """A boundary that is not made of simple loops, at ``vertex`` (an id of the mesh checked: callers that
+    renumbered a file's vertices name it by the file's number)."""
+
+    def __init__(self, message: str, vertex: int):
+        super().__init__(message)
+        self.vertex = int(vertex)
+
+
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     """Ordered boundary loops of an edge-manifold mesh, each an int64 array of vertex ids following
-    the faces' orientation. Raises ``ValueError`` where boundary vertices are not simple (a vertex
-    on two boundary loops, or a fan that touches the boundary twice)."""
+    the faces' orientation. Raises :class:`BoundaryError` (a ``ValueError``) where boundary vertices are not
+    simple (a vertex on two boundary loops, or a fan that touches the boundary twice)."""
     faces = np.asarray(faces, dtype=np.int64)
     half = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
     key = half[:, 0] * (faces.max() + 1 if len(faces) else 1) + half[:, 1]
@@ -63,7 +72,7 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     nxt = {}
     for a, b in border:
         if a in nxt:
-            raise ValueError(f"vertex {a} starts two boundary edges (non-manifold vertex)")
+            raise BoundaryError(f"vertex {a} starts two boundary edges (non-manifold vertex)", a)
         nxt[a] = b
     loops, seen = [], set()
     for start in nxt:
@@ -74,12 +83,60 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
             seen.add(v)
             loop.append(v)
             if v not in nxt:
-                raise ValueError(f"boundary is not closed at vertex {v}")
+                raise BoundaryError(f"boundary is not closed at vertex {v}", v)
             v = nxt[v]
         if v != start:
-            raise ValueError(f"boundary loop through vertex {v} is not simple")
+            raise BoundaryError(f"boundary loop through vertex {v} is not simple", v)
         loops.append(np.array(loop, dtype=np.int64))
     return loops
+
+
+def orientation(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Consistent face orientation over the sheets of a mesh: faces glued along edges that have exactly
+    two faces (edges of three or more faces glue nothing here).
+
+    Two glued faces agree when they run their common edge in opposite directions. Each sheet is walked
+    breadth first from its first face; a face reached is flipped when it disagrees with the face it was
+    reached from. A glued pair that still disagrees once every face is set makes its sheet
+    non-orientable (a Moebius-like strip). Each sheet then keeps the orientation most of its faces have.
+
+    Args:
+        faces: ``(F, 3)`` int triangles.
+
+    Returns:
+        ``flip (F,)`` bool, the faces to reverse; ``conflicts (K, 2)`` int64 glued face pairs that disagree
+        whatever the flips (none on an orientable mesh); ``sheet (F,)`` int64 sheet label of each face.
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    nf = len(faces)
+    if nf == 0:
+        return np.zeros(0, bool), np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+    _, face_edge, count = unique_edges(faces)
+    he = face_edge.reshape(-1)  # half edge h = 3 f + c runs from corner c to corner c + 1
+    order = np.argsort(he, kind="stable")
+    first = np.nonzero(np.r_[True, he[order][1:] != he[order][:-1]])[0]
+    first = first[count[he[order[first]]] == 2]
+    h1, h2 = order[first], order[first + 1]
+    f1, f2 = h1 // 3, h2 // 3
+    same = (faces[f1, h1 % 3] == faces[f2, h2 % 3]).astype(np.int8)  # both run a -> b: they disagree
+    graph = sp.coo_matrix((np.ones(len(f1)), (f1, f2)), shape=(nf, nf))
+    _, sheet = connected_components(graph, directed=False)
+    # One breadth-first walk from a root joined to the first face of every sheet.
+    roots = np.unique(sheet, return_index=True)[1]
+    rows = np.r_[f1, f2, np.full(len(roots), nf)]
+    cols = np.r_[f2, f1, roots]
+    walk = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(nf + 1, nf + 1)).tocsr()
+    visit, pred = breadth_first_order(walk, nf, directed=False, return_predecessors=True)
+    disagree = dict(zip((np.minimum(f1, f2) * nf + np.maximum(f1, f2)).tolist(), same.tolist()))
+    parity = [0] * (nf + 1)
+    for f, p in zip(visit[1:].tolist(), pred[visit[1:]].tolist()):
+        if p != nf:
+            parity[f] = parity[p] ^ disagree[min(f, p) * nf + max(f, p)]
+    flip = np.asarray(parity[:nf], bool)
+    bad = (flip[f1] ^ flip[f2]) != same.astype(bool)
+    majority = np.bincount(sheet, weights=flip) * 2 > np.bincount(sheet)
+    flip ^= majority[sheet]
+    return flip, np.stack([f1[bad], f2[bad]], 1), sheet.astype(np.int64)
 
 
 def triangle_angles(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:

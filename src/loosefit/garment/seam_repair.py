@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from loosefit.garment.mesh_checks import unique_edges
 
 
-def weld(verts: np.ndarray, faces: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, int]:
+def weld(verts: np.ndarray, faces: np.ndarray, tol: float, return_kept: bool = False):
     """Merge vertices closer than ``tol`` (transitively) into their first one.
 
     Only pairs that are one point of the cloth written twice are merged: two ends of an edge (a collapsed edge),
@@ -36,7 +36,8 @@ def weld(verts: np.ndarray, faces: np.ndarray, tol: float) -> tuple[np.ndarray, 
 
     Returns:
         ``(verts (V', 3), faces (F, 3), merged)``: unused merged vertices removed, file order kept
-        otherwise; ``merged = V - V'``.
+        otherwise; ``merged = V - V'``. With ``return_kept``, also ``kept (V',)``: the old id of each vertex
+        kept (the first of those merged into it).
     """
     pairs = cKDTree(verts).query_pairs(tol, output_type="ndarray") if tol > 0 else np.zeros((0, 2), int)
     n = len(verts)
@@ -68,6 +69,8 @@ def weld(verts: np.ndarray, faces: np.ndarray, tol: float) -> tuple[np.ndarray, 
     keep = np.sort(first)
     rank = np.empty(label.max() + 1, np.int64)
     rank[np.argsort(first)] = np.arange(len(first))
+    if return_kept:
+        return verts[keep], rank[label][faces], int(n - len(keep)), keep
     return verts[keep], rank[label][faces], int(n - len(keep))
 
 

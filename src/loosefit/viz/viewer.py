@@ -325,21 +325,25 @@ def print_warnings(scene: ViewerScene) -> None:
 
 def view(inputs: list[str], port: int = 8000, export: str | Path | None = None, body=None,
          collisions: bool = True, collision_frames: int = DEFAULT_COLLISION_FRAMES, serve: bool = True,
-         handling: str = "exact", joint_map=None, keep_first_frame: bool = False):
-    """``loosefit view INPUT... [--port P] [--export DIR]``: export the page to ``DIR``, or serve it on
-    ``http://127.0.0.1:P/`` until interrupted. Returns the index path (export) or the server (``serve=False``:
-    started in the background; close it when done). ``handling``: the runs' collision handling (exact, pushout
-    or none); ``joint_map``: the joint map of their BVH motions; ``keep_first_frame``: keep a far first frame of
-    their motion files (:func:`loosefit.motion.io.load_motion`)."""
+         handling: str = "exact", joint_map=None, keep_first_frame: bool = False,
+         reference: bool = True):
+    """``loosefit view INPUT... [--port P] [--export DIR] [--no-reference]``: export the page to ``DIR``, or serve
+    it on ``http://127.0.0.1:P/`` until interrupted. Returns the index path (export) or the server
+    (``serve=False``: started in the background; close it when done). ``handling``: the runs' collision handling
+    (exact, pushout or none); ``joint_map``: the joint map of their BVH motions; ``keep_first_frame``: keep a far
+    first frame of their motion files (:func:`loosefit.motion.io.load_motion`); ``reference``: the first input is
+    the simulation the others are compared with (``False``: animations, each by itself)."""
     if export is not None:
         scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames,
-                            handling=handling, joint_map=joint_map, keep_first_frame=keep_first_frame)
+                            handling=handling, joint_map=joint_map, keep_first_frame=keep_first_frame,
+                            reference=reference)
         print_warnings(scene)
         return export_scene(scene, export)
     server = ViewerServer(None, port=port)  # a port in use fails before the inputs are loaded
     try:
         scene = build_scene(list(inputs), body=body, collisions=collisions, collision_frames=collision_frames,
-                            handling=handling, joint_map=joint_map, keep_first_frame=keep_first_frame)
+                            handling=handling, joint_map=joint_map, keep_first_frame=keep_first_frame,
+                            reference=reference)
     except BaseException:
         server.httpd.server_close()
         raise

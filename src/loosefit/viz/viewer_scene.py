@@ -9,7 +9,7 @@ Inputs (one panel each, side by side, in the order given):
 - ``RUN:MOTION``: a trained run folder (``loosefit train``) animated on a motion (``.npz`` / ``.bvh``),
   with the body posed along the motion.
 
-The first input is the reference (the simulation). Every later input is a prediction of the same garment:
+By default the first input is the reference (the simulation). Every later input is a prediction of the same garment:
 it must have the reference's garment vertex count. Each input plays for its own length (a run animated on a
 motion longer or shorter than the simulated sequence): the page plays the longest, and a shorter input holds
 its last frame. For a prediction the viewer shows the per-vertex error ``e_ti = 1000 * ||pred_ti - ref_ti||``
@@ -17,6 +17,10 @@ its last frame. For a prediction the viewer shows the per-vertex error ``e_ti = 
 frames both have (``t < min(T_ref, T_pred)``; past them the garment takes its plain colour); for every panel
 with a body, the per-frame collision ratio (% of garment vertices inside the body by more than 1 mm,
 :mod:`loosefit.metrics.collision`) over its own frames.
+
+Without a reference (``reference=False``, ``loosefit view --no-reference``), every input is an animation shown
+by itself (an animation on a user's own motion has no simulation to compare with): any garments, each with its
+body when its file has one, each playing its own length; no errors, no RMSE, the collision ratio as above.
 """
 
 from __future__ import annotations
@@ -228,9 +232,9 @@ def _collisions(panels: list[ViewerPanel], max_frames: int) -> None:
 
 def build_scene(inputs: list[str], body=None, collisions: bool = True,
                 collision_frames: int = DEFAULT_COLLISION_FRAMES, handling: str = "exact",
-                joint_map=None, keep_first_frame: bool = False) -> ViewerScene:
+                joint_map=None, keep_first_frame: bool = False, reference: bool = True) -> ViewerScene:
     """The scene of ``loosefit view INPUT...``: the first input is the reference (simulation), the others
-    predictions compared with it.
+    predictions compared with it; with ``reference=False`` every input is an animation by itself.
 
     Args:
         inputs: input specs (see the module docstring).
@@ -239,6 +243,8 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
         handling: collision handling of the runs' animations (:func:`load_input`).
         joint_map: the joint map of the runs' BVH motions (:func:`load_input`).
         keep_first_frame: keep a far first frame of the runs' motion files (:func:`load_input`).
+        reference: compare the later inputs with the first (the simulation); ``False``: show each by itself,
+            whatever its garment (no errors, no RMSE), at the first input's frame rate.
         collision_frames: compute it at this many evenly spaced frames (0: every frame); the others are
             NaN (one signed-distance tree of a 13.7k-vertex body and a 12k-vertex query take ~0.5 s a frame
             on the 2-core machines).
@@ -256,6 +262,12 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
     loaded = [load_input(spec, body, handling, joint_map, keep_first_frame) for spec in inputs]
     panels = [p for p, _ in loaded]
     fps = loaded[0][1]
+    if not reference:
+        for panel, rate in loaded[1:]:
+            if rate != fps:
+                panel.warnings.append(f"{panel.source}: {rate:g} fps, the page plays every input at the first's "
+                                      f"{fps:g} fps")
+        return _scene(panels, fps, collisions, collision_frames)
     ref = panels[0]
     ref_garment = ref.garment
     for panel in panels[1:]:
@@ -275,6 +287,11 @@ def build_scene(inputs: list[str], body=None, collisions: bool = True,
         diff = garment.verts[:both].astype(np.float64) - ref_garment.verts[:both].astype(np.float64)
         garment.errors = (1000.0 * np.linalg.norm(diff, axis=-1)).astype(np.float32)
         panel.metrics["rmse_mm"] = _rmse_per_frame(garment.errors)
+    return _scene(panels, fps, collisions, collision_frames)
+
+
+def _scene(panels: list[ViewerPanel], fps: float, collisions: bool, collision_frames: int) -> ViewerScene:
+    """The scene of loaded panels (errors set where there are any): collision ratios, length, heat map range."""
     if collisions:
         _collisions(panels, collision_frames)
     num_frames = max(t.verts.shape[0] for p in panels for t in p.tracks)
