@@ -10,9 +10,10 @@ import signal
 import sys
 from pathlib import Path
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, int_at_least, joint_map_option, nonnegative_float,
-                               piece_choice, positive_float, writable)
+from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least, joint_map_option,
+                               nonnegative_float, piece_choice, positive_float, writable)
 from loosefit.errors import InputError, LoosefitError
+from loosefit.paths import guard_output
 
 
 def _body(args):
@@ -35,6 +36,7 @@ def cmd_body(args):
     from loosefit.motion.io import load_motion
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     motion = load_motion(args.motion, body, joint_map=args.joint_map) if args.motion else body.rest_motion(1)
     posed = body.pose(motion)
@@ -56,6 +58,7 @@ def cmd_motion_generate(args):
     from loosefit.motion.procedural import generate
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     start = args.start or 0.0
     motion = generate(args.kind, start + args.seconds, args.seed, body, fps=args.fps)
@@ -69,6 +72,7 @@ def cmd_motion_map(args):
     from loosefit.motion.map_writer import write_joint_map
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     joint_map, notes = write_joint_map(args.file, _body(args), args.out)
     print(f"wrote {args.out}: {len(joint_map.joints)} joints mapped, {len(joint_map.ignore)} ignored; "
           f"check it, then pass it with --joint-map {args.out}")
@@ -80,6 +84,7 @@ def cmd_motion_import(args):
     from loosefit.motion.io import load_motion
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     motion = load_motion(args.file, body, joint_map=args.joint_map, source_fps=args.fps, start=args.start,
                          seconds=args.seconds)
@@ -125,10 +130,19 @@ def _refit_line(path, fitted: dict) -> str:
             f"inside the body before, {fitted['inside_after_percent']:g}% after")
 
 
+def _garment_out(args) -> None:
+    """Check a garment's output and its JSON sidecar (``G.obj`` writes ``G.json`` beside it) before the work."""
+    from loosefit.garment import Garment
+
+    writable(args.out, folder=False)
+    for path in (args.out, Garment.sidecar_path(args.out)):
+        guard_output(path, args.force)
+
+
 def cmd_garment_make(args):
     from loosefit.garment import make_garment
 
-    writable(args.out, folder=False)
+    _garment_out(args)
     params = _garment_params(args.param)
     if args.length is not None:
         params["length"] = args.length
@@ -143,7 +157,7 @@ def cmd_garment_make(args):
 def cmd_garment_import(args):
     from loosefit.garment import import_garment
 
-    writable(args.out, folder=False)
+    _garment_out(args)
     garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up, fit=True if args.fit else None,
                              piece=args.piece)
     garment.save(args.out)
@@ -177,6 +191,7 @@ def cmd_render(args):
     from loosefit.viz.scene import check_panels
 
     writable(args.out)  # a path without a suffix is a folder of PNGs
+    guard_output(args.out, args.force)
     panels = [panel for path in args.input for panel in load_panels(path, sequence=args.sequence)]
     if args.frame is None and Path(args.out).suffix.lower() == ".png":
         frames = check_panels(panels)
@@ -195,10 +210,7 @@ def cmd_evaluate(args):
     settings = EvaluationSettings(**{k: v for k, v in given.items() if v is not None})
     writable(args.out, folder=True)
     out = Path(args.out)
-    is_run = (out / "method.yaml").is_file() or (out / "checkpoints").is_dir()
-    if is_run and (out / "metrics.csv").exists() and not args.force:
-        raise InputError("this is a training run folder and its metrics.csv is the run's training log: choose "
-                         "another --out, or give --force to replace it", out / "metrics.csv")
+    guard_output(out, args.force, names=("metrics.csv", "metrics.json"))  # a run folder's metrics.csv is its log
     result = evaluate(load_pairs(args.pred, args.gt, args.body, args.sequence, args.split), settings)
     print(result.table())
     result.write_csv(out / "metrics.csv")
@@ -223,6 +235,9 @@ def cmd_simulate(args):
             where = "; ".join(f"{option} -> {in_plan[option]}" for option in given)
             raise InputError(f"options for one sequence (--garment, --motion), not for a plan: {', '.join(given)}; "
                              f"write them into the plan instead: {where}", args.plan)
+        if args.force:
+            raise InputError("--force applies to one sequence's --out; a plan resumes in its store (finished "
+                             "sequences are kept)", args.plan)
         writable(args.out, folder=True)
         summary = run_plan(args.plan, args.out, workers=args.workers, address=args.address,
                            splits=tuple(args.splits) if args.splits else None,
@@ -237,6 +252,7 @@ def cmd_simulate(args):
     sets = args.set or []
     params = SimParams.load(args.params, sets) if args.params else SimParams().with_overrides(sets)
     writable(args.out, folder=False)  # before the simulation, not after it
+    guard_output(args.out, args.force)
     result = simulate_file(args.garment, args.motion, args.out, params=params, shape=args.shape,
                            joint_map=args.joint_map, fit=True if args.fit else None)
     print(json.dumps(result.stats, indent=2, default=str))
@@ -267,6 +283,7 @@ def cmd_train(args):
     from loosefit.training import train_model
 
     writable(args.out, folder=True)
+    guard_output(args.out, None, stores_only=True)  # a run folder is train's own output; a store is not
 
     if args.method == "collision":
         if args.nproc != 1 or args.device not in (None, "cpu"):
@@ -310,7 +327,15 @@ def cmd_animate(args):
     from loosefit.metrics.collision import inside_body_report
     from loosefit.motion.io import load_motion
 
+    from loosefit.io.export import export_files
+
     writable(args.out, folder=True if len(args.motion) > 1 else None)
+    if len(args.motion) > 1:
+        written = [f.name for p in args.motion for f in export_files(f"{Path(p).stem}{args.format}", args.with_body)]
+        guard_output(args.out, args.force, names=written)
+    else:
+        for path in export_files(args.out, args.with_body):
+            guard_output(path, args.force)
     body = _body(args)
     motions = [_at_model_rate(load_motion(path, body, joint_map=args.joint_map), path) for path in args.motion]
     if is_static_run(args.run):
@@ -361,6 +386,7 @@ def cmd_report(args):
     from loosefit.report.build import DEFAULT_RESULTS
 
     writable(args.out, folder=True)  # before the runs are evaluated
+    guard_output(args.out, args.force, names=("index.html", "report.md", "metrics.json", "figures"))
     index = build_report(args.data, args.run, args.out, sequences=args.sequence, split=args.split,
                          results_dir=args.results or DEFAULT_RESULTS, device=args.device, images=not args.no_images,
                          handling=args.collision)
@@ -372,6 +398,7 @@ def cmd_export_rig(args):
     from loosefit.motion.io import load_motion
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     motion = _at_model_rate(load_motion(args.motion, body, joint_map=args.joint_map), args.motion)
     summary = export_rig(args.run, motion, args.out, body=None if args.no_body else body, influences=args.influences,
@@ -390,6 +417,7 @@ def cmd_view(args):
 
     if args.export is not None:
         writable(args.export, folder=True)  # before the scene is built
+        guard_output(args.export, None)  # no --force: an export folder is a new one or an earlier export
     result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
                   collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map)
     if args.export is not None:
@@ -400,6 +428,7 @@ def cmd_demo(args):
     from loosefit.demo import run_demo
 
     writable(args.out, folder=True)
+    guard_output(args.out, None)  # no --force: the demo resumes in its own folder
     run_demo(Path(args.out))
 
 
@@ -422,6 +451,7 @@ def build_parser() -> argparse.ArgumentParser:
     joint_map_option(sp)
     sp.add_argument("--frame", type=int, default=0, help="frame written to an .obj")
     sp.add_argument("--out", required=True, help="body.obj (one frame) or body.npz (mesh sequence)")
+    force_option(sp)
     sp.set_defaults(func=cmd_body)
 
     motion = sub.add_parser("motion", help="generate or import motions").add_subparsers(dest="motion_command", required=True)
@@ -434,6 +464,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--fps", type=positive_float, default=30.0)
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_motion_generate)
     sp = motion.add_parser(
         "map", help="write a starting joint map for a BVH skeleton (YAML, to check and pass with --joint-map)",
@@ -443,6 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("file", help="the BVH file")
     body_options(sp)
     sp.add_argument("--out", required=True, help="MAP.yaml")
+    force_option(sp)
     sp.set_defaults(func=cmd_motion_map)
     sp = motion.add_parser("import", help="import a BVH or AMASS file onto the body rig",
                            description="Import a BVH or AMASS (SMPL-H .npz) motion onto the body's rig.\n\n"
@@ -455,6 +487,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seconds", type=positive_float, default=None, help="keep SECONDS seconds (default: to the end)")
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_motion_import)
 
     garment = sub.add_parser("garment", help="make or import garments").add_subparsers(dest="garment_command", required=True)
@@ -468,6 +501,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--param", action="append", help="any other template parameter, NAME=VALUE (repeatable)")
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_garment_make)
     sp = garment.add_parser("import", help="validate, repair and align an OBJ / PLY garment")
     sp.add_argument("file")
@@ -480,6 +514,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="keep one connected piece (1 is the largest); default: every piece, when each is attached")
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_garment_import)
 
     sp = sub.add_parser("info", help="summarise a dataset store")
@@ -493,6 +528,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("input", nargs="+", help="mesh-sequence .npz, motion .npz, or DATA.zarr with --sequence; several side by side")
     sp.add_argument("--sequence", default=None, help="sequence name inside a dataset store")
     sp.add_argument("--out", required=True, help="out.mp4, out.gif, out.png or a folder")
+    force_option(sp)
     sp.add_argument("--frame", type=int_at_least(0), action="append", default=None,
                     help="render only frame K (0 is the first; repeat for several); a .png output needs exactly one")
     sp.add_argument("--fps", type=positive_float, default=30.0)
@@ -504,6 +540,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("simulate", help="simulate ground truth with Blender cloth: one sequence or a plan")
     sp.add_argument("plan", nargs="?", default=None, help="a plan YAML (configs/datasets/*.yaml)")
     sp.add_argument("--out", required=True, help="DATA.zarr for a plan; seq.npz for one sequence")
+    force_option(sp)
     sp.add_argument("--garment", default=None, help="garment .obj (one sequence)")
     sp.add_argument("--motion", default=None, help="motion .npz / .bvh (one sequence)")
     sp.add_argument("--params", default=None, help="simulation parameters YAML")
@@ -566,6 +603,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "count), in the rest pose of --shape; a loosefit garment made on another shape is draped onto it")
     body_options(sp)
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
+    force_option(sp)
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
     sp.add_argument("--with-body", action="store_true", help="export the posed body too (always in an .npz)")
     sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
@@ -588,6 +626,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--joint-map", default=None, help="joint map for a BVH motion")
     body_options(sp)
     sp.add_argument("--out", required=True, help="dress.glb (skinned glTF) or dress.usdc / .usda (UsdSkel)")
+    force_option(sp)
     sp.add_argument("--influences", type=int, choices=[4, 8], default=4, help="skinning weights kept per vertex")
     sp.add_argument("--no-body", action="store_true", help="write the garment only")
     sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
@@ -606,8 +645,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--sted-dt", type=finite_float, default=None, help="STED temporal distance")
     sp.add_argument("--sted-c", type=finite_float, default=None, help="STED temporal weight")
     sp.add_argument("--tolerance", type=finite_float, default=None, help="collision tolerance, metres (default 1 mm)")
-    sp.add_argument("--force", action="store_true", help="replace the training log metrics.csv of a run folder "
-                    "given as --out")
+    force_option(sp)
     sp.set_defaults(func=cmd_evaluate)
 
     sp = sub.add_parser("report", help="compare trained runs on a dataset: HTML + Markdown report with metrics, "
@@ -615,6 +653,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("data", help="a dataset store DATA.zarr (ground truth)")
     sp.add_argument("run", nargs="+", help="run folders written by loosefit train")
     sp.add_argument("--out", required=True, help="report folder (index.html, report.md, metrics.json, figures/)")
+    force_option(sp)
     sp.add_argument("--sequence", action="append", default=None, help="dataset sequence to report on (repeatable)")
     sp.add_argument("--split", default="test", help="split reported when no --sequence is given")
     sp.add_argument("--results", default=None, help="benchmark results folder (default: the checkout's benchmarks/results)")
@@ -665,6 +704,8 @@ def _kept(args, argv: list[str]) -> str:
         except Exception:  # noqa: BLE001 - no store (nothing was stored) or one that cannot be read now
             return f"nothing was stored in {out}; run again: {again}"
         return f"{done} finished sequence(s) are kept in {out}; resume (finished ones are skipped): {again}"
+    if args.command == "simulate":  # one sequence: its file is written only when the simulation is finished
+        return f"nothing was written to {args.out} (a sequence is written when its simulation ends); run again: {again}"
     if args.command == "prepare":
         return (f"what was prepared is kept in {args.data} (a garment cut short is marked writing and redone); "
                 f"resume: {again}")
