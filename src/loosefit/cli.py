@@ -685,10 +685,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class Stopped(KeyboardInterrupt):
-    """SIGTERM, raised where Ctrl-C raises :class:`KeyboardInterrupt` (so that what is running keeps its work)."""
+    """SIGTERM, raised where Ctrl-C raises :class:`KeyboardInterrupt` (so that what is running keeps its work).
+
+    ``Stopped.seen`` says that a SIGTERM arrived even when the exception reaches :func:`main` as a plain
+    :class:`KeyboardInterrupt` (Ray's ``wait`` turns any exception of a signal handler into one)."""
+
+    seen = False
 
 
 def _on_sigterm(signum, frame):
+    Stopped.seen = True
     raise Stopped()
 
 
@@ -722,6 +728,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    Stopped.seen = False
     try:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread: leave SIGTERM alone
@@ -732,9 +739,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"loosefit {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: one line, no traceback
-        name = "SIGTERM" if isinstance(e, Stopped) else "SIGINT"
-        print(f"loosefit {args.command}: interrupted ({name}): {_kept(args, argv)}", file=sys.stderr)
-        return 143 if isinstance(e, Stopped) else 130
+        term = isinstance(e, Stopped) or Stopped.seen
+        print(f"loosefit {args.command}: interrupted ({'SIGTERM' if term else 'SIGINT'}): {_kept(args, argv)}",
+              file=sys.stderr)
+        return 143 if term else 130
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
