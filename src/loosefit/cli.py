@@ -10,9 +10,10 @@ import signal
 import sys
 from pathlib import Path
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, int_at_least, motion_file_options, nonnegative_float,
-                               piece_choice, positive_float, writable)
+from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least,
+                               motion_file_options, nonnegative_float, piece_choice, positive_float, writable)
 from loosefit.errors import InputError, LoosefitError
+from loosefit.paths import guard_output
 from loosefit.quiet import quiet_third_party
 
 
@@ -36,6 +37,7 @@ def cmd_body(args):
     from loosefit.motion.io import load_motion
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     motion = (load_motion(args.motion, body, joint_map=args.joint_map, keep_first_frame=args.keep_first_frame)
               if args.motion else body.rest_motion(1))
@@ -58,6 +60,7 @@ def cmd_motion_generate(args):
     from loosefit.motion.procedural import generate
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     start = args.start or 0.0
     motion = generate(args.kind, start + args.seconds, args.seed, body, fps=args.fps)
@@ -71,6 +74,7 @@ def cmd_motion_map(args):
     from loosefit.motion.map_writer import write_joint_map
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     joint_map, notes = write_joint_map(args.file, _body(args), args.out)
     print(f"wrote {args.out}: {len(joint_map.joints)} joints mapped, {len(joint_map.ignore)} ignored; "
           f"check it, then pass it with --joint-map {args.out}")
@@ -82,6 +86,7 @@ def cmd_motion_import(args):
     from loosefit.motion.io import load_motion
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     motion = load_motion(args.file, body, joint_map=args.joint_map, source_fps=args.fps, start=args.start,
                          seconds=args.seconds, keep_first_frame=args.keep_first_frame)
@@ -127,10 +132,19 @@ def _refit_line(path, fitted: dict) -> str:
             f"inside the body before, {fitted['inside_after_percent']:g}% after")
 
 
+def _garment_out(args) -> None:
+    """Check a garment's output and its JSON sidecar (``G.obj`` writes ``G.json`` beside it) before the work."""
+    from loosefit.garment import Garment
+
+    writable(args.out, folder=False)
+    for path in (args.out, Garment.sidecar_path(args.out)):
+        guard_output(path, args.force)
+
+
 def cmd_garment_make(args):
     from loosefit.garment import make_garment
 
-    writable(args.out, folder=False)
+    _garment_out(args)
     params = _garment_params(args.param)
     if args.length is not None:
         params["length"] = args.length
@@ -145,7 +159,7 @@ def cmd_garment_make(args):
 def cmd_garment_import(args):
     from loosefit.garment import import_garment
 
-    writable(args.out, folder=False)
+    _garment_out(args)
     garment = import_garment(args.file, _body(args), unit=args.unit, up=args.up, fit=True if args.fit else None,
                              piece=args.piece, repair=args.repair)
     garment.save(args.out)
@@ -182,6 +196,7 @@ def cmd_render(args):
     from loosefit.viz.scene import check_panels
 
     writable(args.out)  # a path without a suffix is a folder of PNGs
+    guard_output(args.out, args.force)
     meshes = [p for p in args.input if Path(p).suffix.lower() in (".obj", ".ply")]
     if args.motion and not meshes:
         raise InputError("--motion poses a garment mesh (.obj / .ply input); the inputs have their own frames",
@@ -207,10 +222,7 @@ def cmd_evaluate(args):
     settings = EvaluationSettings(**{k: v for k, v in given.items() if v is not None})
     writable(args.out, folder=True)
     out = Path(args.out)
-    is_run = (out / "method.yaml").is_file() or (out / "checkpoints").is_dir()
-    if is_run and (out / "metrics.csv").exists() and not args.force:
-        raise InputError("this is a training run folder and its metrics.csv is the run's training log: choose "
-                         "another --out, or give --force to replace it", out / "metrics.csv")
+    guard_output(out, args.force, names=("metrics.csv", "metrics.json"))  # a run folder's metrics.csv is its log
     result = evaluate(load_pairs(args.pred, args.gt, args.body, args.sequence, args.split), settings)
     print(result.table())
     result.write_csv(out / "metrics.csv")
@@ -236,6 +248,9 @@ def cmd_simulate(args):
             where = "; ".join(f"{option} -> {in_plan[option]}" for option in given)
             raise InputError(f"options for one sequence (--garment, --motion), not for a plan: {', '.join(given)}; "
                              f"write them into the plan instead: {where}", args.plan)
+        if args.force:
+            raise InputError("--force applies to one sequence's --out; a plan resumes in its store (finished "
+                             "sequences are kept)", args.plan)
         writable(args.out, folder=True)
         summary = run_plan(args.plan, args.out, workers=args.workers, address=args.address,
                            splits=tuple(args.splits) if args.splits else None,
@@ -250,6 +265,7 @@ def cmd_simulate(args):
     sets = args.set or []
     params = SimParams.load(args.params, sets) if args.params else SimParams().with_overrides(sets)
     writable(args.out, folder=False)  # before the simulation, not after it
+    guard_output(args.out, args.force)
     result = simulate_file(args.garment, args.motion, args.out, params=params, shape=args.shape,
                            joint_map=args.joint_map, fit=True if args.fit else None,
                            keep_first_frame=args.keep_first_frame)
@@ -281,6 +297,7 @@ def cmd_train(args):
     from loosefit.training import train_model
 
     writable(args.out, folder=True)
+    guard_output(args.out, None, stores_only=True)  # a run folder is train's own output; a store is not
 
     if args.method == "collision":
         if args.nproc != 1 or args.device not in (None, "cpu"):
@@ -324,7 +341,15 @@ def cmd_animate(args):
     from loosefit.metrics.collision import inside_body_report
     from loosefit.motion.io import load_motion
 
+    from loosefit.io.export import export_files
+
     writable(args.out, folder=True if len(args.motion) > 1 else None)
+    if len(args.motion) > 1:
+        written = [f.name for p in args.motion for f in export_files(f"{Path(p).stem}{args.format}", args.with_body)]
+        guard_output(args.out, args.force, names=written)
+    else:
+        for path in export_files(args.out, args.with_body):
+            guard_output(path, args.force)
     body = _body(args)
     motions = [_at_model_rate(load_motion(path, body, joint_map=args.joint_map, source_fps=args.fps,
                                           keep_first_frame=args.keep_first_frame), path) for path in args.motion]
@@ -377,6 +402,7 @@ def cmd_report(args):
     from loosefit.report.build import DEFAULT_RESULTS
 
     writable(args.out, folder=True)  # before the runs are evaluated
+    guard_output(args.out, args.force, names=("index.html", "report.md", "metrics.json", "figures"))
     index = build_report(args.data, args.run, args.out, sequences=args.sequence, split=args.split,
                          results_dir=args.results or DEFAULT_RESULTS, device=args.device, images=not args.no_images,
                          handling=args.collision)
@@ -388,6 +414,7 @@ def cmd_export_rig(args):
     from loosefit.motion.io import load_motion
 
     writable(args.out, folder=False)
+    guard_output(args.out, args.force)
     body = _body(args)
     motion = _at_model_rate(load_motion(args.motion, body, joint_map=args.joint_map,
                                         keep_first_frame=args.keep_first_frame), args.motion)
@@ -407,6 +434,7 @@ def cmd_view(args):
 
     if args.export is not None:
         writable(args.export, folder=True)  # before the scene is built
+        guard_output(args.export, None)  # no --force: an export folder is a new one or an earlier export
     result = view(args.input, port=args.port, export=args.export, collisions=not args.no_collisions,
                   collision_frames=args.collision_frames, handling=args.collision, joint_map=args.joint_map,
                   keep_first_frame=args.keep_first_frame, reference=not args.no_reference)
@@ -418,6 +446,7 @@ def cmd_demo(args):
     from loosefit.demo import run_demo
 
     writable(args.out, folder=True)
+    guard_output(args.out, None)  # no --force: the demo resumes in its own folder
     run_demo(Path(args.out))
 
 
@@ -441,6 +470,7 @@ def build_parser() -> argparse.ArgumentParser:
     motion_file_options(sp)
     sp.add_argument("--frame", type=int, default=0, help="frame written to an .obj")
     sp.add_argument("--out", required=True, help="body.obj (one frame) or body.npz (mesh sequence)")
+    force_option(sp)
     sp.set_defaults(func=cmd_body)
 
     motion = sub.add_parser("motion", help="generate or import motions").add_subparsers(dest="motion_command", required=True)
@@ -453,6 +483,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--fps", type=positive_float, default=30.0)
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_motion_generate)
     sp = motion.add_parser(
         "map", help="write a starting joint map for a BVH skeleton (YAML, to check and pass with --joint-map)",
@@ -462,6 +493,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("file", help="the BVH file")
     body_options(sp)
     sp.add_argument("--out", required=True, help="MAP.yaml")
+    force_option(sp)
     sp.set_defaults(func=cmd_motion_map)
     sp = motion.add_parser("import", help="import a BVH or AMASS file onto the body rig",
                            description="Import a BVH or AMASS (SMPL-H .npz) motion onto the body's rig.\n\n"
@@ -474,6 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seconds", type=positive_float, default=None, help="keep SECONDS seconds (default: to the end)")
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_motion_import)
 
     garment = sub.add_parser("garment", help="make or import garments").add_subparsers(dest="garment_command", required=True)
@@ -487,6 +520,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--param", action="append", help="any other template parameter, NAME=VALUE (repeatable)")
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_garment_make)
     sp = garment.add_parser("import", help="validate, repair and align an OBJ / PLY garment")
     sp.add_argument("file")
@@ -503,6 +537,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "print what changed")
     body_options(sp)
     sp.add_argument("--out", required=True)
+    force_option(sp)
     sp.set_defaults(func=cmd_garment_import)
 
     sp = sub.add_parser("info", help="summarise a dataset store")
@@ -521,6 +556,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "the body, as the body-LBS baseline); choose a frame for a .png with --frame")
     motion_file_options(sp)
     sp.add_argument("--out", required=True, help="out.mp4, out.gif, out.png or a folder")
+    force_option(sp)
     sp.add_argument("--frame", type=int_at_least(0), action="append", default=None,
                     help="render only frame K (0 is the first; repeat for several); a .png output needs exactly one")
     sp.add_argument("--fps", type=positive_float, default=30.0)
@@ -532,6 +568,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("simulate", help="simulate ground truth with Blender cloth: one sequence or a plan")
     sp.add_argument("plan", nargs="?", default=None, help="a plan YAML (configs/datasets/*.yaml)")
     sp.add_argument("--out", required=True, help="DATA.zarr for a plan; seq.npz for one sequence")
+    force_option(sp)
     sp.add_argument("--garment", default=None, help="garment .obj (one sequence)")
     sp.add_argument("--motion", default=None, help="motion .npz / .bvh (one sequence)")
     sp.add_argument("--params", default=None, help="simulation parameters YAML")
@@ -598,6 +635,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "count), in the rest pose of --shape; a loosefit garment made on another shape is draped onto it")
     body_options(sp)
     sp.add_argument("--out", required=True, help="anim.npz|.usdc|.glb|.abc|.pc2 or an OBJ folder; a folder for several motions")
+    force_option(sp)
     sp.add_argument("--format", default=".npz", help="file suffix per motion when animating several motions")
     sp.add_argument("--with-body", action="store_true", help="export the posed body too (always in an .npz)")
     sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
@@ -620,6 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
     motion_file_options(sp)
     body_options(sp)
     sp.add_argument("--out", required=True, help="dress.glb (skinned glTF) or dress.usdc / .usda (UsdSkel)")
+    force_option(sp)
     sp.add_argument("--influences", type=int, choices=[4, 8], default=4, help="skinning weights kept per vertex")
     sp.add_argument("--no-body", action="store_true", help="write the garment only")
     sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
@@ -641,8 +680,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--surface-depth", type=nonnegative_float, default=None,
                     help="depth inside the body, metres, beyond which a point of the garment's surface (edge midpoint, "
                          "triangle centroid) counts in the surface column (default 5 mm)")
-    sp.add_argument("--force", action="store_true", help="replace the training log metrics.csv of a run folder "
-                    "given as --out")
+    force_option(sp)
     sp.set_defaults(func=cmd_evaluate)
 
     sp = sub.add_parser("report", help="compare trained runs on a dataset: HTML + Markdown report with metrics, "
@@ -650,6 +688,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("data", help="a dataset store DATA.zarr (ground truth)")
     sp.add_argument("run", nargs="+", help="run folders written by loosefit train")
     sp.add_argument("--out", required=True, help="report folder (index.html, report.md, metrics.json, figures/)")
+    force_option(sp)
     sp.add_argument("--sequence", action="append", default=None, help="dataset sequence to report on (repeatable)")
     sp.add_argument("--split", default="test", help="split reported when no --sequence is given")
     sp.add_argument("--results", default=None, help="benchmark results folder (default: the checkout's benchmarks/results)")
@@ -685,10 +724,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class Stopped(KeyboardInterrupt):
-    """SIGTERM, raised where Ctrl-C raises :class:`KeyboardInterrupt` (so that what is running keeps its work)."""
+    """SIGTERM, raised where Ctrl-C raises :class:`KeyboardInterrupt` (so that what is running keeps its work).
+
+    ``Stopped.seen`` says that a SIGTERM arrived even when the exception reaches :func:`main` as a plain
+    :class:`KeyboardInterrupt` (Ray's ``wait`` turns any exception of a signal handler into one)."""
+
+    seen = False
 
 
 def _on_sigterm(signum, frame):
+    Stopped.seen = True
     raise Stopped()
 
 
@@ -704,6 +749,8 @@ def _kept(args, argv: list[str]) -> str:
         except Exception:  # noqa: BLE001 - no store (nothing was stored) or one that cannot be read now
             return f"nothing was stored in {out}; run again: {again}"
         return f"{done} finished sequence(s) are kept in {out}; resume (finished ones are skipped): {again}"
+    if args.command == "simulate":  # one sequence: its file is written only when the simulation is finished
+        return f"nothing was written to {args.out} (a sequence is written when its simulation ends); run again: {again}"
     if args.command == "prepare":
         return (f"what was prepared is kept in {args.data} (a garment cut short is marked writing and redone); "
                 f"resume: {again}")
@@ -720,6 +767,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    Stopped.seen = False
     try:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread: leave SIGTERM alone
@@ -731,9 +779,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"loosefit {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: one line, no traceback
-        name = "SIGTERM" if isinstance(e, Stopped) else "SIGINT"
-        print(f"loosefit {args.command}: interrupted ({name}): {_kept(args, argv)}", file=sys.stderr)
-        return 143 if isinstance(e, Stopped) else 130
+        term = isinstance(e, Stopped) or Stopped.seen
+        print(f"loosefit {args.command}: interrupted ({'SIGTERM' if term else 'SIGINT'}): {_kept(args, argv)}",
+              file=sys.stderr)
+        return 143 if term else 130
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

@@ -96,6 +96,14 @@ joint must be mapped or ignored; the hips, both legs (hip, knee, ankle) and one 
 mapped. `loosefit motion map FILE.bvh --out MAP.yaml` writes a starting map to check."""
 
 
+def force_option(sp) -> None:
+    """The ``--force`` of every verb whose output could land on a run folder's or a dataset store's own files
+    (:func:`loosefit.paths.guard_output` refuses those without it)."""
+    sp.add_argument("--force", action="store_true",
+                    help="write the output even over a training run folder's own files (its metrics.csv, "
+                         "checkpoints/ ...) or inside a dataset store, which is refused otherwise")
+
+
 def joint_map_option(sp) -> None:
     """The ``--joint-map`` option of every verb that reads a BVH file."""
     sp.add_argument("--joint-map", default=None, metavar="MAP.yaml",

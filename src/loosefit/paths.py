@@ -124,3 +124,91 @@ def remove_stale_temporaries(folder: str | Path) -> list[Path]:
             entry.unlink()
             removed.append(entry)
     return removed
+
+
+# ------------------------------------------------------------------------------------- outputs over others' files
+
+#: What the names a training run folder reserves hold (``loosefit.train.run.RunDir``, ``loosefit.training``,
+#: the body SDF's run, a shipped pretrained garment). Repeated here so that every verb checks its outputs
+#: without importing torch; tests/test_paths.py checks that they agree.
+RUN_NAMES = {
+    "config.yaml": "the training config",
+    "metrics.csv": "the training log",
+    "run.json": "the training summary",
+    "model.json": "the model record",
+    "method.yaml": "the method config",
+    "body_sdf.pt": "the body SDF network",
+    "pretrained.json": "the pretrained record",
+    ".lock": "the write lock",
+    "checkpoints": "the checkpoints folder",
+    "tensorboard": "the TensorBoard folder",
+}
+#: A Zarr group (every dataset store, and each group inside one) holds this file.
+STORE_MARKER = ".zgroup"
+
+
+def is_run_folder(path: str | Path) -> bool:
+    """Whether ``path`` is a training run folder: it holds ``method.yaml``, or ``model.json`` with the body SDF
+    network or a checkpoints folder, or checkpoint files (a run that has written nothing else yet)."""
+    path = Path(path)
+    checkpoints = path / "checkpoints"
+    if (path / "method.yaml").is_file():
+        return True
+    if (path / "model.json").is_file() and ((path / "body_sdf.pt").is_file() or checkpoints.is_dir()):
+        return True
+    return checkpoints.is_dir() and any(checkpoints.glob("*.pt"))
+
+
+def _owner(path: Path, stores_only: bool = False) -> str | None:
+    """What writing ``path`` (absolute) would write over, in words: the dataset store it is in (any Zarr group:
+    every file in a store is the store's), or the run folder it is or whose reserved name it is; else None."""
+    ancestors = [p for p in (path, *path.parents) if p.is_dir()]
+    stores = [p for p in ancestors if (p / STORE_MARKER).is_file()]
+    if stores:
+        root = stores[0]
+        while root.parent != root and (root.parent / STORE_MARKER).is_file():  # a group inside the store
+            root = root.parent
+        what = "a dataset store" if path == root else f"inside the dataset store {root}"
+        return what + " (only loosefit simulate and prepare write there)"
+    for folder in [] if stores_only else ancestors:
+        if is_run_folder(folder):
+            if folder == path:
+                return "a training run folder"
+            parts = path.relative_to(folder).parts
+            if parts[0] not in RUN_NAMES:  # anything else beside the run's files is the user's own (an animation...)
+                return None
+            return f"{'inside ' if len(parts) > 1 else ''}{RUN_NAMES[parts[0]]} of the training run folder {folder}"
+    return None
+
+
+def guard_output(path: str | Path, force: bool | None = False, names: tuple[str, ...] | list[str] | None = None,
+                 stores_only: bool = False) -> None:
+    """Refuse an output that would write over a training run folder's own files or into a dataset store,
+    before any work is done.
+
+    ``path`` is an output file or folder. It is refused when it is inside a dataset store (only ``simulate``
+    and ``prepare`` write there) or is a name its run folder reserves (:data:`RUN_NAMES`: ``metrics.csv``,
+    ``checkpoints/...``); an output folder also when it is a run folder itself, unless ``names`` lists the
+    files the verb writes in it (then each of those is checked instead). The path as given and where its
+    symbolic links lead are both checked. A new file, or a user's own earlier output beside a run's files, is
+    written as before.
+
+    Args:
+        force: True: nothing is refused (the verb's ``--force``); None: the verb has no ``--force`` (the
+            message asks for another output only).
+        stores_only: check only that ``path`` is not in a dataset store (``train``, whose output is a run folder).
+
+    Raises:
+        InputError: naming the file or folder that would be overwritten and what it is.
+    """
+    if force:
+        return
+    path = Path(os.path.abspath(path))
+    for target in [path] if names is None else [path / name for name in names]:
+        for seen in dict.fromkeys((target, Path(os.path.realpath(target)))):
+            what = _owner(seen, stores_only)
+            if what is None:
+                continue
+            advice = "choose another output" + (", or give --force to overwrite it" if force is not None else "")
+            link = "" if seen == target else f" (a link to {seen})"
+            raise InputError(f"this is {what}{link}; an output here would write over it: {advice}", target)

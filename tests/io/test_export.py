@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from loosefit.errors import InputError
-from loosefit.io.export import export_animation, read_animation
+from loosefit.io.export import export_animation, export_files, read_animation
 from loosefit.io.obj import read_obj
 from loosefit.io.pc2 import read_pc2
 
@@ -58,9 +58,18 @@ def test_pc2_pair_layout(tmp_path):
     assert np.array_equal(frames, verts)
     rest, rest_faces = read_obj(tmp_path / "anim.obj")
     assert np.abs(rest - verts[0]).max() < 1e-6 and np.array_equal(rest_faces, faces)
+    assert sorted(p.name for p in export_files(tmp_path / "anim.pc2", body=True)) == sorted(
+        p.name for p in tmp_path.iterdir())  # what a caller checks before the work is what is written
     (tmp_path / "anim.obj").unlink()
     with pytest.raises(InputError, match="anim.pc2: a .pc2 file holds no triangles; expected them in anim.obj"):
         read_animation(tmp_path / "anim.pc2")
+
+
+@pytest.mark.parametrize("name", ["a.npz", "a.glb", "frames"])
+def test_export_files_of_one_file_formats(tmp_path, name):
+    verts, faces, body, body_faces = _arrays()
+    export_animation(tmp_path / name, verts, faces, 30.0, body, body_faces)
+    assert [p.name for p in export_files(tmp_path / name, body=True)] == [p.name for p in tmp_path.iterdir()]
 
 
 @pytest.mark.parametrize(

@@ -8,6 +8,7 @@ from pathlib import Path
 from dataclasses import dataclass
 
 from tests.robustness.cases_files import body_cases, garment_cases, motion_cases
+from tests.robustness.cases_hostile import hostile_brief_cases
 from tests.robustness.cases_outputs import (REQUESTS, animate_cases, evaluate_cases, other_cases, render_cases,
                                             report_cases, view_cases)
 from tests.robustness.cases_pipeline import simulate_cases, store_cases, train_cases
@@ -16,7 +17,8 @@ from tests.robustness.harness import Case, Result, error_line
 
 def all_cases() -> list[Case]:
     cases = [*body_cases(), *motion_cases(), *garment_cases(), *store_cases(), *simulate_cases(), *train_cases(),
-             *animate_cases(), *evaluate_cases(), *render_cases(), *report_cases(), *view_cases(), *other_cases()]
+             *animate_cases(), *evaluate_cases(), *render_cases(), *report_cases(), *view_cases(), *other_cases(),
+             *hostile_brief_cases()]
     names = [n for c in cases for n in (c.results or (c.name,))]
     duplicated = {n for n in names if names.count(n) > 1}
     assert not duplicated, f"case names used twice: {sorted(duplicated)}"
@@ -28,7 +30,7 @@ class Meta:
     """What one result name stands for."""
 
     kind: str  # "bad", "control" or "extreme"
-    brief: str  # "store", "inputs", "viewer" or ""
+    brief: str  # "store", "inputs", "viewer", "hostile" or ""
     defect: bool  # a defect family of one of the briefs: the pytest suite runs it
 
 

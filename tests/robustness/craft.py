@@ -4,17 +4,20 @@ own writers, so that the files are the same whichever source tree is measured).
 Damage: :func:`truncate`, :func:`flip_byte`, :func:`garbage`. Payloads: :func:`payload_pickle` (a pickle that
 creates the case's marker file when it is loaded), in ``.pkl``, ``.npz`` (object array), ``.pt`` and Zarr
 (Pickle codec). Copies of the shared store and run to damage. Meshes (OBJ, PLY), BVH cuts, AMASS files.
+Hostile files: YAML bombs and deep nesting, BVH hierarchies too deep or too wide, a zip-bomb ``.npz``.
 """
 
 from __future__ import annotations
 
 import builtins
+import io
 import json
 import os
 import pickle
 import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -268,3 +271,59 @@ def smpl_npz(dst: Path) -> Path:
     np.savez(dst, **{k: np.asarray(v) for k, v in model.items()})
     src.unlink()
     return dst
+
+
+# ---------------------------------------------------------------------------------------------- hostile files
+
+
+def yaml_bomb(levels: int = 10) -> str:
+    """A "billion laughs" document: ten lists of ten aliases of the level below, ``levels`` deep (10**levels values)."""
+    lines = ["l0: &l0 [" + ", ".join(["lol"] * 10) + "]"]
+    for k in range(1, levels):
+        lines.append(f"l{k}: &l{k} [" + ", ".join([f"*l{k - 1}"] * 10) + "]")
+    return "\n".join(lines) + "\n"
+
+
+def yaml_deep(levels: int) -> str:
+    """A YAML mapping whose value is ``levels`` flow lists nested in each other."""
+    return "a: " + "[" * levels + "1" + "]" * levels + "\n"
+
+
+def bvh_chain(depth: int) -> str:
+    """A BVH whose joints form one chain ``depth`` long (an end site at its tip), one frame."""
+    lines = ["HIERARCHY", "ROOT j0", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation "
+             "Xrotation Yrotation"]
+    for k in range(1, depth):
+        lines += [f"JOINT j{k}", "{", "OFFSET 0 0.01 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    lines += ["End Site", "{", "OFFSET 0 0.01 0", "}"] + ["}"] * depth
+    lines += ["MOTION", "Frames: 1", "Frame Time: 0.0333333", " ".join(["0"] * (6 + 3 * (depth - 1)))]
+    return "\n".join(lines) + "\n"
+
+
+def bvh_flat(children: int) -> str:
+    """A BVH whose root has ``children`` end-site children (no channels but the root's)."""
+    lines = ["HIERARCHY", "ROOT r", "{", "OFFSET 0 0 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    for k in range(children):
+        lines += [f"JOINT c{k}", "{", "OFFSET 0 0.01 0", "CHANNELS 0", "}"]
+    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.0333333", "0 0 0"]
+    return "\n".join(lines) + "\n"
+
+
+def zip_bomb(path, gigabytes: float = 4.5, stored_mb: int = 64) -> None:
+    """A motion-like ``.npz`` whose ``rotations`` array declares ``gigabytes`` of float32 and holds its first
+    ``stored_mb`` MB of zeros, deflated (a real bomb holds them all; the header alone must refuse it)."""
+    count = int(gigabytes * 1e9 / 4 / 3)
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False, "shape": (count, 1, 3)})
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        for name, value in (("fps", np.array(30.0)), ("translation", np.zeros((count, 3), np.float32)[:1])):
+            buf = io.BytesIO()
+            np.save(buf, value)
+            z.writestr(f"{name}.npy", buf.getvalue())
+        with z.open("rotations.npy", "w", force_zip64=True) as f:  # streamed: never held in memory here
+            f.write(header.getvalue())
+            block = bytes(64 * 1024 * 1024)
+            left = min(count * 12, stored_mb * 1024 * 1024)
+            while left > 0:
+                f.write(block[:min(left, len(block))])
+                left -= len(block)

@@ -39,7 +39,7 @@ CONTROL_OUTCOMES = ("ok", "controls_failed")
 #: The file a crafted pickle payload creates when it runs (in the case's scratch folder).
 MARKER = "PAYLOAD-RAN"
 #: Briefs that own the fix of a defect family (cases from elsewhere carry "").
-BRIEFS = ("store", "inputs", "viewer")
+BRIEFS = ("store", "inputs", "viewer", "hostile")
 #: loosefit's error line (argparse's too); a progress bar left unfinished may precede it on its line.
 _ERROR_LINE = re.compile(r"loosefit[\w -]*: error: .+$")
 
@@ -141,7 +141,7 @@ class Case:
             paths (``{store}``, ``{run}``, ``{motion}``, ``{seq}``, ``{garment}``, ``{plan}``) are filled in.
         setup: ``setup(tmp, shared)`` writes the inputs into the scratch folder.
         kind: ``"bad"`` input, ``"control"`` (must succeed) or ``"extreme"`` (NaN / inf / huge / tiny values).
-        brief: which fix owns the defect family (``store``, ``inputs``, ``viewer``), "" for none.
+        brief: which fix owns the defect family (``store``, ``inputs``, ``viewer``, ``hostile``), "" for none.
         names: the error line must contain one of these (the file or the argument).
         report: for a bad input that may succeed: the text the output must contain (a repair, a warning).
         check: a further check of the outputs, returning a problem (counted ``silent_wrong``) or None.

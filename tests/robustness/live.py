@@ -1,8 +1,12 @@
-"""Cases that need more than one command: two writers on one store at once, and raw HTTP requests to a
-running ``loosefit view`` server."""
+"""Cases that need more than one command or a live process: two writers on one store or run folder at once, a
+command stopped by SIGINT / SIGTERM while it works, and raw HTTP requests to a running ``loosefit view`` server."""
 
 from __future__ import annotations
 
+import contextlib
+import json
+import os
+import re
 import signal
 import socket
 import subprocess
@@ -12,7 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from tests.robustness.harness import Case, Result, Shared, fill_paths, classify, error_line, run_command, tree_hash
+from tests.robustness.harness import (Case, Ctx, Result, Shared, classify, error_line, fill_paths, run_command,
+                                      tree_hash)
 
 # ---------------------------------------------------------------------------------------------- two writers
 
@@ -68,7 +73,14 @@ def two_writers(argv_a: list[str], argv_b: list[str], wait_for: str | None, time
 
 def _popen(sh: Shared, argv: list[str], cwd: Path) -> subprocess.Popen:
     return subprocess.Popen(sh.command(argv), cwd=cwd, env=sh.env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            stdin=subprocess.DEVNULL)
+                            stdin=subprocess.DEVNULL, preexec_fn=default_sigint)
+
+
+def default_sigint() -> None:
+    """In a child before it starts: Ctrl-C does what it does at a terminal. A shell without job control starts
+    background commands with SIGINT ignored, their children inherit that, and Python then never installs its
+    handler: a case or test run in the background would find every SIGINT without effect."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def then(argv2: list[str], check2: Callable[[Result], str | None]):
@@ -89,6 +101,142 @@ def then(argv2: list[str], check2: Callable[[Result], str | None]):
         return [result]
 
     return runner
+
+
+# ---------------------------------------------------------------------------------------------- interrupts
+
+#: The line a stopped command prints (after any progress bar left on its line).
+_INTERRUPTED = re.compile(r"^loosefit[\w -]*: interrupted \(SIG(INT|TERM)\): ")
+#: The exit status a command line gives when stopped by each signal (128 + its number).
+STOPPED_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+def descendants(pid: int) -> set[int]:
+    """The live processes descended from ``pid`` (read from /proc; zombies left out)."""
+    parents: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:
+            continue
+        fields = text[text.rindex(")") + 2:].split()  # after the command name, which may hold spaces
+        if fields[0] != "Z":
+            parents.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in parents.get(todo.pop(), []):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
+def alive(pids: set[int]) -> set[int]:
+    """Those of ``pids`` still running (not gone, not zombies)."""
+    left = set()
+    for pid in pids:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text()
+        except OSError:
+            continue
+        if state[state.rindex(")") + 2:].split()[0] != "Z":
+            left.add(pid)
+    return left
+
+
+def interrupted(sig: int, ready: Callable[[Path, int], bool], settle: float = 0.0, grace: float = 30.0):
+    """A runner: start the case's command; once ``ready(tmp, pid)`` holds (it is working; then ``settle``
+    seconds more) send it ``sig``. Good (``clear_errors``): exit 130 (SIGINT) or 143 (SIGTERM), no traceback,
+    exactly one line ``loosefit VERB: interrupted (SIG...): ...`` naming one of the case's ``names`` (what was
+    kept, the command that resumes), none of the processes it started still running ``grace`` seconds later
+    (Ray's workers), and the case's ``check`` passing. An exit before the signal, another status or a
+    traceback, no line or several, or processes left running are failures."""
+
+    def runner(case: Case, tmp: Path, sh: Shared) -> list[Result]:
+        argv = [a.format(**sh.tokens(tmp)) for a in case.argv]
+        result = Result(case.name, f"loosefit {' '.join(argv)}  (then {signal.Signals(sig).name})")
+        start = time.perf_counter()
+        proc = _popen(sh, argv, tmp)
+        while proc.poll() is None and not ready(tmp, proc.pid) and time.perf_counter() - start < case.timeout:
+            time.sleep(0.1)
+        early = proc.poll() is not None
+        time.sleep(0 if early else settle)
+        family = descendants(proc.pid)
+        if proc.poll() is None:
+            proc.send_signal(sig)
+        try:
+            out, err = proc.communicate(timeout=max(60.0, case.timeout - (time.perf_counter() - start)))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+        result.seconds = time.perf_counter() - start
+        result.returncode, result.stdout = proc.returncode, out.decode("utf-8", "replace")
+        result.stderr = err.decode("utf-8", "replace")
+        deadline = time.perf_counter() + grace
+        while alive(family) and time.perf_counter() < deadline:
+            time.sleep(0.5)
+        left = alive(family)
+        lines = [ln.strip() for ln in result.stderr.splitlines() if _INTERRUPTED.match(ln.strip())]
+        result.error_line = lines[-1] if lines else ""
+        problem = None
+        if case.check is not None:
+            try:
+                problem = case.check(Ctx(tmp, sh, result))
+            except Exception as e:  # noqa: BLE001 - a check that cannot read the outputs found them wrong
+                problem = f"the outputs could not be checked: {type(e).__name__}: {e}"
+        traceback = "Traceback (most recent call last)" in result.output
+        if early:
+            result.outcome = "silent_wrong"
+            result.problem = f"the command ended (exit {result.returncode}) before it was interrupted"
+        elif traceback or result.returncode != STOPPED_STATUS[sig]:
+            result.outcome = "tracebacks"
+            result.problem = f"exit {result.returncode}" + (", a Python traceback" if traceback else "")
+        elif len(lines) != 1:
+            result.outcome, result.problem = "silent_wrong", f"{len(lines)} lines say it was interrupted, not one"
+        elif left:
+            result.outcome, result.problem = "silent_wrong", f"processes it started still run: {sorted(left)}"
+        elif problem:
+            result.outcome, result.problem = "silent_wrong", problem
+        else:
+            result.outcome = "clear_errors"
+            names = fill_paths(case.names, tmp, sh)
+            if names and not any(n.lower() in result.error_line.lower() for n in names):
+                result.problem = f"the line names none of {names}"
+        for pid in left:  # never leave them behind the matrix
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+        return [result]
+
+    return runner
+
+
+def file_exists(template: str) -> Callable[[Path, int], bool]:
+    """Ready when the file ``template`` (``{tmp}/...``) exists."""
+    return lambda tmp, pid: Path(template.format(tmp=tmp)).exists()
+
+
+def stored_ok(store: str, count: int = 1) -> Callable[[Path, int], bool]:
+    """Ready when the store ``{tmp}/STORE`` holds ``count`` sequences stored ok (read from their attributes)."""
+    def ready(tmp: Path, pid: int) -> bool:
+        done = 0
+        for attrs in (tmp / store).glob("sequences/*/.zattrs"):
+            try:
+                done += json.loads(attrs.read_text()).get("status") == "ok"
+            except (OSError, ValueError):
+                pass
+        return done >= count
+    return ready
+
+
+def module_loaded(name: str) -> Callable[[Path, int], bool]:
+    """Ready when the process has mapped a library whose path holds ``name`` (``/bpy/``: Blender is loaded; a bare
+    ``bpy`` would match ``.pyenv``)."""
+    def ready(tmp: Path, pid: int) -> bool:
+        try:
+            return name in Path(f"/proc/{pid}/maps").read_text()
+        except OSError:
+            return False
+    return ready
 
 
 # ---------------------------------------------------------------------------------------------- HTTP server

@@ -10,31 +10,12 @@ import pytest
 from loosefit.cli import main
 from loosefit.errors import InputError
 from loosefit.motion.bvh import MAX_BVH_DEPTH, MAX_BVH_JOINTS, read_bvh
-
-
-def chain(depth: int) -> str:
-    """A BVH whose joints form one chain ``depth`` long (an end site at its tip), one frame."""
-    lines = ["HIERARCHY", "ROOT j0", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation "
-             "Xrotation Yrotation"]
-    for k in range(1, depth):
-        lines += [f"JOINT j{k}", "{", "OFFSET 0 0.01 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
-    lines += ["End Site", "{", "OFFSET 0 0.01 0", "}"] + ["}"] * depth
-    lines += ["MOTION", "Frames: 1", "Frame Time: 0.0333333", " ".join(["0"] * (6 + 3 * (depth - 1)))]
-    return "\n".join(lines) + "\n"
-
-
-def flat(children: int) -> str:
-    """A BVH whose root has ``children`` end-site children (no channels but the root's)."""
-    lines = ["HIERARCHY", "ROOT r", "{", "OFFSET 0 0 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
-    for k in range(children):
-        lines += [f"JOINT c{k}", "{", "OFFSET 0 0.01 0", "CHANNELS 0", "}"]
-    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.0333333", "0 0 0"]
-    return "\n".join(lines) + "\n"
+from tests.robustness.craft import bvh_chain, bvh_flat
 
 
 def test_ten_thousand_joint_chain_is_refused_naming_the_limit(tmp_path):
     path = tmp_path / "chain.bvh"
-    path.write_text(chain(10_000))
+    path.write_text(bvh_chain(10_000))
     assert sys.getrecursionlimit() < 10_000 * 2  # the chain would overflow the recursion of a naive parser
     with pytest.raises(InputError) as info:
         read_bvh(path)
@@ -44,7 +25,7 @@ def test_ten_thousand_joint_chain_is_refused_naming_the_limit(tmp_path):
 
 def test_too_many_joints_are_refused_naming_the_limit(tmp_path):
     path = tmp_path / "wide.bvh"
-    path.write_text(flat(MAX_BVH_JOINTS + 5))
+    path.write_text(bvh_flat(MAX_BVH_JOINTS + 5))
     with pytest.raises(InputError, match=f"more than {MAX_BVH_JOINTS} joints and end sites") as info:
         read_bvh(path)
     assert str(info.value).startswith(str(path))
@@ -52,16 +33,16 @@ def test_too_many_joints_are_refused_naming_the_limit(tmp_path):
 
 def test_skeletons_within_the_limits_read(tmp_path):
     path = tmp_path / "ok.bvh"
-    path.write_text(chain(MAX_BVH_DEPTH))
+    path.write_text(bvh_chain(MAX_BVH_DEPTH))
     bvh = read_bvh(path)
     assert len(bvh.names) == MAX_BVH_DEPTH + 1 and bvh.parents[-1] == MAX_BVH_DEPTH - 1
-    path.write_text(flat(MAX_BVH_JOINTS - 1))
+    path.write_text(bvh_flat(MAX_BVH_JOINTS - 1))
     assert len(read_bvh(path).names) == MAX_BVH_JOINTS
 
 
 def test_cli_refuses_the_chain_without_traceback(tmp_path, capsys):
     path = tmp_path / "chain.bvh"
-    path.write_text(chain(10_000))
+    path.write_text(bvh_chain(10_000))
     assert main(["motion", "map", str(path), "--out", str(tmp_path / "map.yaml")]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"loosefit motion: error: {path}: line ") and "MAX_BVH_DEPTH" in err, err

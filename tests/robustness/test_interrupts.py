@@ -1,5 +1,6 @@
 """Ctrl-C (SIGINT) and SIGTERM in the long verbs, through the CLI in a subprocess: one line saying what was
-kept and the command that resumes, exit status 130 / 143, no traceback; the resume command works."""
+kept and the command that resumes, exit status 130 / 143, no traceback; the resume command works. A plan on
+Ray workers leaves none of its processes running; one sequence leaves no half-written file."""
 
 from __future__ import annotations
 
@@ -15,27 +16,15 @@ from pathlib import Path
 
 import pytest
 
-from tests.robustness.cases_pipeline import GARMENT, TINY_TRAIN
-
-#: Long enough that the signal always lands while the command works (a few hundred epochs of a tiny model).
-LONG_TRAIN = [a if a != "train.stages.low.epochs=2" else "train.stages.low.epochs=500" for a in TINY_TRAIN]
-
-SLOW_PLAN = """\
-name: slow
-garments:
-  skirt: {template: skirt, seed: 0, edge_length: 0.06, params: {length: 0.4, flare: 20}}
-motions:
-  walk: {procedural: walk, seconds: 0.3, seed: 0}
-  spin: {procedural: spin, seconds: 20.0, seed: 1}
-sim_params:
-  default: {preroll: 0.2}
-"""
+from tests.robustness.cases_hostile import LONG_TRAIN, SLOW_PLAN
+from tests.robustness.cases_pipeline import GARMENT
+from tests.robustness.live import alive, default_sigint, descendants, module_loaded
 
 
 def _start(argv: list[str], cwd: Path) -> subprocess.Popen:
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONUNBUFFERED="1")
     return subprocess.Popen([sys.executable, "-m", "loosefit.cli", *argv], cwd=cwd, env=env, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
 
 
 def _interrupt(proc: subprocess.Popen, ready, sig: int, timeout: float = 240.0) -> tuple[int, str, str]:
@@ -84,8 +73,8 @@ def test_train_interrupted_keeps_last_epoch_and_resumes(tiny_store, tmp_path, si
             *LONG_TRAIN]
     last = run / "checkpoints" / "last.pt"
     rc, _, err = _interrupt(_start(argv, tmp_path), last.is_file, sig)
-    line = _one_line(err, "train")
     assert rc == status, err
+    line = _one_line(err, "train")
     assert f"({name})" in line and str(last) in line and line.rstrip().endswith("--resume"), line
     assert last.is_file()
     resume = shlex.split(line.split("resume: ", 1)[1])
@@ -118,3 +107,69 @@ def test_prepare_interrupted_names_store_and_resume(tiny_store, tmp_path):
     assert str(store) in line and line.endswith(f"resume: loosefit prepare {store} --force --set iterations=100000 "
                                                 "--set transform_iterations=1000"), line
     assert not (store / ".lock").exists()
+
+
+@pytest.fixture(scope="module")
+def one_sequence(tmp_path_factory):
+    """A coarse skirt and a 20 s walk: a single-sequence simulation of a minute or more."""
+    from loosefit.cli import main
+
+    folder = tmp_path_factory.mktemp("one-sequence")
+    garment, motion = folder / "g.obj", folder / "walk.npz"
+    assert main(["garment", "make", "--kind", "skirt", "--seed", "0", "--edge-length", "0.06", "--param", "length=0.4",
+                 "--param", "flare=20", "--out", str(garment)]) == 0
+    assert main(["motion", "generate", "--kind", "walk", "--seconds", "20", "--out", str(motion)]) == 0
+    return garment, motion
+
+
+def _after(ready, seconds: float):
+    """``ready`` once it has held for ``seconds`` (the command has gone on into its work)."""
+    since = []
+
+    def check() -> bool:
+        if not since and ready():
+            since.append(time.monotonic())
+        return bool(since) and time.monotonic() - since[0] > seconds
+    return check
+
+
+@pytest.mark.parametrize("sig,status,name", [(signal.SIGINT, 130, "SIGINT"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_single_sequence_interrupted_writes_nothing_and_says_so(one_sequence, tmp_path, sig, status, name):
+    garment, motion = one_sequence
+    out = tmp_path / "seq.npz"
+    argv = ["simulate", "--garment", str(garment), "--motion", str(motion), "--out", str(out)]
+    proc = _start(argv, tmp_path)
+    # Blender loaded, then long enough for the body and garment to be set up and the frames to run
+    rc, _, err = _interrupt(proc, _after(lambda: module_loaded("/bpy/")(tmp_path, proc.pid), 15.0), sig)
+    assert rc == status, err
+    line = _one_line(err, "simulate")
+    assert line == (f"loosefit simulate: interrupted ({name}): nothing was written to {out} (a sequence is written "
+                    f"when its simulation ends); run again: {shlex.join(['loosefit', *argv])}"), line
+    assert not out.exists() and not list(tmp_path.glob(".seq.npz.*"))  # no half-written file, no temporary
+
+
+@pytest.mark.parametrize("sig,status,name", [(signal.SIGINT, 130, "SIGINT"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_ray_plan_interrupted_keeps_finished_sequences_and_stops_its_workers(tmp_path, sig, status, name):
+    plan, store = tmp_path / "slow.yaml", tmp_path / "d.zarr"
+    plan.write_text(SLOW_PLAN)
+    argv = ["simulate", str(plan), "--out", str(store), "--workers", "2"]
+    proc = _start(argv, tmp_path)
+    started: set[int] = set()
+
+    def ready() -> bool:  # the walk is stored while a worker simulates the 20 s spin
+        if _stored_ok(store) < 1:
+            return False
+        started.update(descendants(proc.pid))
+        return True
+
+    rc, _, err = _interrupt(proc, ready, sig)
+    assert rc == status, err
+    line = _one_line(err, "simulate")
+    assert line.startswith(f"loosefit simulate: interrupted ({name}): 1 finished sequence(s) are kept in {store}")
+    assert line.endswith(shlex.join(["loosefit", *argv])), line
+    assert not (store / ".lock").exists()
+    assert len(started) >= 3, started  # Ray's own processes and its workers ran under the command ...
+    deadline = time.monotonic() + 30
+    while alive(started) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert not alive(started)  # ... and none of them outlives it

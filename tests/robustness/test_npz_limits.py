@@ -3,10 +3,8 @@ inflated, naming the file, the array and the limit; ordinary files still read.""
 
 from __future__ import annotations
 
-import io
 import time
 import tracemalloc
-import zipfile
 
 import numpy as np
 import pytest
@@ -16,26 +14,7 @@ from loosefit.errors import InputError
 from loosefit.io import npz
 from loosefit.io.npz import MAX_NPZ_BYTES, load_npz
 from loosefit.motion.motion import Motion
-
-
-def zip_bomb(path, gigabytes: float = 4.5, stored_mb: int = 64) -> None:
-    """A motion-like ``.npz`` whose ``rotations`` array declares ``gigabytes`` of float32 and holds its first
-    ``stored_mb`` MB of zeros, deflated (a real bomb holds them all; the header alone must refuse it)."""
-    count = int(gigabytes * 1e9 / 4 / 3)
-    header = io.BytesIO()
-    np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False, "shape": (count, 1, 3)})
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as z:
-        for name, value in (("fps", np.array(30.0)), ("translation", np.zeros((count, 3), np.float32)[:1])):
-            buf = io.BytesIO()
-            np.save(buf, value)
-            z.writestr(f"{name}.npy", buf.getvalue())
-        with z.open("rotations.npy", "w", force_zip64=True) as f:  # streamed: never held in memory here
-            f.write(header.getvalue())
-            block = bytes(64 * 1024 * 1024)
-            left = min(count * 12, stored_mb * 1024 * 1024)
-            while left > 0:
-                f.write(block[:min(left, len(block))])
-                left -= len(block)
+from tests.robustness.craft import zip_bomb
 
 
 @pytest.fixture(scope="module")

@@ -18,8 +18,9 @@ from pathlib import Path
 import pytest
 
 from loosefit.cli import main
+from tests.robustness.cases_hostile import LONG_TRAIN
 from tests.robustness.cases_pipeline import GARMENT, TINY_TRAIN
-from tests.robustness.test_interrupts import LONG_TRAIN
+from tests.robustness.live import default_sigint
 
 
 def snapshot(folder: Path) -> dict[str, str]:
@@ -127,7 +128,7 @@ def test_second_train_into_a_run_folder_is_refused_naming_the_holder(tiny_store,
             *LONG_TRAIN]
     env = dict(os.environ, OMP_NUM_THREADS="1")
     first = subprocess.Popen([sys.executable, "-m", "loosefit.cli", *argv], env=env, stdin=subprocess.DEVNULL,
-                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     try:
         _wait(first, (run / "checkpoints" / "last.pt").is_file)
         assert main([*argv, "--resume"]) == 2

@@ -72,8 +72,8 @@ def test_evaluate_keeps_a_runs_training_log_unless_forced(run, tmp_path, capsys)
     assert main(["animate", str(folder), "--motion", str(_motion(tmp_path, 30)), "--out", str(anim)]) == 0
     assert main(["evaluate", str(anim), str(anim), "--out", str(folder)]) == 2
     err = capsys.readouterr().err
-    assert f"loosefit evaluate: error: {log}: this is a training run folder and its metrics.csv is the run's " \
-           "training log" in err and "--force" in err, err
+    assert f"loosefit evaluate: error: {log}: this is the training log of the training run folder {folder}" in err \
+           and "--force" in err, err
     assert hashlib.sha256(log.read_bytes()).hexdigest() == before
     assert main(["evaluate", str(anim), str(anim), "--out", str(folder), "--force"]) == 0
     assert hashlib.sha256(log.read_bytes()).hexdigest() != before

@@ -13,18 +13,7 @@ from loosefit.config import MAX_YAML_CHARS, MAX_YAML_DEPTH, MAX_YAML_VALUES, loa
 from loosefit.errors import InputError
 from loosefit.motion.joint_map import load_joint_map
 from loosefit.sim.params import SimParams
-
-
-def bomb(levels: int = 10) -> str:
-    """A "billion laughs" document: ten lists of ten aliases of the level below, ``levels`` deep (10**levels values)."""
-    lines = ["l0: &l0 [" + ", ".join(["lol"] * 10) + "]"]
-    for k in range(1, levels):
-        lines.append(f"l{k}: &l{k} [" + ", ".join([f"*l{k - 1}"] * 10) + "]")
-    return "\n".join(lines) + "\n"
-
-
-def deep(levels: int) -> str:
-    return "a: " + "[" * levels + "1" + "]" * levels + "\n"
+from tests.robustness.craft import yaml_bomb, yaml_deep
 
 
 def _refused_quickly(call, *match: str) -> InputError:
@@ -45,7 +34,7 @@ def _refused_quickly(call, *match: str) -> InputError:
 
 
 def test_billion_laughs_is_refused_in_under_a_second_and_little_memory(tmp_path):
-    text = bomb()
+    text = yaml_bomb()
     assert len(text) < 800  # the 0.7 KB plan of the issue
     path = tmp_path / "bomb.yaml"
     path.write_text(text)
@@ -53,7 +42,7 @@ def test_billion_laughs_is_refused_in_under_a_second_and_little_memory(tmp_path)
 
 
 def test_a_bomb_below_the_limit_still_reads():
-    data = load_yaml(bomb(levels=4))  # 10,000 values: an ordinary use of aliases
+    data = load_yaml(yaml_bomb(levels=4))  # 10,000 values: an ordinary use of aliases
     assert len(data["l3"]) == 10 and data["l3"][0][0][0] == ["lol"] * 10
 
 
@@ -69,7 +58,7 @@ def test_self_referring_alias_is_refused(tmp_path):
     _refused_quickly(lambda: load_yaml("a: &a [1, *a]\n", path), str(path), "contains itself")
 
 
-@pytest.mark.parametrize("text", [deep(MAX_YAML_DEPTH + 1), deep(100_000), "a: " + "{a: " * 100_000 + "1" + "}" * 100_000,
+@pytest.mark.parametrize("text", [yaml_deep(MAX_YAML_DEPTH + 1), yaml_deep(100_000), "a: " + "{a: " * 100_000 + "1" + "}" * 100_000,
                                   "- " * 1_000_000 + "1\n", "".join(" " * k + f"k{k}:\n" for k in range(2000))],
                          ids=["flow-65", "flow-100k", "mapping-100k", "block-1M", "indent-2k"])
 def test_deep_nesting_is_refused_without_recursion_error(tmp_path, text):
@@ -78,7 +67,7 @@ def test_deep_nesting_is_refused_without_recursion_error(tmp_path, text):
 
 
 def test_nesting_at_the_limit_reads():
-    value = load_yaml(deep(MAX_YAML_DEPTH - 2))
+    value = load_yaml(yaml_deep(MAX_YAML_DEPTH - 2))
     for _ in range(MAX_YAML_DEPTH - 2):
         value = value["a"] if isinstance(value, dict) else value[0]
     assert value == [1] or value == 1
@@ -94,7 +83,7 @@ def test_document_longer_than_the_limit_is_refused(tmp_path):
 
 def test_every_yaml_reader_refuses_a_bomb(tmp_path):
     path = tmp_path / "bomb.yaml"
-    path.write_text(bomb())
+    path.write_text(yaml_bomb())
     from loosefit.train.settings import TrainConfig
 
     for read in (lambda: load_config(TrainConfig, path), lambda: SimParams.load(path), lambda: load_joint_map(path)):
@@ -103,7 +92,7 @@ def test_every_yaml_reader_refuses_a_bomb(tmp_path):
 
 def test_cli_refuses_a_bomb_plan_naming_it(tmp_path, capsys):
     plan = tmp_path / "bomb.yaml"
-    plan.write_text(bomb())
+    plan.write_text(yaml_bomb())
     start = time.perf_counter()
     assert main(["simulate", str(plan), "--out", str(tmp_path / "d.zarr")]) == 2
     assert time.perf_counter() - start < 5.0  # imports included

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.interrupts import held_signals
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.paths import atomic_path
 from loosefit.io.pc2 import write_pc2
@@ -33,7 +34,15 @@ _FPS_METADATA = re.compile(rb"FramesPerTimeUnit=([0-9]+(?:\.[0-9]*)?)")
 
 
 def write_alembic(path: str | Path, seq: MeshSequence) -> None:
-    """Write ``seq`` (garment, and body if ``seq.extra`` has ``body_verts``/``body_faces``) to an ``.abc`` file."""
+    """Write ``seq`` (garment, and body if ``seq.extra`` has ``body_verts``/``body_faces``) to an ``.abc`` file.
+
+    A Ctrl-C or SIGTERM waits until the file is written (:func:`loosefit.interrupts.held_signals`: Blender's
+    operators would swallow it)."""
+    with held_signals():
+        _write_alembic(path, seq)
+
+
+def _write_alembic(path: str | Path, seq: MeshSequence) -> None:
     from loosefit.extras import require
 
     bpy = require("bpy", "Alembic export (through Blender)")
@@ -69,8 +78,14 @@ def write_alembic(path: str | Path, seq: MeshSequence) -> None:
 def read_alembic(path: str | Path) -> MeshSequence:
     """Read an ``.abc`` mesh sequence: object ``garment`` (else the first mesh) and ``body`` if present.
 
-    Returns a Z-up :class:`MeshSequence`, one frame per frame of the file's time range at its frame rate.
+    Returns a Z-up :class:`MeshSequence`, one frame per frame of the file's time range at its frame rate. A
+    Ctrl-C or SIGTERM waits until the file is read, as in :func:`write_alembic`.
     """
+    with held_signals():
+        return _read_alembic(path)
+
+
+def _read_alembic(path: str | Path) -> MeshSequence:
     import bpy
 
     path = Path(path)

@@ -79,6 +79,17 @@ def export_animation(
     return path
 
 
+def export_files(path: str | Path, body: bool = False) -> list[Path]:
+    """The files (or OBJ folder) :func:`export_animation` writes for ``path``: the path itself, and for ``.pc2``
+    its ``<stem>.obj`` too (with ``body``, the body's ``.pc2`` and ``.obj`` as well), so that a caller can check
+    them all before the work starts."""
+    path = Path(path)
+    if path.suffix.lower() != ".pc2":
+        return [path]
+    pairs = [path, _body_path(path)] if body else [path]
+    return [p for pc2 in pairs for p in (pc2, pc2.with_suffix(".obj"))]
+
+
 def read_animation(path: str | Path) -> MeshSequence:
     """Read any file :func:`export_animation` writes back into a :class:`MeshSequence` (Z-up metres)."""
     path = Path(path)

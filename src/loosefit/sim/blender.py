@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.extras import require
+from loosefit.interrupts import held_signals
 from loosefit.geometry.laplacian import edges
 from loosefit.geometry.normals import face_areas
 from loosefit.io.alembic import mesh_object
@@ -110,7 +111,8 @@ def run_cloth(
     write_pc2(workdir / "body.pc2", collider_frames)
     write_pc2(workdir / "garment.pc2", garment_frames)
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    with held_signals():  # Blender runs its add-ons' scripts here and would swallow a Ctrl-C
+        bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.fps = int(round(fps))
     scene.render.fps_base = scene.render.fps / fps
@@ -152,11 +154,13 @@ def run_cloth(
     depsgraph = bpy.context.evaluated_depsgraph_get()
     for frame in range(num_frames):
         start = time.perf_counter()
-        scene.frame_set(frame + 1)
+        with held_signals():  # a Ctrl-C stops the run between two frames
+            scene.frame_set(frame + 1)
         garment.evaluated_get(depsgraph).data.vertices.foreach_get("co", buf)
         seconds[frame] = time.perf_counter() - start
         out[frame] = buf.reshape(num_verts, 3)
-    bpy.ops.wm.read_factory_settings(use_empty=True)  # free the point cache before returning
+    with held_signals():
+        bpy.ops.wm.read_factory_settings(use_empty=True)  # free the point cache before returning
     return out, seconds
 
 

@@ -20,8 +20,11 @@ Each Ray worker is its own process with its own Blender.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
+import signal
+import threading
 import time
 import traceback
 from pathlib import Path
@@ -31,6 +34,7 @@ import numpy as np
 from tqdm import tqdm
 
 from loosefit.errors import InputError
+from loosefit.interrupts import held_signals
 from loosefit.sim.params import SimParams
 from loosefit.sim.plan import Plan, ProceduralMotion, SequenceJob, TemplateGarment, load_plan
 from loosefit.sim.quality import QualityGate
@@ -465,16 +469,12 @@ def _run_ray(
     import ray
 
     started = not ray.is_initialized()
-    if started and address is not None:
-        ray.init(address=address, log_to_driver=False)
-    elif started:
-        ray.init(
-            num_cpus=workers, include_dashboard=False, object_store_memory=_OBJECT_STORE_BYTES, log_to_driver=False
-        )
+    pending: dict[Any, SequenceJob] = {}
     try:
+        if started:
+            _start_ray(ray, workers, address)
         task = ray.remote(num_cpus=1, max_retries=0)(_simulate_parts)
         capacity = 2 * (workers if address is None else max(1, int(ray.cluster_resources().get("CPU", workers))))
-        pending: dict[Any, SequenceJob] = {}
         refs: dict[int, Any] = {}  # one object-store copy per garment / motion
         for job, payload in zip(jobs, payloads):
             for key in ("garment", "motion"):
@@ -487,9 +487,32 @@ def _run_ray(
                 _collect(ray, pending, record)
         while pending:
             _collect(ray, pending, record)
+    except BaseException:  # Ctrl-C, SIGTERM or an error: no task of this run goes on simulating (on a cluster too)
+        for ref in pending:
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        raise
     finally:
-        if started:
+        if started:  # a local Ray stops with its worker processes (also one cut short while starting)
             ray.shutdown()
+
+
+def _start_ray(ray, workers: int, address: str | None) -> None:
+    """``ray.init`` (the cluster at ``address``, else a local one of ``workers`` CPUs), keeping the caller's
+    signal handlers: Ray puts in one that exits at once on SIGTERM, which would say nothing of what is kept."""
+    handler = signal.getsignal(signal.SIGTERM) if threading.current_thread() is threading.main_thread() else None
+    try:
+        with held_signals():  # a Ctrl-C while Ray starts acts once it has started (and can be shut down)
+            if address is not None:
+                ray.init(address=address, log_to_driver=False)
+            else:
+                ray.init(num_cpus=workers, include_dashboard=False, object_store_memory=_OBJECT_STORE_BYTES,
+                         log_to_driver=False)
+    except SystemExit as e:  # Ray's own SIGTERM handler ran while it started: act as the caller's would have
+        if not callable(handler) or e.code != signal.SIGTERM:
+            raise
+        handler(signal.SIGTERM, None)
+        raise
 
 
 def _simulate_parts(garment, motion, payload: dict[str, Any]) -> dict[str, Any]:
