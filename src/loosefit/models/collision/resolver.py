@@ -170,7 +170,11 @@ class CollisionResolver:
         if passes < 0:
             raise InputError(f"surface passes must be >= 0, got {passes}")
         self.surface, self.passes = bool(surface), int(passes)
-        self.sample_index, self.sample_weight = surface_sample_weights(faces)
+        index, weight = surface_sample_weights(faces)
+        self.num_surface = len(index)  # then each vertex as a sample of its own (checked again once moved)
+        own = np.arange(num_verts)
+        self.sample_index = np.concatenate([index, np.stack([own, own, own], 1)])
+        self.sample_weight = np.concatenate([weight, np.tile([1.0, 0.0, 0.0], (num_verts, 1))])
         # what each vertex of a sample moves per metre of the sample's depth: w_j / sum_k w_k^2
         self.sample_push = self.sample_weight / (self.sample_weight**2).sum(1, keepdims=True)
         # CSR: the samples that vertex i is part of are sample_of[sample_start[i]:sample_start[i + 1]]
@@ -237,30 +241,41 @@ class CollisionResolver:
         out = verts.detach().clone()
         inside = np.zeros(len(out), bool)
         with flushed_denormals():
-            self._move_out(out, sdf, cand, inside, frames)
-            if self.surface and self.passes and len(self.sample_index):
-                self._surface(out, sdf, inside, frames, outside)
+            value = self._move_out(out, sdf, cand, inside, frames)
+            if self.surface and self.passes and self.num_surface:
+                known = np.where(np.isnan(value), 0.0, value)  # not a candidate: proved outside
+                known[inside] = -np.inf  # moved: unknown
+                self._surface(out, sdf, inside, known, frames, outside)
         return out, inside
 
-    def _surface(self, out: torch.Tensor, sdf, moved: np.ndarray, frames: bool, outside) -> None:
+    def _surface(self, out: torch.Tensor, sdf, moved: np.ndarray, known: np.ndarray, frames: bool,
+                 outside) -> None:
         """The surface pass (loosefit's, beyond SwinGar Eq. 10; see the class), in place on ``out (T V, 3)``,
-        marking the vertices it moves in ``moved (T V,)``. Flat sample index ``t S + k`` is sample ``k`` of
-        frame ``t``."""
+        marking the vertices it moves in ``moved (T V,)``. ``known (T V,)``: a lower bound of the field at each
+        vertex (its value where evaluated, 0 where the cull proved it outside, -inf unknown). Flat sample index
+        ``t S + k`` is sample ``k`` of frame ``t``; samples ``E + F`` on are the vertices themselves."""
         dev = out.device
         V, S = self.num_verts, len(self.sample_index)
         T = len(out) // V
         i0, i1, i2 = self.sample_index.T
         dtype = torch.empty(0, dtype=out.dtype).numpy().dtype  # the vertices' (float32 over a motion)
         w0, w1, w2 = (w[None, :, None].astype(dtype) for w in self.sample_weight.T)
-        check = None  # flat samples worth checking again (those touching the vertices just moved); None: all
+        check = np.zeros((T, S), bool)  # the samples worth checking: at first every edge and triangle
+        check[:, :self.num_surface] = True
+        check = check.reshape(-1)
         for _ in range(self.passes):
             x = out.cpu().numpy().reshape(T, V, 3)
             points = x[:, i0] * w0 + x[:, i1] * w1 + x[:, i2] * w2  # (T, S, 3)
-            maybe = np.ones(T * S, bool) if outside is None else \
-                ~np.asarray(outside(points if frames else points[0])).reshape(-1)
-            if check is not None:
-                maybe &= check
+            maybe = check if outside is None else \
+                check & ~np.asarray(outside(points if frames else points[0])).reshape(-1)
             cand = np.flatnonzero(maybe)
+            # a field that is a distance changes by at most |p - x_j| from a vertex to a sample: a vertex known to
+            # be that far out proves the sample is not deep (the field is not asked)
+            sample = cand % S
+            corner = (cand // S * V)[:, None] + self.sample_index[sample]
+            reach = np.linalg.norm(points.reshape(-1, 3)[cand][:, None] - x.reshape(-1, 3)[corner], axis=-1)
+            bound = np.where(self.sample_weight[sample] > 0, known[corner] - reach, -np.inf).max(1)
+            cand = cand[bound < -SURFACE_TOLERANCE]
             if len(cand) == 0:
                 return
             at = (torch.from_numpy(points.reshape(-1, 3)[cand]).to(out),)
@@ -268,6 +283,9 @@ class CollisionResolver:
                 at += (torch.from_numpy(cand // S).to(dev),)
             value, gradient = value_and_gradient_fn(sdf, *at)
             value = value.detach().cpu().numpy().astype(np.float64)
+            is_vertex = cand % S >= self.num_surface
+            vertex_of = cand[is_vertex] // S * V + cand[is_vertex] % S - self.num_surface
+            known[vertex_of] = value[is_vertex]  # the vertices' own samples: their value now
             deep = np.flatnonzero(value < -SURFACE_TOLERANCE)
             if len(deep) == 0:
                 return
@@ -288,23 +306,24 @@ class CollisionResolver:
             rows = torch.from_numpy(which).to(dev)
             out[rows] = out[rows] + torch.from_numpy(shift).to(out)
             moved[which] = True
-            # moved along another point's normal, a vertex can end in another part of the body: SwinGar Eq. 10
-            # on the moved ones (their moves are already marked)
-            self._move_out(out, sdf, which, np.zeros(len(out), bool), frames)
-            # the samples touching a moved vertex are the ones that can have changed
-            local, base = which % V, which - which % V
+            known[which] = -np.inf
+            # the samples touching a moved vertex are the ones that can have changed, the vertex's own among them
+            # (moved along another point's normal, it can end in another part of the body)
+            local, frame = which % V, which // V
             count = self.sample_start[local + 1] - self.sample_start[local]
             total = np.cumsum(count)
             touched = self.sample_of[np.repeat(self.sample_start[local] - total + count, count) + np.arange(total[-1])]
             check = np.zeros(T * S, bool)
-            check[touched + np.repeat(base // V * S, count)] = True
+            check[touched + np.repeat(frame * S, count)] = True
 
-    def _move_out(self, out: torch.Tensor, sdf, cand: np.ndarray, inside: np.ndarray, frames: bool) -> None:
-        """:meth:`_resolve`'s work, in place on ``out``, filling ``inside``."""
+    def _move_out(self, out: torch.Tensor, sdf, cand: np.ndarray, inside: np.ndarray, frames: bool) -> np.ndarray:
+        """SwinGar Eq. 10, in place on ``out``, filling ``inside``; returns the field's values ``(T V,)`` where it
+        was evaluated (before the moves; NaN elsewhere)."""
         dev = out.device
         V = self.num_verts
+        value = np.full(len(out), np.nan)
         if len(cand) == 0:
-            return
+            return value
 
         def at(index: np.ndarray) -> tuple:  # the field's arguments for these flat indices
             rows = torch.from_numpy(index).to(dev)
@@ -316,11 +335,10 @@ class CollisionResolver:
         hit = s_cand < 0
         ins = cand[hit]
         inside[ins] = True
-        if len(ins) == 0:
-            return
-        g = gradient(torch.from_numpy(np.flatnonzero(hit)).to(dev)).detach().cpu().numpy().astype(np.float64)
-        value = np.full(len(x), np.nan)
         value[cand] = s_cand
+        if len(ins) == 0:
+            return value
+        g = gradient(torch.from_numpy(np.flatnonzero(hit)).to(dev)).detach().cpu().numpy().astype(np.float64)
         # the neighbours of the inside vertices, flat: neighbour nbr[k] belongs to inside vertex ins[rows[k]]
         vertex = ins % V
         count = self.start[vertex + 1] - self.start[vertex]
@@ -346,6 +364,7 @@ class CollisionResolver:
         direction = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
         moved = x_in + direction * (np.abs(s_cand[hit]) + delta)[:, None]
         out[torch.from_numpy(ins).to(dev)] = torch.from_numpy(moved).to(out)
+        return value
 
 
 def resolve_collisions(verts: torch.Tensor, faces: np.ndarray, sdf: SDFFunction, sigma: float | None = None,
