@@ -124,6 +124,8 @@ def test_the_passes_converge_where_a_curved_limb_needs_several():
     assert depths(verts, faces, cylinder).min() < -0.015
     assert depths(out, faces, cylinder).min() >= -LEFT
     assert depths(one, faces, cylinder).min() <= depths(out, faces, cylinder).min()
+    # when the passes run out, SwinGar Eq. 10 checks the last moves: no vertex is left inside
+    assert (cylinder(one) >= -1e-9).all() and (cylinder(out) >= -1e-9).all()
     with pytest.raises(InputError, match="surface passes"):
         CollisionResolver(faces, len(verts), passes=-1)
 
@@ -142,9 +144,9 @@ def test_exact_field_with_the_cull_resolves_a_triangle_through_a_mesh_limb():
     asked = []
 
     class Counting(ExactSDF):
-        def _query(self, points):
+        def _query(self, points, *hint):
             asked.append(len(points))
-            return super()._query(points)
+            return super()._query(points, *hint)
 
     culled, moved = correct_frame(world, resolver, Counting(body), None, culler)
     plain, moved_plain = correct_frame(world, resolver, field, None, None)
@@ -154,3 +156,21 @@ def test_exact_field_with_the_cull_resolves_a_triangle_through_a_mesh_limb():
     unmoved = ~moved
     assert np.array_equal(culled[unmoved], world[unmoved])
     assert max(asked) < len(surface_sample_weights(faces)[0])  # the cull kept most samples from the field
+
+
+def test_exact_field_trusts_a_known_outside_distance_only_for_its_winding_check():
+    """``outside_beyond``: a point farther from the surface than it is known outside (the surface pass knows it
+    from a vertex farther out than its distance to the point), and the winding number is not asked. Two spheres
+    in one mesh passing through each other: at x = 0.15 a point is inside the first, 5 cm from the second's
+    surface whose side faces it (the closest triangle says outside, the winding number inside)."""
+    a = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    mesh = BodySDF(np.concatenate([a.vertices, a.vertices + [1.2, 0.0, 0.0]]),
+                   np.concatenate([a.faces, a.faces + len(a.vertices)]))
+    point = torch.tensor([[0.15, 0.0, 0.0]], dtype=torch.float64)
+    field = ExactSDF(mesh)
+    plain = float(field.value_and_gradient_fn(point)[0][0])
+    assert plain == pytest.approx(-0.05, abs=2e-3)
+    # a bound below its distance would say outside (it is only ever given where that is proved): the winding
+    # number is skipped; a bound above its distance changes nothing
+    assert float(field.value_and_gradient_fn(point, outside_beyond=np.array([0.01]))[0][0]) == pytest.approx(-plain)
+    assert float(field.value_and_gradient_fn(point, outside_beyond=np.array([0.2]))[0][0]) == plain

@@ -12,7 +12,8 @@ in; the displacement here is along the outward gradient, as intended there.
   a triangle or an edge whose vertices are all outside it (a knee through a skirt between its vertices: 59-71 mm
   inside at edge midpoints and centroids on a kick, a run and a lunge). :class:`CollisionResolver` (``surface``,
   on by default) also evaluates the field at every edge's midpoint and triangle's centroid and moves the vertices
-  of a sample inside the body out along the field's gradient at it, until no sample is inside (a few passes).
+  of a sample inside the body out along the field's gradient at it, until no sample is inside or
+  :data:`SURFACE_PASSES` passes have run.
 - :func:`push_out`: the fixed-distance baseline (TailorNet) the paper compares with.
 - :func:`correct_frame` (one frame, for streaming), :func:`correct_motion` (a whole motion) and
   :func:`handle_motion_collisions` (any method's animated garment, ``loosefit animate --collision``): the posed
@@ -32,6 +33,7 @@ import queue
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+import scipy.sparse as sp
 import torch
 
 from loosefit.errors import InputError
@@ -46,11 +48,13 @@ from loosefit.threads import torch_threads
 
 #: Closest-triangle distance (m) beyond which :class:`ExactSDF` checks a point's side by its winding number.
 WINDING_FROM = 0.005
-#: Passes of the surface pass at most (each: the samples checked, the vertices of the deep ones moved, those
-#: vertices checked by SwinGar Eq. 10). One pass puts a deep sample on the surface where the field is a distance
-#: (the normal line through a point meets the surface at its closest point); more mend what a pass changes next
-#: to it (a shared vertex moved by its deepest sample lifts the others of its triangles too, a curved limb).
-SURFACE_PASSES = 4
+#: Passes of the surface pass at most (each: the samples that can be deep checked, the vertices of the deep ones
+#: moved). One pass puts a deep sample on the surface where the field is a distance (the normal line through a
+#: point meets the surface at its closest point); more mend what a pass changes next to it: cloth straddling a
+#: limb (a triangle on both sides of a thigh) is wrapped around it a ring of triangles a pass. On a skinned 3.9k
+#: vertex skirt through a kicking or running leg the deepest edge midpoint or centroid left was 44-49 mm after 4
+#: passes, 27 mm after 8, 19-21 mm after 16, for 20 % more field queries than 8 (benchmarks/surface_collision.py).
+SURFACE_PASSES = 8
 #: Metres a surface sample must be inside the field's surface (``S < -SURFACE_TOLERANCE``) to be moved: cloth
 #: resting on the body is left alone (the chord of a 2 cm edge on a waist of 15 cm radius sags 0.33 mm inside it),
 #: and a sample put on the surface by the previous pass is not moved again for its float rounding. A hundredth
@@ -70,14 +74,20 @@ class ExactSDF:
     def __init__(self, mesh: BodySDF):
         self.mesh = mesh
 
-    def _query(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Signed distances ``(N,)`` and unit outward gradients ``(N, 3)``, as tensors like ``points``."""
+    def _query(self, points: torch.Tensor, outside_beyond: np.ndarray | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Signed distances ``(N,)`` and unit outward gradients ``(N, 3)``, as tensors like ``points``.
+        ``outside_beyond (N,)``: metres; a point farther than this from the surface is known to be outside (a
+        point of the garment near one known to be outside, :meth:`CollisionResolver._surface`), and its side is
+        not checked by the winding number."""
         p = points.detach().cpu().double().numpy()
         dist, closest, face = self.mesh.closest(p)
         # A posed body can fold through itself (the hips on a spin): there the closest triangle's side can say
         # outside for a point centimetres inside; the winding number settles it (for points more than
         # WINDING_FROM out: the cases seen were 26-82 mm, and most candidates are cloth resting on the skin).
-        out = np.nonzero(dist > WINDING_FROM)[0]
+        far = dist > WINDING_FROM
+        if outside_beyond is not None:
+            far &= dist <= outside_beyond
+        out = np.nonzero(far)[0]
         if len(out):
             dist[out[self.mesh.inside(p[out])]] *= -1.0
         away = p - closest
@@ -92,9 +102,10 @@ class ExactSDF:
         # the value with the exact gradient attached: d/dx (value + n . (x - x0)) = n
         return value + (direction * (points - points.detach())).sum(-1)
 
-    def value_and_gradient_fn(self, points: torch.Tensor):
-        """Values ``(N,)`` and ``rows -> gradients (M, 3)`` from one query (see :func:`value_and_gradient_fn`)."""
-        value, direction = self._query(points)
+    def value_and_gradient_fn(self, points: torch.Tensor, outside_beyond: np.ndarray | None = None):
+        """Values ``(N,)`` and ``rows -> gradients (M, 3)`` from one query (see :func:`value_and_gradient_fn`;
+        ``outside_beyond``: see :meth:`_query`)."""
+        value, direction = self._query(points, outside_beyond)
         return value, lambda rows: direction[rows]
 
 
@@ -141,21 +152,25 @@ class CollisionResolver:
     a free neighbour. With every vertex a candidate the result is that of evaluating the field everywhere.
 
     The surface pass (``surface``; loosefit's addition beyond SwinGar Eq. 10, which resolves vertices only) then
-    looks between the vertices: the samples of :func:`surface_sample_weights` (edge midpoints and triangle
-    centroids, ``p = sum_j w_j x_j``) that an ``outside`` test cannot prove outside are given to the field, and for
-    each with ``S(p) < -SURFACE_TOLERANCE`` every vertex ``j`` of it is asked to move by
-    ``d n w_j / sum_k w_k^2`` (``d = |S(p)|``, ``n`` the unit gradient at ``p``): together these put ``p`` itself
-    on the surface. A vertex asked by several samples takes the largest ask (the sum would move it once per deep
-    sample; the mean, too little for the deepest). The vertices moved are then checked by SwinGar Eq. 10 (moved
-    along another point's normal, one can land in another part of the body), and the samples touching them are
-    checked again, up to ``passes`` passes in all. A triangle or edge with no sample inside is never moved.
+    looks between the vertices, at the samples of :func:`surface_sample_weights` (edge midpoints and triangle
+    centroids, ``p = sum_j w_j x_j``). A sample is given to the field unless the ``outside`` test proves it outside
+    or one of its vertices is known to be farther out than its distance to ``p`` (a distance field changes by at
+    most the distance: ``S(p) >= S(x_j) - |p - x_j|``). For each with ``S(p) < -SURFACE_TOLERANCE`` every vertex
+    ``j`` of it is asked to move by ``d n w_j / sum_k w_k^2`` (``d = |S(p)|``, ``n`` the unit gradient at ``p``):
+    together these put ``p`` itself on the surface. A vertex asked by several samples takes the largest ask (the
+    sum would move it once per deep sample; the mean, too little for the deepest). The next pass checks the
+    samples touching a moved vertex, the vertex itself among them (moved along another point's normal, it can
+    end in another part of the body), up to ``passes`` passes; when they run out, SwinGar Eq. 10 checks the last
+    pass's moves. A triangle or edge with no sample inside is not moved; one next to it can be, in a later pass,
+    when the move of a shared vertex pulled it into the body.
 
     Args:
         faces: ``(F, 3)`` triangles (the neighbourhoods, and the surface samples).
         num_verts: ``V``.
         sigma: Gaussian width, metres; None: the mean edge length of the first mesh given to :meth:`__call__`.
         surface: run the surface pass after SwinGar Eq. 10 (False: the paper's vertex-only handling).
-        passes: surface passes at most (:data:`SURFACE_PASSES`).
+        passes: surface passes at most (:data:`SURFACE_PASSES`); the surface samples ``S = E + F + V`` (the
+            vertices last) are built once, like the neighbour lists.
     """
 
     def __init__(self, faces: np.ndarray, num_verts: int, sigma: float | None = None, surface: bool = True,
@@ -177,6 +192,9 @@ class CollisionResolver:
         self.sample_weight = np.concatenate([weight, np.tile([1.0, 0.0, 0.0], (num_verts, 1))])
         # what each vertex of a sample moves per metre of the sample's depth: w_j / sum_k w_k^2
         self.sample_push = self.sample_weight / (self.sample_weight**2).sum(1, keepdims=True)
+        rows = np.repeat(np.arange(len(self.sample_index)), 3)  # (S, V): every sample of a frame in one product
+        self.sample_matrix = sp.csr_matrix((self.sample_weight.ravel(), (rows, self.sample_index.ravel())),
+                                           shape=(len(self.sample_index), num_verts))
         # CSR: the samples that vertex i is part of are sample_of[sample_start[i]:sample_start[i + 1]]
         sample, corner = np.nonzero(self.sample_weight > 0)
         owner = self.sample_index[sample, corner]
@@ -257,41 +275,50 @@ class CollisionResolver:
         dev = out.device
         V, S = self.num_verts, len(self.sample_index)
         T = len(out) // V
-        i0, i1, i2 = self.sample_index.T
         dtype = torch.empty(0, dtype=out.dtype).numpy().dtype  # the vertices' (float32 over a motion)
-        w0, w1, w2 = (w[None, :, None].astype(dtype) for w in self.sample_weight.T)
-        check = np.zeros((T, S), bool)  # the samples worth checking: at first every edge and triangle
-        check[:, :self.num_surface] = True
-        check = check.reshape(-1)
+        cand = (np.arange(T)[:, None] * S + np.arange(self.num_surface)).reshape(-1)  # every edge and triangle
+        last = None
         for _ in range(self.passes):
-            x = out.cpu().numpy().reshape(T, V, 3)
-            points = x[:, i0] * w0 + x[:, i1] * w1 + x[:, i2] * w2  # (T, S, 3)
-            maybe = check if outside is None else \
-                check & ~np.asarray(outside(points if frames else points[0])).reshape(-1)
-            cand = np.flatnonzero(maybe)
+            x = out.cpu().numpy().reshape(T * V, 3)
+            sample, frame = cand % S, cand // S
+            corner = (frame * V)[:, None] + self.sample_index[sample]  # (N, 3) flat vertices
+            weight = self.sample_weight[sample]
+            if last is None:  # every sample: one sparse product a frame
+                xt = x.reshape(T, V, 3).transpose(1, 0, 2).reshape(V, T * 3)
+                points = (self.sample_matrix @ xt).reshape(-1, T, 3).transpose(1, 0, 2)[:, :self.num_surface]
+                points = points.reshape(-1, 3).astype(dtype)
+            else:
+                points = np.einsum("nk,nkd->nd", weight, x[corner]).astype(dtype)
+            if outside is not None:
+                free = self._culled(points, frame, T, outside, every=last is None)
+                cand, sample, frame, corner, weight, points = (a[~free] for a in (cand, sample, frame, corner,
+                                                                                   weight, points))
             # a field that is a distance changes by at most |p - x_j| from a vertex to a sample: a vertex known to
-            # be that far out proves the sample is not deep (the field is not asked)
-            sample = cand % S
-            corner = (cand // S * V)[:, None] + self.sample_index[sample]
-            reach = np.linalg.norm(points.reshape(-1, 3)[cand][:, None] - x.reshape(-1, 3)[corner], axis=-1)
-            bound = np.where(self.sample_weight[sample] > 0, known[corner] - reach, -np.inf).max(1)
-            cand = cand[bound < -SURFACE_TOLERANCE]
+            # be that far out proves the sample is not deep, and is not asked about it (exact for the exact field;
+            # the network is a distance as far as its Eikonal term made it one)
+            reach = np.linalg.norm(points[:, None].astype(np.float64) - x[corner], axis=-1)
+            bound = np.where(weight > 0, known[corner] - reach, -np.inf).max(1)
+            keep = bound < -SURFACE_TOLERANCE
+            cand, sample, frame, bound, points = cand[keep], sample[keep], frame[keep], bound[keep], points[keep]
             if len(cand) == 0:
-                return
-            at = (torch.from_numpy(points.reshape(-1, 3)[cand]).to(out),)
+                break
+            at = (torch.from_numpy(points).to(dev),)
             if frames:
-                at += (torch.from_numpy(cand // S).to(dev),)
-            value, gradient = value_and_gradient_fn(sdf, *at)
+                at += (torch.from_numpy(frame).to(dev),)
+            if isinstance(sdf, ExactSDF):  # farther from the surface than the bound says, a sample is outside
+                value, gradient = sdf.value_and_gradient_fn(*at, outside_beyond=-bound)
+            else:
+                value, gradient = value_and_gradient_fn(sdf, *at)
             value = value.detach().cpu().numpy().astype(np.float64)
-            is_vertex = cand % S >= self.num_surface
-            vertex_of = cand[is_vertex] // S * V + cand[is_vertex] % S - self.num_surface
-            known[vertex_of] = value[is_vertex]  # the vertices' own samples: their value now
+            own = sample >= self.num_surface  # the vertices' own samples: their value now
+            known[frame[own] * V + sample[own] - self.num_surface] = value[own]
             deep = np.flatnonzero(value < -SURFACE_TOLERANCE)
             if len(deep) == 0:
-                return
+                last = None
+                break
             g = gradient(torch.from_numpy(deep).to(dev)).detach().cpu().numpy().astype(np.float64)
             normal = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
-            sample, frame = cand[deep] % S, cand[deep] // S
+            sample, frame = sample[deep], frame[deep]
             # each vertex of a deep sample is asked to move by d w_j / sum w^2 along the sample's normal
             ask = -value[deep][:, None] * self.sample_push[sample]  # (K, 3)
             vertex = frame[:, None] * V + self.sample_index[sample]  # (K, 3) flat vertices
@@ -300,21 +327,37 @@ class CollisionResolver:
             ask, vertex, row = ask[real], vertex[real], row[real]
             # the largest ask of each vertex: sorted by vertex, then ask; the last of each vertex's run
             order = np.lexsort((ask, vertex))
-            last = order[np.r_[vertex[order][1:] != vertex[order][:-1], True]]
-            which = vertex[last]  # sorted, unique
-            shift = ask[last, None] * normal[row[last]]
-            rows = torch.from_numpy(which).to(dev)
+            pick = order[np.r_[vertex[order][1:] != vertex[order][:-1], True]]
+            last = vertex[pick]  # sorted, unique
+            shift = ask[pick, None] * normal[row[pick]]
+            rows = torch.from_numpy(last).to(dev)
             out[rows] = out[rows] + torch.from_numpy(shift).to(out)
-            moved[which] = True
-            known[which] = -np.inf
+            moved[last] = True
+            known[last] = -np.inf
             # the samples touching a moved vertex are the ones that can have changed, the vertex's own among them
             # (moved along another point's normal, it can end in another part of the body)
-            local, frame = which % V, which // V
+            local, frame = last % V, last // V
             count = self.sample_start[local + 1] - self.sample_start[local]
             total = np.cumsum(count)
             touched = self.sample_of[np.repeat(self.sample_start[local] - total + count, count) + np.arange(total[-1])]
-            check = np.zeros(T * S, bool)
-            check[touched + np.repeat(frame * S, count)] = True
+            cand = np.unique(touched + np.repeat(frame * S, count))
+        if last is not None:  # the passes ran out: the last moves are not checked, unless by SwinGar Eq. 10
+            self._move_out(out, sdf, last, np.zeros(len(out), bool), frames)
+
+    @staticmethod
+    def _culled(points: np.ndarray, frame: np.ndarray, T: int, outside, every: bool) -> np.ndarray:
+        """``(N,)`` bool: the cull proves ``points (N, 3)`` (of frames ``frame (N,)``, sorted) outside. ``every``: the
+        points are every sample of every frame, in order; otherwise a frames' cull (``T > 1``) is given each frame's
+        points padded to the same count with a point far outside."""
+        if T == 1:
+            return np.asarray(outside(points))
+        if every:
+            return np.asarray(outside(points.reshape(T, -1, 3))).reshape(-1)
+        count = np.bincount(frame, minlength=T)
+        slot = np.arange(len(frame)) - np.repeat(np.cumsum(count) - count, count)
+        padded = np.full((T, max(int(count.max()), 1), 3), 1e4, points.dtype)
+        padded[frame, slot] = points
+        return np.asarray(outside(padded))[frame, slot]
 
     def _move_out(self, out: torch.Tensor, sdf, cand: np.ndarray, inside: np.ndarray, frames: bool) -> np.ndarray:
         """SwinGar Eq. 10, in place on ``out``, filling ``inside``; returns the field's values ``(T V,)`` where it
