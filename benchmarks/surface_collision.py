@@ -31,13 +31,14 @@ points more than 5 mm inside at most 0.5 % on average and 1.5 % in any frame; th
     PYTHONPATH=src .venv/bin/python benchmarks/surface_collision.py [--edge 0.0165] [--motion kick:1:3 ...]
 
 Motions: ``kind:seed:seconds`` (procedural) or a BVH file (``--joint-map cc`` for ``../shared/mocap``), the first
-``--frames`` frames. Writes ``benchmarks/results/surface_collision.json``.
+``--frames`` frames. Writes ``benchmarks/results/surface_collision.json`` (``--append``: one motion a run, the rows of
+the others kept).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
@@ -46,7 +47,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import save_results  # noqa: E402
+from _common import RESULTS, save_results  # noqa: E402
 
 #: ``../shared/mocap/cmu-cc`` of the checkout (or of a folder above a worktree), None where there is none.
 MOCAP = next((up / "shared" / "mocap" / "cmu-cc" for up in Path(__file__).resolve().parents
@@ -144,6 +145,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3, help="timed runs of each handling (the least counts)")
     ap.add_argument("--passes", type=int, default=None, help="surface passes at most (default: the handling's)")
     ap.add_argument("--out", default="surface_collision")
+    ap.add_argument("--append", action="store_true",
+                    help="keep the other motions' rows of results/<out>.json (one motion a run; pooled over all)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     args.passes = SURFACE_PASSES if args.passes is None else args.passes
@@ -157,6 +160,12 @@ def main() -> None:
     print(f"skirt: {V} vertices, {len(faces)} triangles; surface pass: {args.passes} passes, tolerance "
           f"{SURFACE_TOLERANCE * 1e3:g} mm", flush=True)
     rows = []
+    saved = RESULTS / f"{args.out}.json"
+    if args.append and saved.is_file():
+        before = json.loads(saved.read_text())["results"]
+        if before["garment"]["vertices"] != V or before["surface_passes"] != args.passes:
+            raise SystemExit(f"{saved} was measured on another skirt or pass count: drop --append")
+        rows = [r for r in before["rows"] if r["motion"] not in motions]
     for label, motion in motions.items():
         raw = body_lbs(garment.verts, body, motion)
         T = len(raw)
