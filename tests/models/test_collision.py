@@ -55,7 +55,7 @@ def test_delta_is_the_gaussian_mean_of_free_neighbours():
     mean |S|, by hand."""
     verts = torch.tensor([[0.5, 0.4, -0.1 + 0.2], [0.5, 0.4 + 0.1, 0.2], [0.5 + 0.3, 0.4, 0.0]], dtype=torch.float64)
     faces = np.array([[0, 1, 2]])
-    out, inside = resolve_collisions(verts, faces, sphere_sdf, sigma=0.1)
+    out, inside = resolve_collisions(verts, faces, sphere_sdf, sigma=0.1, surface=False)  # Eq. 10 alone
     assert inside.tolist() == [True, False, False]
     s = sphere_sdf(verts)
     d = (verts[1:] - verts[0]).norm(dim=-1)
@@ -424,8 +424,10 @@ def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, m
     verts = (flat[None] + frames.mean(1)[:, None]).astype(np.float32)  # (T, V, 3)
     resolver = CollisionResolver(sheet_faces, verts.shape[1], sigma=0.03)
     culler = AxisRayCuller(frames[0], faces)
+    # the cull's window as correct_motion sets it (the garment's box before the correction): the surface pass asks
+    # the cull about samples the vertices' moves carried out of it, which the network with a margin may call inside
     by_frame = np.stack([correct_frame(verts[t], resolver, net.bind(codes[t]).offset(0.01), (rot[t], origin[t]),
-                                       culler.update(frames[t]))[0] for t in range(T)])
+                                       culler.update(frames[t], verts[t]))[0] for t in range(T)])
     monkeypatch.setattr(resolver_module, "FRAME_CHUNK", 4)  # several chunks
     serial, moved = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, workers=1)
     overlapped, moved_too = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, workers=3)

@@ -40,11 +40,18 @@ def test_cloth_near_the_body_ends_outside_the_inflated_enclosing_surface(body):
         # armpits), where the offset surface folds
         assert np.median(depth) > 0.0018 and depth.mean() > 0.0016 and np.quantile(depth, 0.1) > 0.0012
     # outside the (inflated) surface: left alone, but for the few offset vertices that fold into another part
-    # of the body (fingers, armpits; their winding number says inside: 1.0 % measured)
+    # of the body (fingers, armpits; their winding number says inside: 0.7 % measured), and with the surface pass
+    # the vertices of the triangles there whose edge midpoints or centroids are inside by more than 0.5 mm (1.8 %)
+    vertices_only = handle_motion_collisions(near, proxy.faces, body, motion, "exact", inflate=0.0, surface=False)
+    assert np.any(vertices_only != near, axis=-1).mean() < 0.015
     plain = handle_motion_collisions(near, proxy.faces, body, motion, "exact", inflate=0.0)
-    assert np.any(plain != near, axis=-1).mean() < 0.015
+    assert np.any(plain != near, axis=-1).mean() < 0.025
     assert np.any(moved != near, axis=-1).mean() > 0.9
-    far_moved = handle_motion_collisions(far, proxy.faces, body, motion, "exact")
+    far_moved = handle_motion_collisions(far, proxy.faces, body, motion, "exact", surface=False)
     assert np.any(far_moved != far, axis=-1).mean() < 0.04  # 3.1 % measured
+    # the offset folds into the body between the legs and at the armpits: 2.0 % of its edge midpoints and
+    # centroids 0.8-8 mm inside the inflated surface, whose triangles the surface pass moves too (7.3 %)
+    far_moved = handle_motion_collisions(far, proxy.faces, body, motion, "exact")
+    assert np.any(far_moved != far, axis=-1).mean() < 0.09
     with pytest.raises(InputError, match="proxy inflation"):
         handle_motion_collisions(near, proxy.faces, body, motion, "exact", inflate=-0.001)

@@ -1,6 +1,6 @@
 """Neural collision handling's signs and constants (SwinGar Sec. III-D) on closed-form fields: SwinGar Eq. 10
 weighs only the neighbours that are not inside, moves along the outward gradient (loosefit's SDF is negative
-inside, SwinGar Eq. 7's positive); SwinGar Eqs. 8-9 with ``mu_e = 0.15`` and the Eikonal target 1; the
+inside, SwinGar Eq. 7's positive; Eq. 10 alone, without loosefit's surface pass); SwinGar Eqs. 8-9 with ``mu_e = 0.15`` and the Eikonal target 1; the
 network's Softplus at beta = 100."""
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def test_only_free_neighbours_weigh_in_the_correction():
     verts = torch.cat([on_ray([1.0, 0.2, 0.0], [-0.03]), on_ray([1.0, 0.0, 0.1], [-0.01]),
                        on_ray([1.0, -0.1, -0.1], [0.02])])
     for sigma in (0.01, 0.05, 1.0):  # the inside neighbour would weigh more and more
-        out, inside = resolve_collisions(verts, np.array([[0, 1, 2]]), sphere, sigma=sigma)
+        out, inside = resolve_collisions(verts, np.array([[0, 1, 2]]), sphere, sigma=sigma, surface=False)
         assert inside.tolist() == [True, True, False]
         torch.testing.assert_close(sphere(out[:2]), torch.full((2,), 0.02, dtype=torch.float64), rtol=1e-9, atol=1e-12)
         assert torch.equal(out[2], verts[2])
@@ -47,7 +47,7 @@ def test_a_vertex_without_free_neighbours_lands_on_the_surface():
     by ``|S(x_i)|`` onto the surface, along the outward gradient."""
     verts = torch.cat([on_ray([0.0, 0.0, 1.0], [-0.05]), on_ray([0.1, 0.0, 1.0], [-0.02]),
                        on_ray([0.0, 0.1, 1.0], [-0.04])])
-    out, inside = CollisionResolver(np.array([[0, 1, 2]]), 3, sigma=0.05)(verts, sphere)
+    out, inside = CollisionResolver(np.array([[0, 1, 2]]), 3, sigma=0.05, surface=False)(verts, sphere)
     assert inside.all()
     torch.testing.assert_close(sphere(out), torch.zeros(3, dtype=torch.float64), rtol=0, atol=1e-12)
     outward = (out - verts) / (out - verts).norm(dim=-1, keepdim=True)
@@ -59,7 +59,7 @@ def test_the_correction_magnitude_adds_delta_to_the_depth():
     """``|Delta(x_i)| = |S(x_i)| + delta_i`` (SwinGar Eq. 10): both terms add; the vertex leaves the body by delta."""
     verts = torch.cat([on_ray([0.0, 1.0, 0.0], [-0.04, 0.01, 0.03])])
     sigma = 0.02
-    out, inside = resolve_collisions(verts, np.array([[0, 1, 2]]), sphere, sigma=sigma)
+    out, inside = resolve_collisions(verts, np.array([[0, 1, 2]]), sphere, sigma=sigma, surface=False)
     d = (verts[1:] - verts[0]).norm(dim=-1)
     w = torch.exp(-d**2 / (2 * sigma**2))
     delta = float((w * torch.tensor([0.01, 0.03], dtype=torch.float64)).sum() / w.sum())

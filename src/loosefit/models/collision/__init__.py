@@ -8,7 +8,8 @@ pointing outwards.
   and bone frames, its file.
 - :mod:`~loosefit.models.collision.fast_eval`: its evaluation and gradient written out for inference
   (:class:`BoundBodySDF`, :class:`MotionBodySDF`, :class:`FramedSDF`).
-- :mod:`~loosefit.models.collision.resolver`: SwinGar Eq. 10 (:class:`CollisionResolver`), the push-out baseline,
+- :mod:`~loosefit.models.collision.resolver`: SwinGar Eq. 10 (:class:`CollisionResolver`) and loosefit's surface
+  pass beyond it (the body through a triangle or an edge between vertices), the push-out baseline,
   the exact field, and the correction of a frame or a whole motion (:func:`handle_motion_collisions`).
 - :mod:`~loosefit.models.collision.training`: training samples, SwinGar Eqs. 8-9, training, the margin's
   calibration and the run folder of ``loosefit train --method collision``.
@@ -23,9 +24,9 @@ from loosefit.models.collision.network import (SOFTPLUS_BETA, BodySDFConfig, Bod
                                                motion_sdf_inputs, posed_joints, save_body_sdf)
 from loosefit.models.collision.resolver import (CULL_CELL, FRAME_CHUNK, CollisionResolver, ExactSDF, correct_frame,
                                                 correct_motion, handle_motion_collisions, inflated, POST_PROCESSES,
-                                                PROXY_INFLATE,
+                                                PROXY_INFLATE, SURFACE_PASSES, SURFACE_TOLERANCE,
                                                 check_post_process, post_process, push_out,
-                                                resolve_collisions, vertex_neighbours)
+                                                resolve_collisions, surface_sample_weights, vertex_neighbours)
 from loosefit.models.collision.training import (CALIBRATION_QUANTILE, EIKONAL_WEIGHT, SDF_FILE, SDF_META,
                                                 SDFRunConfig, SDFTrainConfig, body_sdf_samples, calibrate_margin,
                                                 calibrate_sdf_run, calibration_set, collision_margin,
@@ -41,7 +42,8 @@ __all__ = [
     # resolver
     "ExactSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out", "CULL_CELL",
     "correct_frame", "FRAME_CHUNK", "correct_motion", "handle_motion_collisions", "PROXY_INFLATE", "inflated",
-    "POST_PROCESSES", "check_post_process", "post_process",
+    "POST_PROCESSES", "check_post_process", "post_process", "SURFACE_PASSES", "SURFACE_TOLERANCE",
+    "surface_sample_weights",
     # training
     "EIKONAL_WEIGHT", "sdf_loss", "sdf_samples", "SDFTrainConfig", "random_anny_shapes", "random_procedural_motions",
     "body_sdf_samples", "samples_code", "train_body_sdf", "SDF_FILE", "SDF_META", "CALIBRATION_QUANTILE",
