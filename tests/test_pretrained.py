@@ -33,8 +33,15 @@ def test_a_shipped_run_animates_as_the_run_itself(lbs_run, tiny_store, tmp_path,
     assert pretrained.resolve_run("pretrained:skirt/body-lbs") == out
     store = DatasetStore.open(tiny_store)
     motion = store.motion(store.sequence(store.sequence_names(split="test")[0]).motion)
-    np.testing.assert_array_equal(Animator("pretrained:skirt/body-lbs").animate(motion),
-                                  Animator(lbs_run, checkpoint="last").animate(motion))
+    original = torch.load(lbs_run / "checkpoints" / "last.pt", weights_only=True)["model"]
+    for key, value in original.items():  # large float tensors halved, the rest as trained
+        big = value.is_floating_point() and value.numel() > pretrained.HALF_ABOVE
+        assert state["model"][key].dtype == (torch.float16 if big else value.dtype)
+        torch.testing.assert_close(state["model"][key].to(value.dtype), value, rtol=1e-3, atol=1e-4)
+    shipped = Animator("pretrained:skirt/body-lbs").animate(motion)
+    # float16 weights move a vertex by well under a millimetre (0.75 mm at most on a held-out clip of the shipped
+    # VirtualBones skirt)
+    np.testing.assert_allclose(shipped, Animator(lbs_run, checkpoint="last").animate(motion), rtol=0, atol=1e-3)
 
 
 def test_names_that_are_not_shipped_are_refused_with_the_list(tmp_path, monkeypatch):

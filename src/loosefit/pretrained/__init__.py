@@ -29,6 +29,10 @@ DEFAULT_METHOD = "virtualbones"
 FILES = ("model.json", "method.yaml", "checkpoints/best.pt", "pretrained.json")
 #: Each shipped checkpoint stays below this (bytes): they travel inside the wheel.
 MAX_BYTES = 20 * 1024 * 1024
+#: Weight tensors with more elements than this are stored as float16 in a shipped checkpoint (loading casts them
+#: back to the model's float32), which halves a VirtualBones or JointNet garment; smaller tensors, the input and
+#: target statistics among them, stay float32, so that positions of a metre keep their sub-millimetre precision.
+HALF_ABOVE = 4096
 
 
 def available() -> list[str]:
@@ -55,8 +59,8 @@ def resolve_run(run: str | Path) -> Path:
 
 def ship(run: str | Path, out: str | Path, info: dict) -> Path:
     """Reduce the trained run folder ``run`` into ``out`` (a new folder): its ``model.json`` and ``method.yaml``,
-    its best checkpoint (the last one for a run without validation) with the model's weights only, and
-    ``pretrained.json`` holding ``info`` (what it was trained on, its scores). Returns ``out``.
+    its best checkpoint (the last one for a run without validation) with the model's weights only (the large ones
+    as float16: :data:`HALF_ABOVE`), and ``pretrained.json`` holding ``info`` (what it was trained on, its scores). Returns ``out``.
 
     Raises:
         InputError: ``run`` is not a finished run folder, or the checkpoint exceeds :data:`MAX_BYTES`.
@@ -70,6 +74,8 @@ def ship(run: str | Path, out: str | Path, info: dict) -> Path:
         if not (run.path / name).is_file():
             raise InputError(f"not a finished run folder (no {name})", run.path)
     state.update(optimizer=None, scheduler=None)  # animation reads the weights only
+    state["model"] = {k: v.half() if v.is_floating_point() and v.numel() > HALF_ABOVE else v
+                      for k, v in state["model"].items()}
     if out.exists():
         shutil.rmtree(out)
     (out / "checkpoints").mkdir(parents=True)
