@@ -69,6 +69,9 @@ if request is not None:
     sys.stdin = open(os.devnull)
     sys.argv = [request["module"], *request["argv"]]
     import runpy
+    import warnings
+    # the server imported the module already (PRELOAD): runpy's warning about that is the harness's, not the CLI's
+    warnings.filterwarnings("ignore", message=".*found in sys.modules after import of package", category=RuntimeWarning)
     runpy.run_module(request["module"], run_name="__main__", alter_sys=True)
 """
 
