@@ -41,8 +41,10 @@ def test_a_garment_made_for_a_taller_body_is_fitted(tmp_path, body, tall_shirt):
     tall, shirt = tall_shirt
     path = write_obj(tmp_path / "tall.obj", pelvis_y_up(tall, shirt.verts, 100.0), shirt.faces)
     sdf = measure_body(body).sdf
-    # A small search (the default scores 9 shapes, then refines): height 0.5 (this body) or 0.8.
-    search = Search(coarse=(("height", (0.5, 0.8)),), steps=(), morph_seconds=0.4, settle_seconds=0.3)
+    # A small search (the default looks at a few hundred shapes' profiles, then scores the best exactly and
+    # refines): height 0.5 (this body) or 0.8.
+    search = Search(coarse=(("height", (0.5, 0.8)),), profile_steps=(), steps=(), morph_seconds=0.4,
+                    settle_seconds=0.3)
     # Without --fit (fit=None): placed directly, two vertices would be pushed out 21 mm, over the 20 mm limit;
     # so it is fitted.
     g = import_garment(path, body, fit=None, fit_search=search)
@@ -196,3 +198,58 @@ def test_a_bad_body_shape_in_the_sidecar_names_it(tmp_path, tall_shirt):
     with pytest.raises(InputError, match="unreadable garment sidecar.*height=1.8") as err:
         Garment.load(tmp_path / "g.obj")
     assert "g.json" in str(err.value)
+
+
+def strapless_dress(body, edge_length: float = 0.05):
+    """A strapless dress made on ``body``: a strap dress cut 5 cm under the armpits."""
+    from loosefit.garment.level_cut import cut_mesh
+
+    dress = make_garment("dress", body, seed=2, edge_length=edge_length, sleeve_length=0.0)
+    v, f, _ = cut_mesh(dress.verts, dress.faces, dress.verts[:, 2] - (measure_body(body).armpit_z - 0.05))
+    return v, f
+
+
+#: How close the body found must come to the one the garment was made on, in what a garment shows of it: the
+#: girths at the chest, waist and hips (cm; a garment with ease fits bodies a few centimetres apart about as well:
+#: 1 cm of ease is 6 cm of girth) and the height (cm, over what the garment covers).
+GIRTH_TOLERANCE_CM = 6.0
+HEIGHT_TOLERANCE_CM = 12.0
+
+
+@pytest.mark.parametrize("case", ["slim-female-strapless", "tall-long-shirt"])
+def test_a_garment_for_a_body_far_from_this_one_is_found_and_lands(tmp_path, body, case):
+    """A garment made on a body at an end of the shape range (a slim woman's strapless dress, as in the report
+    that asked for the search over all six keys; a tall body's long shirt), written as another tool would and
+    imported with --fit onto the default body: the body found is close to the one it was made on in girths and
+    height (the default body is not), and after the drape no vertex is inside this body."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.body.measures import shape_measures
+
+    shape, top = {"slim-female-strapless": (AnnyShape(gender=1.0, weight=0.2), "strapless"),
+                  "tall-long-shirt": (AnnyShape(height=0.85), "shoulders")}[case]
+    source = AnnyBody(shape)
+    if top == "strapless":
+        verts, faces = strapless_dress(source, 0.04)
+    else:
+        made = make_garment("long_shirt", source, seed=0, edge_length=0.06)
+        verts, faces = made.verts, made.faces
+    path = write_obj(tmp_path / f"{case}.obj", pelvis_y_up(source, verts, 100.0), faces)
+    g = import_garment(path, body, fit=True)
+    fit = g.params["fit"]
+    assert g.params["attachment"] == top
+    assert fit["inside_after_drape_percent"] == 0.0 and fit["inside_percent"] == 0.0, fit
+    assert (measure_body(body).sdf.query(g.verts) < -0.002).sum() == 0
+
+    found = AnnyShape(**fit["shape"])
+    truth, got, default = shape_measures(body, shape), shape_measures(body, found), shape_measures(body)
+
+    def misses(m):  # how far a body's measures are from the truth, beyond the tolerances (0: within)
+        girths = max(abs(m[k] - truth[k]) for k in ("chest_girth_cm", "waist_girth_cm", "hips_girth_cm"))
+        return max(girths - GIRTH_TOLERANCE_CM, 100 * abs(m["height_m"] - truth["height_m"]) - HEIGHT_TOLERANCE_CM, 0)
+
+    assert misses(got) == 0, (fit["shape"], got, truth)
+    assert misses(default) > 0, (default, truth)  # the test tells the found body from this one
+    if case == "slim-female-strapless":  # the bust: a woman's body
+        assert found.gender >= 0.75, fit["shape"]
+    assert fit["shape_option"].startswith("--shape ") and AnnyShape.parse(fit["shape_option"].split()[1]) == found

@@ -4,29 +4,38 @@ A garment cut for a slimmer body sits inside this one (the direct placement of
 :mod:`loosefit.garment.placement` refuses it); one cut for a larger body hangs away from it. Three steps
 bring it onto the body without changing its cut:
 
-1. **The body it was made for** (:func:`find_shape`): the Anny shape (keys :data:`SEARCH_KEYS`; age and
-   proportions stay the target's) that minimises interpenetration plus gap at the garment's attachment. Each
-   shape is scored by the existing placement (:func:`~loosefit.garment.placement.place` on
-   :data:`SEARCH_SAMPLES` points): :func:`~loosefit.garment.placement.fit_score` over the garment's top
-   :data:`SEARCH_BAND` (how uneven the gap is there, plus the penalties for cloth more than 3 mm inside the
-   body), plus :data:`GAP_WEIGHT` times the mean gap at the top 4 cm, plus :data:`FLOOR_WEIGHT` times the
-   garment's mean depth below the floor, plus :data:`PRIOR` metres per unit of shape distance from the
-   target. The evenness is what tells the body apart: a strapless top cut for a thin Anny (height 0.45,
-   weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away
-   in a key (over its top 10 cm). The band reaches past a strap dress's or a shirt's shoulders to the bust,
-   a skirt's waistband to the hips: on the 12 garments of ``benchmarks/garment_fit.py`` the height, weight and
-   gender found are 0.11 from the true ones on average with 25 cm, 0.16 with 10 cm (a long shirt cut for a
-   tall slim body of weight 0.3: found at 0.27, at 0.8 with 10 cm); 45 cm reaches a dress's flared skirt and
-   finds its body at weight 1.0 where it was cut at 0.3. The mean gap alone would prefer the largest body the
-   garment does not cut into (2 mm of gap where the garment was made with 14 mm of ease), hence its small
-   weight. The prior breaks ties towards the target (the height of a body under a skirt's waistband is not
-   seen), so that the drape is short. Search:
-   a coarse grid (:data:`COARSE`, 9 shapes, plus the target) scored with the full height window, then a
-   coordinate search on every key with steps :data:`STEPS`, each shape's height window narrowed to 5 cm
-   around where the best shape's attachment landmark (waist, armpits or neck) puts the top; at most
-   :data:`MAX_EVALUATIONS` shapes. Several shapes often fit about as well (bodies differ in more ways than a
-   garment's cut shows), so the shape found is a body the garment fits, not always the one it was made on
-   (``benchmarks/garment_fit.py`` reports both).
+1. **The body it was made for** (:func:`find_shape`): the Anny shape, over all six keys (:data:`SEARCH_KEYS`;
+   age at least :data:`ADULT_AGE` unless no adult body can wear the garment), that minimises
+   interpenetration plus gap at the garment's attachment. The exact score of a shape is the existing
+   placement's (:func:`~loosefit.garment.placement.place` on :data:`SEARCH_SAMPLES` points):
+   :func:`~loosefit.garment.placement.fit_score` over the garment's top :data:`SEARCH_BAND` (how uneven the gap
+   is there, read on up to :data:`BAND_SAMPLES` of its vertices, plus the penalties for cloth more than 3 mm
+   inside the body), plus :data:`GAP_WEIGHT` times the mean gap at the top 4 cm, plus :data:`FLOOR_WEIGHT`
+   times the garment's mean depth below the floor, plus :data:`PRIOR` metres per unit of shape distance from
+   the target. The evenness is what tells the body apart: a strapless top cut for a thin Anny (height 0.45,
+   weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away in a key (over its
+   top 10 cm). The band reaches past a strap dress's or a shirt's shoulders to the bust, a skirt's waistband
+   to the hips; 45 cm would reach a dress's flared skirt (a dress cut at weight 0.3 was found at 1.0). The mean
+   gap alone would prefer the largest body the garment does not cut into (2 mm of gap where the garment was
+   made with 14 mm of ease), hence its small weight. The prior breaks ties towards the target (the height of a
+   body under a skirt's waistband is not seen), so that the drape is short.
+   The exact score costs about 0.25 s a shape, too much for six keys, so the search looks first at the
+   garment's and the bodies' cylindrical profiles (:mod:`loosefit.garment.shape_profile`: the same score on
+   radii in 2 cm by 15 degree bins, 1-2 ms a shape, bodies made in batches): every shape of a grid of gender,
+   weight and height (:data:`COARSE`, 125 shapes; at the target's other values), then a coordinate search on
+   every key with steps :data:`PROFILE_STEPS` from the best :data:`STARTS` shapes at least :data:`DISTINCT`
+   apart (at most :data:`MAX_PROFILES` shapes). Those are scored exactly, with the target at each height of
+   the grid (the profiles leave out the arms, which show where a sleeved garment's body is: a long shirt cut
+   for a tall body was put on a short one whose arms its sleeves went through), then a coordinate search on
+   the exact score with steps :data:`STEPS`, each shape's height window narrowed to 5 cm around where the best
+   shape's attachment landmark (waist, armpits or neck) puts the top; at most :data:`MAX_EVALUATIONS` shapes
+   scored exactly. About 10 s in all on one core, for a garment of any size (the samples are fixed).
+   Several shapes often fit about as well: bodies differ in more ways than a garment's cut shows, and a garment
+   with 1 cm of ease fits a body 6 cm larger in girth nearly as evenly as its own. The shape found is a body the
+   garment fits, within a few centimetres of girth of the one it was made on on the garments of
+   ``benchmarks/garment_fit.py`` and of ``tests/garment/test_body_fit.py`` (which report and check both); when
+   the drape from it still fails, the refusal names it as a ``--shape`` to import and simulate the garment on
+   (:func:`shape_option`).
 2. **Placed rigidly** on that body (the placement's axis swap and offset; the unit's scale).
 3. **Draped** (:func:`drape`): Blender cloth on the body's collider while the body's vertices move linearly
    from the found shape to the target over :data:`MORPH_SECONDS`, then hold for :data:`SETTLE_SECONDS`
@@ -65,7 +74,7 @@ MAX_PROFILES = 400
 STARTS = 3
 DISTINCT = 0.2
 #: Steps of the last coordinate search, on the exact score, in shape units.
-STEPS = (0.06, 0.03)
+STEPS = (0.12, 0.06, 0.03)
 #: Objective per unit of Euclidean shape distance from the target, m: breaks ties towards the target.
 PRIOR = 0.001
 #: Depth of the garment's upper band whose gap evenness scores a shape, m.
@@ -78,8 +87,10 @@ GAP_WEIGHT = 0.05
 FLOOR_WEIGHT = 1.0
 #: Points the placement scores per shape during the search (the final placement uses all its samples).
 SEARCH_SAMPLES = 300
+#: Vertices of the garment's top band the exact score reads, at most.
+BAND_SAMPLES = 400
 #: Most shapes scored exactly in one search.
-MAX_EVALUATIONS = 24
+MAX_EVALUATIONS = 36
 #: The youngest age searched unless no adult body can wear the garment (Anny's age 0.5 is the average adult; below
 #: it the body is a child's). A body is needed younger only when the profiles find every adult one more than
 #: :data:`CHILD_INSIDE` of its bins more than 3 mm inside the garment.
@@ -194,7 +205,7 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
             if check is not None and not checked:
                 checked.append(True)
                 check(to_z_up(verts, p.up) + p.offset, lm)
-            pts = to_z_up(verts[pick[unit]], p.up) + p.offset
+            pts = to_z_up(verts[_scored(verts, p.up, pick, unit)], p.up) + p.offset
             score = (fit_score(lm.sdf.query(pts), pts[:, 2], SEARCH_BAND)[0] + GAP_WEIGHT * p.top_gap
                      + FLOOR_WEIGHT * np.maximum(-pts[:, 2], 0.0).mean() + PRIOR * distance)
             if score < best[0]:
@@ -205,7 +216,7 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
             hints[best[2]] = (best[1].top_z, best[1].attachment, _anchor(lm, best[1].attachment))
         return best[0]
 
-    pick = {u: np.linspace(0, len(v) - 1, min(len(v), SEARCH_SAMPLES)).astype(int) for u, v in scaled.items()}
+    pick: dict = {}
     hints: dict = {}
     best_seen = [None]
     checked: list = []
@@ -213,8 +224,12 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
     bounds = np.array([[min(ADULT_AGE, target.age), 1.0] if k == "age" else [0.0, 1.0] for k in SEARCH_KEYS])
     profiles = _ProfileSearch(scaled, faces, body, up, target_values, search)
     starts = profiles.run(bounds)
-    # Step B: the best of them scored exactly (with the target), then the exact coordinate search.
-    for values in [tuple(target_values)] + starts:
+    # Step B: the best of them scored exactly, with the target at every height of the grid (the profiles leave
+    # out the arms, which show a sleeved garment's height: a long shirt cut for a tall body was put on a short
+    # one, its sleeves through the arms), then the exact coordinate search.
+    heights = dict(search.coarse).get("height", ())
+    for values in starts + [_round(np.where(np.array(SEARCH_KEYS) == "height", h, target_values), bounds)
+                            for h in heights] + [tuple(target_values)]:
         evaluate(values)
     best = min(memo, key=lambda k: memo[k][0])
     if not np.isfinite(memo[best][0]):
@@ -238,6 +253,20 @@ def find_shape(scaled: dict, faces: np.ndarray, body, path, up: str | None = Non
     placement = place(scaled[unit], faces, lm, path, found.up, top_hint=found.top_z)
     return ShapeFit(shape=shape, placement=placement, unit=unit, objective=float(score), evaluations=len(memo),
                     profiles=profiles.count)
+
+
+def _scored(verts: np.ndarray, up: str, pick: dict, unit: str) -> np.ndarray:
+    """The vertices the exact score reads (kept in ``pick`` per unit and up axis): up to :data:`BAND_SAMPLES` of
+    the garment's top :data:`SEARCH_BAND`, whose gap's evenness tells the bodies apart, and
+    :data:`SEARCH_SAMPLES` spread over the whole garment for the penalties (300 spread over all of a long dress
+    left 60 in its band: a score noisier than the differences between bodies)."""
+    if (unit, up) not in pick:
+        z = to_z_up(verts, up)[:, 2]
+        band = np.nonzero(z > z.max() - SEARCH_BAND)[0]
+        band = band[np.linspace(0, len(band) - 1, min(len(band), BAND_SAMPLES)).astype(int)]
+        spread = np.linspace(0, len(verts) - 1, min(len(verts), SEARCH_SAMPLES)).astype(int)
+        pick[unit, up] = np.union1d(band, spread)
+    return pick[unit, up]
 
 
 def _round(values, bounds: np.ndarray) -> tuple:
@@ -327,6 +356,13 @@ class _ProfileSearch:
             if all(np.abs(np.subtract(s, o)).max() >= DISTINCT for o in out):
                 out.append(s)
         return out
+
+
+def shape_option(shape) -> str:
+    """The command-line option that selects Anny ``shape``: ``--shape gender=1,weight=0.2`` (the values that
+    are not 0.5, the default of an unnamed key; ``gender=0.5`` for the average body)."""
+    values = ",".join(f"{k}={getattr(shape, k):g}" for k in SEARCH_KEYS if getattr(shape, k) != 0.5)
+    return f"--shape {values or 'gender=0.5'}"
 
 
 def _anchor(lm, attachment: str) -> float:
@@ -443,6 +479,7 @@ def fit_to_body(scaled: dict, faces: np.ndarray, body, path, up: str | None = No
                          morph_seconds=search.morph_seconds, settle_seconds=search.settle_seconds)
     info = {
         "shape": {k: round(getattr(fit.shape, k), 3) for k in SEARCH_KEYS},
+        "shape_option": shape_option(fit.shape),
         "objective": round(fit.objective, 5),
         "evaluations": fit.evaluations,
         "profiles": fit.profiles,

@@ -1,18 +1,24 @@
 """The first, cheap look of the body-shape search (:mod:`loosefit.garment.body_fit`): garment and bodies as
 cylindrical profiles.
 
-A body is reduced to the radius of its torso and legs (arms left out) about a vertical axis, in bins of
-:data:`LEVEL` of height and :data:`SECTORS` sectors around: the largest radius of its vertices in each bin.
-A garment is reduced the same way to the smallest radius of points sampled on its surface (about one a
-square centimetre), so that a sleeve beside the torso does not count, only the wall nearest the body. The gap
-in a bin is the garment's radius less the body's: the cylindrical version of the signed distances that
-:func:`~loosefit.garment.placement.fit_score` reads, and scored the same way (how uneven over the top
-:data:`~loosefit.garment.body_fit.SEARCH_BAND`, penalties for cloth inside), for every shape of a grid at
-once and every height of the garment's top in the shape's window, with the garment moved front to back by
--2, 0 and 2 cm (:data:`DYS`). Anny's batched model gives a body in about 1.3 ms, so a grid of several
-hundred shapes over all six keys costs a few seconds, where the exact score (the placement on the body's
-signed distance) costs about 0.25 s a shape. The few best shapes are then scored exactly and refined
-(:func:`loosefit.garment.body_fit.find_shape`).
+A body is reduced to the radius of its torso and legs (arms left out) about a vertical axis (the hips' midline,
+the waist's front-back middle), in bins of :data:`LEVEL` of height and :data:`SECTORS` sectors around: the
+largest radius of its vertices in each bin. A garment is reduced the same way, about its own axis (its top
+band's left-right middle, its box's front-back middle: the placement's start), to the smallest and the largest
+radius of points sampled on its surface (about one a square centimetre). The gap in a bin is the garment's
+largest radius less the body's, the same statistic on both (a surface's radius varies across a sector), except
+where a sleeve hangs beside the torso: a largest radius over :data:`FAR_WALL` out, and a smallest not as far
+in, is a sleeve, and the smallest (the cloth over the torso) counts. This is the cylindrical version of the
+signed distances that :func:`~loosefit.garment.placement.fit_score` reads, scored the same way (how uneven
+over the top band, penalties for cloth inside, the top's gap, the floor) for every shape of a batch at once and
+every height of the garment's top in the shape's window (:data:`TOP_STEP` apart), with the garment moved
+front to back by :data:`DYS`. Anny's batched model makes a body in 1-2 ms, so a few hundred shapes over all
+six keys cost a few seconds, where the exact score (the placement on the body's signed distance) costs about
+0.25 s a shape. The best few are then scored exactly and refined (:func:`loosefit.garment.body_fit.find_shape`).
+
+What the profiles do not see: the arms (a sleeve's fit; the exact score does), and cloth within a bin's error
+of the body (:data:`INSIDE_TOLERANCE`). On a template on its own body, the gaps are even to about 5 mm but
+for the shoulders' slope, where a radius is not a distance to the surface.
 """
 
 from __future__ import annotations
@@ -110,10 +116,18 @@ def _radius_bins(points: np.ndarray, axis: np.ndarray, level: np.ndarray, Z: int
 
 
 def _perimeter(radius: np.ndarray) -> np.ndarray:
-    """``(..., Z)`` perimeter of the polygon through each level's sector radii (NaN where a sector is empty)."""
+    """``(..., Z)`` perimeter of the polygon through each level's non-empty sectors' radii (``radius (..., Z,
+    SECTORS)``, NaN where empty: a thin slab of a body leaves a few sectors without a vertex); NaN where fewer
+    than half the sectors hold one."""
     angle = (np.arange(SECTORS) + 0.5) * 2 * np.pi / SECTORS
     x, y = radius * np.cos(angle), radius * np.sin(angle)
-    return np.hypot(x - np.roll(x, 1, -1), y - np.roll(y, 1, -1)).sum(-1)
+    valid = np.isfinite(radius)
+    # An empty sector takes the last non-empty one's point (around the circle): a zero-length side.
+    index = np.where(np.concatenate([valid, valid], -1), np.arange(2 * SECTORS), -1)
+    last = np.maximum.accumulate(index, -1)[..., SECTORS:] % SECTORS
+    x, y = np.take_along_axis(x, last, -1), np.take_along_axis(y, last, -1)
+    perimeter = np.hypot(x - np.roll(x, 1, -1), y - np.roll(y, 1, -1)).sum(-1)
+    return np.where(valid.sum(-1) >= SECTORS // 2, perimeter, np.nan)
 
 
 @dataclass
@@ -121,9 +135,9 @@ class GarmentProfile:
     """A garment's cylindrical profile (see the module docstring), its top at height 0.
 
     Attributes:
-        radius: ``(len(DYS), K, SECTORS)`` smallest radius of the garment's surface points in each bin about
-            the axis moved by each of :data:`DYS`, m (NaN: none); level ``k`` covers ``[-k - 1, -k) * LEVEL``
-            below the top.
+        radius: ``(len(DYS), 2, K, SECTORS)`` smallest and largest radius of the garment's surface points in
+            each bin about the axis moved by each of :data:`DYS`, m (NaN: none); level ``k`` covers depths
+            ``[k, k + 1) * LEVEL`` below the top.
         depths: ``(N,)`` sorted depths of the surface points below the top, m (for the floor term).
         kind: ``"ring"`` or a hanging attachment (:func:`~loosefit.garment.placement.attachment_type`).
         x_offset, y_offset: move of the garment's own coordinates that puts its axis on the body's, less
@@ -160,11 +174,17 @@ def garment_profile(verts: np.ndarray, faces: np.ndarray, kind: str, seed: int =
     K = int(np.ceil(depth.max() / LEVEL)) + 1
     level = np.floor(depth / LEVEL).astype(np.int64)[None]
     # The garment moved front-back by dy: its axis, in its own coordinates, by -dy.
-    radius = np.concatenate([_radius_bins(pts[None], np.array([[x_mid, y_mid - dy]]), level, K, largest=False)
-                             for dy in DYS])
+    radius = np.stack([np.concatenate([_radius_bins(pts[None], np.array([[x_mid, y_mid - dy]]), level, K, largest)
+                                       for largest in (False, True)]) for dy in DYS])
     return GarmentProfile(radius, np.sort(depth), kind, x_mid, y_mid, top)
 
 
+#: A garment's largest radius in a bin this far out of the body is a sleeve's (or a flare's), m.
+FAR_WALL = 0.06
+#: Depth inside the body from which a bin counts as inside, m: the exact score's 3 mm plus the profiles' own
+#: error (a bin's largest radius on a sloped surface; with 5 mm, a long shirt on its own tall body scored 14.8 mm
+#: for bins "inside" at its shoulders, worse than on a shorter body of another gender, 11.6 mm).
+INSIDE_TOLERANCE = 0.015
 #: Gaps are clipped to this range in the evenness (m): a sleeve's or a flared hem's wide gap is not a misfit.
 GAP_CLIP = (-0.05, 0.08)
 
@@ -184,7 +204,7 @@ def profile_scores(bodies: BodyProfiles, garment: GarmentProfile, band: float, g
     from loosefit.garment.placement import MAX_TOP_GAP, window_heights
 
     S, Z, _ = bodies.radius.shape
-    D, K, _ = garment.radius.shape
+    D, _, K, _ = garment.radius.shape
     lo, hi = window_heights(garment.kind, bodies.waist_z, bodies.armpit_z, bodies.neck_z)
     m_lo = np.ceil(lo / LEVEL - 1e-9).astype(int)
     m_hi = np.floor(hi / LEVEL + 1e-9).astype(int)
@@ -203,8 +223,14 @@ def profile_scores(bodies: BodyProfiles, garment: GarmentProfile, band: float, g
         inside_z = (level >= 0) & (level < Z)
         rb = bodies.radius[rows][:, np.clip(level, 0, Z - 1)]  # (C, T, K, SECTORS)
         rb = np.where(inside_z[None, :, :, None], rb, np.nan)
-        # The garment's axis is put on the body's (the placement's start), then moved by dy.
-        gaps = garment.radius[None, :, None] - rb[:, None]  # (C, D, T, K, SECTORS)
+        # The garment's axis is put on the body's (the placement's start), then moved by dy. The gap is the
+        # garment's largest radius in a bin less the body's (the same statistic on both: a surface's radius
+        # varies across a sector), unless that is over FAR_WALL out and the smallest radius is not FAR_WALL in:
+        # then a sleeve beside the torso holds the largest, and the smallest (the wall over the torso) counts.
+        # (A trouser leg's smallest radius is its far side, deep inside the leg: the largest counts.)
+        walls = garment.radius[None, :, :, None] - rb[:, None, None]  # (C, D, 2, T, K, SECTORS)
+        sleeve = (walls[:, :, 1] > FAR_WALL) & (walls[:, :, 0] > -FAR_WALL)
+        gaps = np.where(sleeve, walls[:, :, 0], walls[:, :, 1])  # (C, D, T, K, SECTORS)
         valid = np.isfinite(gaps)
         g = np.where(valid, gaps, 0.0)
         upper = valid & in_band
@@ -212,7 +238,7 @@ def profile_scores(bodies: BodyProfiles, garment: GarmentProfile, band: float, g
         clipped = np.clip(g, *GAP_CLIP)
         mean = (clipped * upper).sum((3, 4)) / np.maximum(n_up, 1)
         evenness = (np.abs(clipped - mean[..., None, None]) * upper).sum((3, 4)) / np.maximum(n_up, 1)
-        depth = np.where(valid, np.maximum(-g - 0.003, 0.0), 0.0)
+        depth = np.where(valid, np.maximum(-g - INSIDE_TOLERANCE, 0.0), 0.0)
         n = np.maximum(valid.sum((3, 4)), 1)
         inside = 2.0 * (depth > 0).sum((3, 4)) / n + 5.0 * depth.sum((3, 4)) / n
         top_bins = valid & at_top
