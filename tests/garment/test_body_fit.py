@@ -253,3 +253,59 @@ def test_a_garment_for_a_body_far_from_this_one_is_found_and_lands(tmp_path, bod
     if case == "slim-female-strapless":  # the bust: a woman's body
         assert found.gender >= 0.75, fit["shape"]
     assert fit["shape_option"].startswith("--shape ") and AnnyShape.parse(fit["shape_option"].split()[1]) == found
+
+
+def test_shape_option_selects_the_shape():
+    """The body found, as the option that selects it: the values that are not the average's (an unnamed key is
+    0.5), read back by the --shape parser as the same shape."""
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment.body_fit import shape_option
+
+    assert shape_option(AnnyShape(gender=1.0, weight=0.2)) == "--shape gender=1,weight=0.2"
+    assert shape_option(AnnyShape()) == "--shape gender=0.5"
+    odd = AnnyShape(gender=0.12, age=0.62, muscle=0.5, weight=0.38, height=0.81, proportions=0.0)
+    assert AnnyShape.parse(shape_option(odd).split()[1]) == odd
+
+
+def test_a_refusal_after_the_drape_says_how_the_fit_came_about_and_names_the_shape():
+    """With --fit, the refusal after the drape says so; without it (the direct placement refused first) it says
+    that, and that the fit followed, never "the fit's drape" as if asked; both end with the body found as a
+    ready --shape."""
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment.importer import _drape_refusal
+
+    found = AnnyShape(gender=1.0, weight=0.2)
+    where, hint = _drape_refusal(found, None)
+    assert where.startswith("with --fit, after the drape from the body it fits best (--shape gender=1,weight=0.2)")
+    assert "--shape gender=1,weight=0.2`, and simulate with the same --shape" in hint
+    direct = InputError("placed on this body, 477 vertices are too deep inside the body: pushing them out would "
+                        "move them up to 31 mm, over the 20 mm limit (made for another body? --fit drapes it)")
+    where, hint = _drape_refusal(found, direct)
+    assert where.startswith("placed on this body, 477 vertices are too deep inside the body: pushing them out would "
+                            "move them up to 31 mm, over the 20 mm limit; fitted instead as a garment made for "
+                            "another body, after the drape from the body it fits best (--shape gender=1,weight=0.2)")
+    assert "fit's drape" not in where + hint and "--fit drapes" not in where
+
+
+def test_profiles_tell_a_womans_garment_from_the_average_body(body):
+    """The first look of the search: a slim woman's strapless dress scores better on her body's profile than on
+    the average body's (into which it cuts), and a batch of bodies is made as one at a time."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment.placement import attachment_type
+    from loosefit.garment.shape_profile import body_profiles, garment_profile, profile_scores
+
+    shapes = [AnnyShape(gender=1.0, weight=0.2), AnnyShape()]
+    verts, joints = body.rest_batch(shapes)
+    for shape, v, j in zip(shapes, verts, joints):
+        np.testing.assert_allclose(v, body.rest_verts(shape), atol=1e-6)
+        np.testing.assert_allclose(j, body.rest_joints(shape), atol=1e-6)
+    lm = measure_body(body)
+    profiles = body_profiles(verts, joints, body.joint_names, lm.arm_weight)
+    assert profiles.waist_z[1] == pytest.approx(lm.waist_z, abs=0.03)  # as measure_body, on 2 cm bins
+    assert profiles.axis[1][1] == pytest.approx(lm.center_y, abs=0.005)
+    dress, faces = strapless_dress(AnnyBody(shapes[0]), 0.05)
+    score, top, _ = profile_scores(profiles, garment_profile(dress, faces, attachment_type(dress, faces)),
+                                   0.25, 0.05, 1.0)
+    assert score[0] < score[1], score
+    assert top[0] == pytest.approx(dress[:, 2].max(), abs=0.04)  # near where it was made (2 cm steps)
