@@ -208,7 +208,7 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
     g.save(workdir / f"{kind}-{seed}-{name}-fitted.obj")
     if landing_only:
         row["passed"] = bool(row["inside_percent"] == 0.0)
-        return row
+        return render_case(row, render, body, g, kind, seed, name)
     if g.num_verts == made.num_verts and np.array_equal(g.faces, made.faces):
         placed = to_z_up(file_verts / scale, g.params["up"]) + np.asarray(g.params["offset"])
         row["vs_file_mm"] = round(1e3 * kabsch_mean_distance(g.verts.astype(np.float64), placed), 2)
@@ -219,6 +219,11 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
     reference = make_garment(kind, body, seed=seed, edge_length=edge_length)
     row["vs_default_template_mm"] = round(1e3 * surface_distance(g.verts, g.faces, reference.verts, reference.faces), 2)
     row["passed"] = passed(row)
+    return render_case(row, render, body, g, kind, seed, name)
+
+
+def render_case(row: dict, render: Path | None, body, g, kind: str, seed: int, name: str) -> dict:
+    """The fitted garment on the body, to ``render`` (a PNG) when given; its path in ``row``."""
     if render is not None:
         from loosefit.viz.render import render_video
         from loosefit.viz.scene import MeshTrack
@@ -379,9 +384,10 @@ def finish(name: str, results: dict) -> None:
         "landed_none_inside": landed_clean,
         "landed_none_inside_percent": round(100.0 * landed_clean / max(len(rows), 1), 1),
         "passed": sum(bool(r.get("passed")) for r in rows),
-        "direct_refused": sum(r["direct"]["refused"] for r in rows if "direct" in r),
+        "direct_refused": (sum(r["direct"]["refused"] for r in rows if "direct" in r)
+                           if any("direct" in r for r in rows) else None),
         "worst_girth_vs_true_cm": max(girths, default=None),
-        "median_girth_vs_true_cm": float(np.median(girths)) if girths else None,
+        "median_girth_vs_true_cm": round(float(np.median(girths)), 1) if girths else None,
         "fit_cpu_seconds": [r.get("cpu_seconds") for r in rows],
         "worst_inside_percent": max((r["inside_percent"] for r in rows if r["landed"]), default=None),
         "worst_kept_mm": max((r["kept_mm"] for r in rows if r.get("kept_mm") is not None), default=None),

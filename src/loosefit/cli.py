@@ -493,8 +493,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--unit", choices=["m", "cm", "mm"], default=None, help="file unit (default: detected from size)")
     sp.add_argument("--up", choices=["y", "z"], default=None, help="file up axis (default: detected by fitting)")
     sp.add_argument("--fit", action="store_true",
-                    help="a garment made for another body: find the Anny shape it fits, drape it from there onto "
-                         "this body with Blender cloth (done anyway when it has no plausible placement here)")
+                    help="a garment made for another body: find the Anny shape it fits (all six keys; said in one "
+                         "line), drape it from there onto this body (--shape) with Blender cloth (done anyway when it "
+                         "has no plausible placement here)")
     sp.add_argument("--piece", type=piece_choice, default=None, metavar="largest|N",
                     help="keep one connected piece (1 is the largest); default: every piece, when each is attached")
     sp.add_argument("--repair", action="store_true",

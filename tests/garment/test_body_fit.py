@@ -229,8 +229,8 @@ def test_a_garment_for_a_body_far_from_this_one_is_found_and_lands(tmp_path, bod
     shape, top = {"slim-female-strapless": (AnnyShape(gender=1.0, weight=0.2), "strapless"),
                   "tall-long-shirt": (AnnyShape(height=0.85), "shoulders")}[case]
     source = AnnyBody(shape)
-    if top == "strapless":
-        verts, faces = strapless_dress(source, 0.04)
+    if top == "strapless":  # 1,743 vertices: the search before six keys found the average body for it
+        verts, faces = strapless_dress(source, 0.03)
     else:
         made = make_garment("long_shirt", source, seed=0, edge_length=0.06)
         verts, faces = made.verts, made.faces
