@@ -155,7 +155,8 @@ def cmd_garment_import(args):
             print(f"repair: {line}")
     if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
         f = p["fit"]
-        print(f"fitted as a garment made for another body ({f['why']}): it fits the body {f['shape_option']} best, "
+        print(f"fitted as a garment made for another body ({f['why']}): it fits the body "
+              f"{f.get('shape_option') or _shape_text(f['shape'])} best, "
               f"draped from there onto this body; {f['inside_percent']:g}% of vertices more than 2 mm inside it")
     repaired = {k: v for k, v in p["repairs"].items() if v}
     print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces; {p['unit']}, {p['up']} up, "
@@ -259,7 +260,8 @@ def cmd_simulate(args):
         print(_refit_line(args.garment, fitted))
     elif fitted is not None:
         print(f"{args.garment}: fitted as a garment made for another body ({fitted['why']}): it fits the body "
-              f"{fitted['shape_option']} best; {fitted['inside_percent']:g}% of vertices more than 2 mm inside this body")
+              f"{fitted.get('shape_option') or _shape_text(fitted['shape'])} best; {fitted['inside_percent']:g}% of "
+              "vertices more than 2 mm inside this body")
     if result.status != "ok":
         raise LoosefitError(f"{args.out}: the simulation failed the quality gate: {result.reason}")
     print(f"{args.out}: simulated ok ({result.verts.shape[0]} frames, passed the quality gate)")

@@ -2,6 +2,7 @@
 refusals before any simulation; the bounded push out of the body."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -309,3 +310,40 @@ def test_profiles_tell_a_womans_garment_from_the_average_body(body):
                                    0.25, 0.05, 1.0)
     assert score[0] < score[1], score
     assert top[0] == pytest.approx(dress[:, 2].max(), abs=0.04)  # near where it was made (2 cm steps)
+
+
+def test_an_import_refused_after_the_drape_names_the_shape_to_use(tmp_path, body, skirt_m, monkeypatch):
+    """The refusal of a garment still too deep inside the body after the fit's drape (the drape replaced by one
+    that leaves the skirt 3 cm inside: no simulation here), as the import words it: with --fit, and without it
+    after the direct placement was refused; both name the body found as a ready --shape."""
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment import body_fit
+    from loosefit.garment.body_fit import ShapeFit
+    from loosefit.garment.placement import place
+
+    verts, faces = skirt_m
+    sdf = measure_body(body).sdf
+    d, direction = outward(sdf, verts)
+    dent = d < d.min() + 0.004
+    dented = verts.copy()
+    dented[dent] -= (d[dent] + 0.025)[:, None] * direction[dent]  # 2.5 cm into the hips: refused when placed
+    path = write_obj(tmp_path / "deep.obj", dented, faces)
+    found = AnnyShape(gender=1.0, weight=0.2)
+
+    def drape_left_inside(scaled, faces_, body_, path_, up=None, params=None, search=None, pieces=None, check=None):
+        placement = place(scaled["m"], faces_, measure_body(body_), path_, "z")
+        fit = ShapeFit(shape=found, placement=placement, unit="m", objective=0.0, evaluations=1)
+        return dented, fit, dented, {"shape": {}, "inside_before_percent": 0.0, "inside_after_drape_percent": 1.0}
+
+    monkeypatch.setattr(body_fit, "fit_to_body", drape_left_inside)
+    with pytest.raises(InputError, match=r"deep.obj: with --fit, after the drape from the body it fits best \(--shape "
+                                         r"gender=1,weight=0.2\) onto this one, \d+ vertices are too deep inside the "
+                                         r"body.*`loosefit garment import FILE --shape gender=1,weight=0.2`"):
+        import_garment(path, body, fit=True)
+    with pytest.raises(InputError) as err:
+        import_garment(path, body, fit=None)
+    assert re.match(r"placed on this body, \d+ vertices are too deep inside the body: pushing them out would move "
+                    r"them up to \d+ mm, over the 20 mm limit; fitted instead as a garment made for another body, after "
+                    r"the drape from the body it fits best \(--shape gender=1,weight=0.2\) onto this one, \d+ vertices",
+                    err.value.problem), err.value.problem
+    assert "fit's drape" not in err.value.problem and "--fit drapes" not in err.value.problem
