@@ -1,9 +1,8 @@
 """What each Anny shape key changes: the body's height and its girths at the chest, waist and hips, at 0 and 1 of
 each key with the others at 0.5 (the average adult), against the average body.
 
-Girths are perimeters of the convex hull of the rest body's vertices within 1 cm of a joint's height (chest: the
-upper spine joint ``Spine1``; waist: ``Spine``; hips: the hip joints ``LeftUpLeg``), keeping only the torso: the
-vertices laterally inside 90 % of the shoulder joints' half-width (the rest pose holds the arms out, beyond it).
+Girths as :mod:`loosefit.body.measures` takes them (the convex hull of the torso within 1 cm of the upper spine
+joint, the spine joint and the hip joints).
 
 Run: .venv/bin/python benchmarks/body_shapes.py   (writes benchmarks/results/body-shapes.json)
 """
@@ -14,26 +13,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import save_results  # noqa: E402
 
-LEVELS = {"chest": "Spine1", "waist": "Spine", "hips": "LeftUpLeg"}
-
-
-def measures(verts: np.ndarray, joints: dict[str, np.ndarray]) -> dict[str, float]:
-    """Height (m) and girths (cm) of a rest body ``verts (V, 3)`` (Z up) with rest ``joints`` (name -> (3,))."""
-    height = float(verts[:, 2].max() - verts[:, 2].min())
-    out = {"height_m": height}
-    centre = joints["Hips"][0]
-    torso = np.abs(verts[:, 0] - centre) < 0.9 * abs(joints["LeftArm"][0] - joints["RightArm"][0]) / 2
-    for name, joint in LEVELS.items():
-        ring = verts[torso & (np.abs(verts[:, 2] - joints[joint][2]) < 0.01)][:, :2]
-        hull = ConvexHull(ring)
-        out[f"{name}_girth_cm"] = float(hull.area * 100)  # in 2-D, ``area`` is the perimeter
-    return out
+from loosefit.body.measures import measures  # noqa: E402
 
 
 def main() -> None:

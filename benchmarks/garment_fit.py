@@ -1,6 +1,7 @@
 """Garments made for other bodies, fitted to the default body (``loosefit garment import --fit``).
 
-Every template kind (skirt, dress, long_shirt, jumpsuit; ``--seeds``) is made on three other Anny bodies:
+Every template kind (skirt, dress, long_shirt, jumpsuit; ``--seeds``; also ``strapless``, a strap dress cut
+under the armpits) is made on three other Anny bodies:
 ``tall-slim`` and ``heavy`` as in ``configs/datasets/garments.yaml``, and ``short`` (height 0.1, not a shape
 of that plan: the shortest body tall enough to wear every template). Each is written as an OBJ the way
 another tool would: Y up, in centimetres (even cases) or millimetres (odd ones), about the source body's
@@ -43,7 +44,16 @@ Per case (``<kind>-<seed>/<body>/...``):
 
 The fitted garments are written to ``--workdir`` as ``<kind>-<seed>-<body>-fitted.obj`` (with the sidecar).
 
-Refusals (``refusals/...``, with ``fit=True``): the first case's garment 100 times too small (in metres) and
+Across the shape range (``--cases range --landing-only``): garments made on bodies spread over the six Anny keys
+(``female-slim``: the report that asked for the search over all of them, a slim woman's strapless dress refused
+on the default body with and without --fit; ``female-tall``, ``female-short``, ``male-heavy``, ``slim-old``:
+:data:`RANGE_CASES`), each imported with --fit alone. ``landing_only``: per case only ``landed``,
+``inside_percent`` (share of vertices more than 2 mm inside after the drape and push), the shape found,
+``measures_vs_true`` (the body found less the true one: height and girths at the chest, waist and hips in cm,
+:mod:`loosefit.body.measures`), ``seconds`` and ``cpu_seconds``; ``passed``: landed with none inside. The summary
+counts ``landed_none_inside`` (target: at least 90 %).
+
+Refusals (``refusals/...``, with ``fit=True``; not with ``--landing-only``): the first case's garment 100 times too small (in metres) and
 too large (in millimetres; 100 times too small in centimetres is the right size in metres), and inside out
 (faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming the
 file, before any simulation.
@@ -52,7 +62,7 @@ What was measured, and how it changed: ``benchmarks/README.md`` (garments made f
 
 Run: nice -n 5 .venv/bin/python benchmarks/garment_fit.py [--kinds skirt,dress] [--bodies tall-slim,heavy,short]
          [--seeds 0] [--edge-length 0.03] [--render dress-0/tall-slim] [--name garment-fit] [--sim air_drag=3]
-         [--at-rest 3] [--workdir /tmp/garment-fit]
+         [--at-rest 3] [--workdir /tmp/garment-fit] [--cases range|KIND-SEED/BODY,...] [--landing-only]
 (writes benchmarks/results/<name>.json after every case and resumes from it; the render to
 benchmarks/results/<name>-<kind>-<seed>-<body>.png)
 """
@@ -74,8 +84,21 @@ BODIES = {
     "tall-slim": {"height": 0.8, "weight": 0.3, "gender": 0.7},
     "heavy": {"height": 0.35, "weight": 0.85, "gender": 0.6},
     "short": {"height": 0.1},
+    # Across the shape range (--cases): a slim woman (the report that asked for the search over all six keys),
+    # a tall and a short one, a heavy muscular man, a slim older body with long legs.
+    "female-slim": {"gender": 1.0, "weight": 0.2},
+    "female-tall": {"gender": 0.9, "height": 0.9, "weight": 0.4},
+    "female-short": {"gender": 0.85, "height": 0.15, "weight": 0.6, "proportions": 0.7},
+    "male-heavy": {"gender": 0.0, "weight": 0.9, "muscle": 0.8},
+    "slim-old": {"weight": 0.05, "muscle": 0.3, "age": 0.8, "proportions": 0.25},
 }
 KINDS = ("skirt", "dress", "long_shirt", "jumpsuit")
+#: Also accepted by --kinds and --cases: ``strapless``, a strap dress cut 5 cm under its body's armpits (the top
+#: the report's dress had).
+EXTRA_KINDS = ("strapless",)
+#: The shape-range set (``--cases range``): garments made on bodies across the range, imported with --fit alone.
+RANGE_CASES = ("strapless-0/female-slim", "dress-0/female-slim", "long_shirt-0/female-tall", "jumpsuit-0/female-short",
+               "skirt-0/male-heavy", "dress-1/male-heavy", "long_shirt-1/slim-old", "skirt-2/female-tall")
 ORIGIN = np.array([0.37, -0.21, 0.55])
 #: Floors.
 MAX_INSIDE_PERCENT = 1.0
@@ -135,7 +158,16 @@ def source_garment(kind: str, seed: int, shape_values: dict, edge_length: float,
     from loosefit.garment.importer import top_pins
 
     source = AnnyBody(AnnyShape(**shape_values))
-    made = make_garment(kind, source, seed=seed, edge_length=edge_length)
+    if kind == "strapless":
+        from loosefit.garment.landmarks import measure_body
+        from loosefit.garment.level_cut import cut_mesh
+
+        made = make_garment("dress", source, seed=seed, edge_length=edge_length, sleeve_length=0.0)
+        v, f, _ = cut_mesh(made.verts, made.faces, made.verts[:, 2] - (measure_body(source).armpit_z - 0.05))
+        made = dataclasses.replace(made, verts=v.astype(made.verts.dtype), faces=f,
+                                   pinned=top_pins(v, np.zeros(len(v), np.int64)))
+    else:
+        made = make_garment(kind, source, seed=seed, edge_length=edge_length)
     if at_rest > 0:
         pins = top_pins(made.verts, np.zeros(made.num_verts, np.int64))
         rested, _ = drape(made.verts, made.faces, pins, source, source.shape, settle_seconds=at_rest)
@@ -144,7 +176,7 @@ def source_garment(kind: str, seed: int, shape_values: dict, edge_length: float,
 
 
 def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, unit: str, render: Path | None,
-             at_rest: float = 0.0, params=None):
+             at_rest: float = 0.0, params=None, landing_only: bool = False):
     from loosefit.errors import InputError
     from loosefit.garment import import_garment, make_garment
     from loosefit.garment.placement import to_z_up
@@ -154,22 +186,29 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
     file_verts = as_file(made.verts, source.rest_joints()[0], scale)
     path = write_obj(workdir / f"{kind}-{seed}-{name}.obj", file_verts, made.faces)
     row = {"vertices": int(made.num_verts), "unit": unit, "true_shape": shape_values}
-    try:
-        direct = import_garment(path, body)
-        row["direct"] = {"refused": False, "pushed_out_max_mm": direct.params["pushed_out"]["max_mm"]}
-    except InputError as err:
-        row["direct"] = {"refused": True, "error": err.problem[:300]}
-    start = time.perf_counter()
+    if not landing_only:
+        try:
+            direct = import_garment(path, body)
+            row["direct"] = {"refused": False, "pushed_out_max_mm": direct.params["pushed_out"]["max_mm"]}
+        except InputError as err:
+            row["direct"] = {"refused": True, "error": err.problem[:300]}
+    start, cpu = time.perf_counter(), time.process_time()
     try:
         g = import_garment(path, body, fit=True, fit_params=params)
     except InputError as err:
-        row.update(landed=False, error=str(err)[:600], seconds=round(time.perf_counter() - start, 1))
+        row.update(landed=False, error=str(err)[:600], seconds=round(time.perf_counter() - start, 1),
+                   cpu_seconds=round(time.process_time() - cpu, 1))
         return row
     row["seconds"] = round(time.perf_counter() - start, 1)
+    row["cpu_seconds"] = round(time.process_time() - cpu, 1)
     fit = g.params["fit"]
     row.update(landed=True, shape=fit["shape"], inside_percent=fit["inside_percent"], fit=fit,
-               pushed_out=g.params["pushed_out"], attachment=g.params["attachment"])
+               pushed_out=g.params["pushed_out"], attachment=g.params["attachment"],
+               measures_vs_true=measures_vs_true(body, shape_values, fit["shape"]))
     g.save(workdir / f"{kind}-{seed}-{name}-fitted.obj")
+    if landing_only:
+        row["passed"] = bool(row["inside_percent"] == 0.0)
+        return render_case(row, render, body, g, kind, seed, name)
     if g.num_verts == made.num_verts and np.array_equal(g.faces, made.faces):
         placed = to_z_up(file_verts / scale, g.params["up"]) + np.asarray(g.params["offset"])
         row["vs_file_mm"] = round(1e3 * kabsch_mean_distance(g.verts.astype(np.float64), placed), 2)
@@ -180,6 +219,11 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
     reference = make_garment(kind, body, seed=seed, edge_length=edge_length)
     row["vs_default_template_mm"] = round(1e3 * surface_distance(g.verts, g.faces, reference.verts, reference.faces), 2)
     row["passed"] = passed(row)
+    return render_case(row, render, body, g, kind, seed, name)
+
+
+def render_case(row: dict, render: Path | None, body, g, kind: str, seed: int, name: str) -> dict:
+    """The fitted garment on the body, to ``render`` (a PNG) when given; its path in ``row``."""
     if render is not None:
         from loosefit.viz.render import render_video
         from loosefit.viz.scene import MeshTrack
@@ -189,6 +233,17 @@ def run_case(kind, seed, name, shape_values, body, edge_length, workdir: Path, u
         render_video(panels, render, size=(640, 720), progress=False)
         row["render"] = str(render.relative_to(RESULTS.parent.parent))
     return row
+
+
+def measures_vs_true(body, true_shape: dict, found_shape: dict) -> dict:
+    """The body found against the one the garment was made on, as a tailor measures them
+    (:mod:`loosefit.body.measures`): found less true, height in cm, girths in cm."""
+    from loosefit.body import AnnyShape
+    from loosefit.body.measures import shape_measures
+
+    true, found = shape_measures(body, AnnyShape(**true_shape)), shape_measures(body, AnnyShape(**found_shape))
+    return {k.replace("_girth_cm", "").replace("_m", ""): round((found[k] - true[k]) * (100.0 if k == "height_m" else 1.0), 1)
+            for k in true}
 
 
 def settled_reference(fitted: np.ndarray, placed: np.ndarray, faces: np.ndarray, body, shape: dict, params=None) -> dict:
@@ -253,6 +308,12 @@ def main() -> None:
     ap.add_argument("--kinds", default=",".join(KINDS))
     ap.add_argument("--bodies", default=",".join(BODIES))
     ap.add_argument("--seeds", default="0")
+    ap.add_argument("--cases", default=None,
+                    help="kind-seed/body,... instead of --kinds x --bodies x --seeds; 'range': the shape-range set "
+                         "(garments made on bodies across the shape range)")
+    ap.add_argument("--landing-only", action="store_true",
+                    help="only the import with --fit (landed, share inside, shape found, seconds): no direct import, "
+                         "no round trip, no comparison with the default body's template")
     ap.add_argument("--edge-length", type=float, default=0.03)
     ap.add_argument("--render", default="dress-0/tall-slim", help="the case rendered to PNG")
     ap.add_argument("--name", default="garment-fit")
@@ -279,8 +340,15 @@ def main() -> None:
     results.setdefault("cases", {})
     results["at_rest_s"] = args.at_rest
     results["sim"] = args.sim
-    cases = [(k, int(s), b) for s in args.seeds.split(",") for k in args.kinds.split(",") for b in args.bodies.split(",")]
-    if "refusals" not in results:
+    if args.cases is not None:
+        listed = RANGE_CASES if args.cases == "range" else args.cases.split(",")
+        cases = [(kind_seed.rsplit("-", 1)[0], int(kind_seed.rsplit("-", 1)[1]), b)
+                 for kind_seed, b in (c.split("/") for c in listed)]
+    else:
+        cases = [(k, int(s), b) for s in args.seeds.split(",") for k in args.kinds.split(",")
+                 for b in args.bodies.split(",")]
+    results["landing_only"] = args.landing_only
+    if "refusals" not in results and not args.landing_only:
         k, s, b = cases[0]
         results["refusals"] = refusals(k, s, b, BODIES[b], body, args.edge_length, workdir)
         save_results(args.name, results)
@@ -292,7 +360,8 @@ def main() -> None:
         render = RESULTS / f"{args.name}-{kind}-{seed}-{name}.png" if key == args.render else None
         print(f"== {key}", flush=True)
         results["cases"][key] = run_case(kind, seed, name, BODIES[name], body, args.edge_length, workdir,
-                                         "cm" if i % 2 == 0 else "mm", render, args.at_rest, params)
+                                         "cm" if i % 2 == 0 else "mm", render, args.at_rest, params,
+                                         args.landing_only)
         finish(args.name, results)
 
 
@@ -306,11 +375,20 @@ def passed(row: dict) -> bool:
 def finish(name: str, results: dict) -> None:
     """The summary over the cases so far, and the results written."""
     rows = list(results["cases"].values())
+    landed_clean = sum(bool(r["landed"] and r["inside_percent"] == 0.0) for r in rows)
+    girths = [max(abs(r["measures_vs_true"][k]) for k in ("chest", "waist", "hips")) for r in rows
+              if r.get("measures_vs_true")]
     results["summary"] = {
         "cases": len(rows),
         "landed": sum(r["landed"] for r in rows),
+        "landed_none_inside": landed_clean,
+        "landed_none_inside_percent": round(100.0 * landed_clean / max(len(rows), 1), 1),
         "passed": sum(bool(r.get("passed")) for r in rows),
-        "direct_refused": sum(r["direct"]["refused"] for r in rows),
+        "direct_refused": (sum(r["direct"]["refused"] for r in rows if "direct" in r)
+                           if any("direct" in r for r in rows) else None),
+        "worst_girth_vs_true_cm": max(girths, default=None),
+        "median_girth_vs_true_cm": round(float(np.median(girths)), 1) if girths else None,
+        "fit_cpu_seconds": [r.get("cpu_seconds") for r in rows],
         "worst_inside_percent": max((r["inside_percent"] for r in rows if r["landed"]), default=None),
         "worst_kept_mm": max((r["kept_mm"] for r in rows if r.get("kept_mm") is not None), default=None),
         "worst_round_trip_mm": max((r["round_trip_mm"] for r in rows if r.get("round_trip_mm") is not None),

@@ -169,8 +169,9 @@ def cmd_garment_import(args):
             print(f"repair: {line}")
     if "fit" in p:  # made for another body: say so, what it was made for, and what is left inside
         f = p["fit"]
-        print(f"fitted as a garment made for another body ({f['why']}): made for {_shape_text(f['shape'])}, draped "
-              f"onto this body; {f['inside_percent']:g}% of vertices more than 2 mm inside it")
+        print(f"fitted as a garment made for another body ({f['why']}): it fits the body "
+              f"{f.get('shape_option') or _shape_text(f['shape'])} best, "
+              f"draped from there onto this body; {f['inside_percent']:g}% of vertices more than 2 mm inside it")
     repaired = {k: v for k, v in p["repairs"].items() if v}
     print(f"wrote {args.out}: {len(garment.verts)} vertices, {len(garment.faces)} faces; {p['unit']}, {p['up']} up, "
           f"attachment {p['attachment']}, top at {p['top_z']:.3f} m (moved by {p['offset']} m); pushed out of the body "
@@ -274,8 +275,9 @@ def cmd_simulate(args):
     if fitted is not None and "from_shape" in fitted:
         print(_refit_line(args.garment, fitted))
     elif fitted is not None:
-        print(f"{args.garment}: fitted as a garment made for another body ({fitted['why']}): made for "
-              f"{_shape_text(fitted['shape'])}; {fitted['inside_percent']:g}% of vertices more than 2 mm inside this body")
+        print(f"{args.garment}: fitted as a garment made for another body ({fitted['why']}): it fits the body "
+              f"{fitted.get('shape_option') or _shape_text(fitted['shape'])} best; {fitted['inside_percent']:g}% of "
+              "vertices more than 2 mm inside this body")
     if result.status != "ok":
         raise LoosefitError(f"{args.out}: the simulation failed the quality gate: {result.reason}")
     print(f"{args.out}: simulated ok ({result.verts.shape[0]} frames, passed the quality gate)")
@@ -527,8 +529,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--unit", choices=["m", "cm", "mm"], default=None, help="file unit (default: detected from size)")
     sp.add_argument("--up", choices=["y", "z"], default=None, help="file up axis (default: detected by fitting)")
     sp.add_argument("--fit", action="store_true",
-                    help="a garment made for another body: find the Anny shape it fits, drape it from there onto "
-                         "this body with Blender cloth (done anyway when it has no plausible placement here)")
+                    help="a garment made for another body: find the Anny shape it fits (all six keys; said in one "
+                         "line), drape it from there onto this body (--shape) with Blender cloth (done anyway when it "
+                         "has no plausible placement here)")
     sp.add_argument("--piece", type=piece_choice, default=None, metavar="largest|N",
                     help="keep one connected piece (1 is the largest); default: every piece, when each is attached")
     sp.add_argument("--repair", action="store_true",

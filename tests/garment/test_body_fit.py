@@ -2,6 +2,7 @@
 refusals before any simulation; the bounded push out of the body."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -41,8 +42,10 @@ def test_a_garment_made_for_a_taller_body_is_fitted(tmp_path, body, tall_shirt):
     tall, shirt = tall_shirt
     path = write_obj(tmp_path / "tall.obj", pelvis_y_up(tall, shirt.verts, 100.0), shirt.faces)
     sdf = measure_body(body).sdf
-    # A small search (the default scores 9 shapes, then refines): height 0.5 (this body) or 0.8.
-    search = Search(coarse=(("height", (0.5, 0.8)),), steps=(), morph_seconds=0.4, settle_seconds=0.3)
+    # A small search (the default looks at a few hundred shapes' profiles, then scores the best exactly and
+    # refines): height 0.5 (this body) or 0.8.
+    search = Search(coarse=(("height", (0.5, 0.8)),), profile_steps=(), steps=(), morph_seconds=0.4,
+                    settle_seconds=0.3)
     # Without --fit (fit=None): placed directly, two vertices would be pushed out 21 mm, over the 20 mm limit;
     # so it is fitted.
     g = import_garment(path, body, fit=None, fit_search=search)
@@ -196,3 +199,151 @@ def test_a_bad_body_shape_in_the_sidecar_names_it(tmp_path, tall_shirt):
     with pytest.raises(InputError, match="unreadable garment sidecar.*height=1.8") as err:
         Garment.load(tmp_path / "g.obj")
     assert "g.json" in str(err.value)
+
+
+def strapless_dress(body, edge_length: float = 0.05):
+    """A strapless dress made on ``body``: a strap dress cut 5 cm under the armpits."""
+    from loosefit.garment.level_cut import cut_mesh
+
+    dress = make_garment("dress", body, seed=2, edge_length=edge_length, sleeve_length=0.0)
+    v, f, _ = cut_mesh(dress.verts, dress.faces, dress.verts[:, 2] - (measure_body(body).armpit_z - 0.05))
+    return v, f
+
+
+#: How close the body found must come to the one the garment was made on, in what a garment shows of it: the
+#: girths at the chest, waist and hips (cm; a garment with ease fits bodies a few centimetres apart about as well:
+#: 1 cm of ease is 6 cm of girth) and the height (cm, over what the garment covers).
+GIRTH_TOLERANCE_CM = 6.0
+HEIGHT_TOLERANCE_CM = 12.0
+
+
+@pytest.mark.parametrize("case", ["slim-female-strapless", "tall-long-shirt"])
+def test_a_garment_for_a_body_far_from_this_one_is_found_and_lands(tmp_path, body, case):
+    """A garment made on a body at an end of the shape range (a slim woman's strapless dress, as in the report
+    that asked for the search over all six keys; a tall body's long shirt), written as another tool would and
+    imported with --fit onto the default body: the body found is close to the one it was made on in girths and
+    height (the default body is not), and after the drape no vertex is inside this body."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.body.measures import shape_measures
+
+    shape, top = {"slim-female-strapless": (AnnyShape(gender=1.0, weight=0.2), "strapless"),
+                  "tall-long-shirt": (AnnyShape(height=0.85), "shoulders")}[case]
+    source = AnnyBody(shape)
+    if top == "strapless":  # 1,743 vertices: the search before six keys found the average body for it
+        verts, faces = strapless_dress(source, 0.03)
+    else:
+        made = make_garment("long_shirt", source, seed=0, edge_length=0.06)
+        verts, faces = made.verts, made.faces
+    path = write_obj(tmp_path / f"{case}.obj", pelvis_y_up(source, verts, 100.0), faces)
+    g = import_garment(path, body, fit=True)
+    fit = g.params["fit"]
+    assert g.params["attachment"] == top
+    assert fit["inside_after_drape_percent"] == 0.0 and fit["inside_percent"] == 0.0, fit
+    assert (measure_body(body).sdf.query(g.verts) < -0.002).sum() == 0
+
+    found = AnnyShape(**fit["shape"])
+    truth, got, default = shape_measures(body, shape), shape_measures(body, found), shape_measures(body)
+
+    def misses(m):  # how far a body's measures are from the truth, beyond the tolerances (0: within)
+        girths = max(abs(m[k] - truth[k]) for k in ("chest_girth_cm", "waist_girth_cm", "hips_girth_cm"))
+        return max(girths - GIRTH_TOLERANCE_CM, 100 * abs(m["height_m"] - truth["height_m"]) - HEIGHT_TOLERANCE_CM, 0)
+
+    assert misses(got) == 0, (fit["shape"], got, truth)
+    assert misses(default) > 0, (default, truth)  # the test tells the found body from this one
+    if case == "slim-female-strapless":  # the bust: a woman's body
+        assert found.gender >= 0.75, fit["shape"]
+    assert fit["shape_option"].startswith("--shape ") and AnnyShape.parse(fit["shape_option"].split()[1]) == found
+
+
+def test_shape_option_selects_the_shape():
+    """The body found, as the option that selects it: the values that are not the average's (an unnamed key is
+    0.5), read back by the --shape parser as the same shape."""
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment.body_fit import shape_option
+
+    assert shape_option(AnnyShape(gender=1.0, weight=0.2)) == "--shape gender=1,weight=0.2"
+    assert shape_option(AnnyShape()) == "--shape gender=0.5"
+    odd = AnnyShape(gender=0.12, age=0.62, muscle=0.5, weight=0.38, height=0.81, proportions=0.0)
+    assert AnnyShape.parse(shape_option(odd).split()[1]) == odd
+
+
+def test_a_refusal_after_the_drape_says_how_the_fit_came_about_and_names_the_shape():
+    """With --fit, the refusal after the drape says so; without it (the direct placement refused first) it says
+    that, and that the fit followed, never "the fit's drape" as if asked; both end with the body found as a
+    ready --shape."""
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment.importer import _drape_refusal
+
+    found = AnnyShape(gender=1.0, weight=0.2)
+    where, hint = _drape_refusal(found, None)
+    assert where.startswith("with --fit, after the drape from the body it fits best (--shape gender=1,weight=0.2)")
+    assert "--shape gender=1,weight=0.2`, and simulate with the same --shape" in hint
+    direct = InputError("placed on this body, 477 vertices are too deep inside the body: pushing them out would "
+                        "move them up to 31 mm, over the 20 mm limit (made for another body? --fit drapes it)")
+    where, hint = _drape_refusal(found, direct)
+    assert where.startswith("placed on this body, 477 vertices are too deep inside the body: pushing them out would "
+                            "move them up to 31 mm, over the 20 mm limit; fitted instead as a garment made for "
+                            "another body, after the drape from the body it fits best (--shape gender=1,weight=0.2)")
+    assert "fit's drape" not in where + hint and "--fit drapes" not in where
+
+
+def test_profiles_tell_a_womans_garment_from_the_average_body(body):
+    """The first look of the search: a slim woman's strapless dress scores better on her body's profile than on
+    the average body's (into which it cuts), and a batch of bodies is made as one at a time."""
+    from loosefit.body import AnnyBody
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment.placement import attachment_type
+    from loosefit.garment.shape_profile import body_profiles, garment_profile, profile_scores
+
+    shapes = [AnnyShape(gender=1.0, weight=0.2), AnnyShape()]
+    verts, joints = body.rest_batch(shapes)
+    for shape, v, j in zip(shapes, verts, joints):
+        np.testing.assert_allclose(v, body.rest_verts(shape), atol=1e-6)
+        np.testing.assert_allclose(j, body.rest_joints(shape), atol=1e-6)
+    lm = measure_body(body)
+    profiles = body_profiles(verts, joints, body.joint_names, lm.arm_weight)
+    assert profiles.waist_z[1] == pytest.approx(lm.waist_z, abs=0.03)  # as measure_body, on 2 cm bins
+    assert profiles.axis[1][1] == pytest.approx(lm.center_y, abs=0.005)
+    dress, faces = strapless_dress(AnnyBody(shapes[0]), 0.05)
+    score, top, _ = profile_scores(profiles, garment_profile(dress, faces, attachment_type(dress, faces)),
+                                   0.25, 0.05, 1.0)
+    assert score[0] < score[1], score
+    assert top[0] == pytest.approx(dress[:, 2].max(), abs=0.04)  # near where it was made (2 cm steps)
+
+
+def test_an_import_refused_after_the_drape_names_the_shape_to_use(tmp_path, body, skirt_m, monkeypatch):
+    """The refusal of a garment still too deep inside the body after the fit's drape (the drape replaced by one
+    that leaves the skirt 3 cm inside: no simulation here), as the import words it: with --fit, and without it
+    after the direct placement was refused; both name the body found as a ready --shape."""
+    from loosefit.body.anny_body import AnnyShape
+    from loosefit.garment import body_fit
+    from loosefit.garment.body_fit import ShapeFit
+    from loosefit.garment.placement import place
+
+    verts, faces = skirt_m
+    sdf = measure_body(body).sdf
+    d, direction = outward(sdf, verts)
+    dent = d < d.min() + 0.004
+    dented = verts.copy()
+    dented[dent] -= (d[dent] + 0.025)[:, None] * direction[dent]  # 2.5 cm into the hips: refused when placed
+    path = write_obj(tmp_path / "deep.obj", dented, faces)
+    found = AnnyShape(gender=1.0, weight=0.2)
+
+    def drape_left_inside(scaled, faces_, body_, path_, up=None, params=None, search=None, pieces=None, check=None):
+        placement = place(scaled["m"], faces_, measure_body(body_), path_, "z")
+        fit = ShapeFit(shape=found, placement=placement, unit="m", objective=0.0, evaluations=1)
+        return dented, fit, dented, {"shape": {}, "inside_before_percent": 0.0, "inside_after_drape_percent": 1.0}
+
+    monkeypatch.setattr(body_fit, "fit_to_body", drape_left_inside)
+    with pytest.raises(InputError, match=r"deep.obj: with --fit, after the drape from the body it fits best \(--shape "
+                                         r"gender=1,weight=0.2\) onto this one, \d+ vertices are too deep inside the "
+                                         r"body.*`loosefit garment import FILE --shape gender=1,weight=0.2`"):
+        import_garment(path, body, fit=True)
+    with pytest.raises(InputError) as err:
+        import_garment(path, body, fit=None)
+    assert re.match(r"placed on this body, \d+ vertices are too deep inside the body: pushing them out would move "
+                    r"them up to \d+ mm, over the 20 mm limit; fitted instead as a garment made for another body, after "
+                    r"the drape from the body it fits best \(--shape gender=1,weight=0.2\) onto this one, \d+ vertices",
+                    err.value.problem), err.value.problem
+    assert "fit's drape" not in err.value.problem and "--fit drapes" not in err.value.problem

@@ -152,6 +152,38 @@ class AnnyBody(BodyModel):
             self._rest[shape] = ((verts + offset).astype(np.float32), (joints + offset).astype(np.float32))
         return self._rest[shape]
 
+    def rest_batch(self, shapes: list[AnnyShape], chunk: int = 128) -> tuple[np.ndarray, np.ndarray]:
+        """Rest vertices ``(S, V, 3)`` and joints ``(S, J, 3)`` (float32, loosefit's frame) of many shapes in
+        batched model calls: about 1.3 ms a shape at full resolution against 30 ms one by one (the body-shape
+        search of :mod:`loosefit.garment.shape_profile` looks at hundreds). Nothing is cached."""
+        model = load_anny(self.rig, TOPOLOGIES[self.resolution])
+        names = AnnyShape.names()
+        values = np.array([[getattr(s, k) for k in names] for s in shapes], np.float64).reshape(-1, len(names))
+        verts_out, joints_out = [], []
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # half the CPU time of two threads on the 2-core machines, and no slower
+        try:
+            for start in range(0, len(values), chunk):
+                verts, joints = self._rest_chunk(model, values[start:start + chunk], shapes[start:start + chunk])
+                verts_out.append(verts)
+                joints_out.append(joints)
+        finally:
+            torch.set_num_threads(threads)
+        return np.concatenate(verts_out), np.concatenate(joints_out)
+
+    def _rest_chunk(self, model, values: np.ndarray, shapes: list[AnnyShape]) -> tuple[np.ndarray, np.ndarray]:
+        names = AnnyShape.names()
+        part = torch.as_tensor(values, dtype=model.dtype)
+        pose = torch.eye(4, dtype=model.dtype).expand(len(part), model.bone_count, 4, 4).clone()
+        with torch.no_grad():
+            out = model(pose_parameters=pose, phenotype_kwargs={k: part[:, i] for i, k in enumerate(names)})
+        verts, joints = out["rest_vertices"].numpy(), out["rest_bone_heads"].numpy()
+        if self.resolution == "full":  # as floor_offset, from this very mesh
+            offset = np.concatenate([-joints[:, :1, :2], -verts[:, :, 2:].min(1, keepdims=True)], 2)
+        else:
+            offset = np.stack([floor_offset(self.rig, s) for s in shapes])[:, None]
+        return (verts + offset).astype(np.float32), (joints + offset).astype(np.float32)
+
     def anny_offset(self, shape=None) -> np.ndarray:
         """``(3,)`` float64: loosefit frame = Anny frame + this offset."""
         return floor_offset(self.rig, self._resolve(shape))

@@ -334,7 +334,8 @@ def import_garment(
             placement, unit = _place(verts, faces, units, lm, path, up)
             check_attached(to_z_up(verts * UNITS[unit], placement.up) + placement.offset, faces, pieces, lm, path)
             pushed_verts, moved = _push(to_z_up(verts * UNITS[unit], placement.up) + placement.offset, faces, lm,
-                                        clearance, path, "placed on this body")
+                                        clearance, path, "placed on this body",
+                                        " (made for another body? --fit drapes it from the body it fits)")
         except InputError as err:
             if fit is False or not _has_shapes(body) or DETACHED in err.problem.split(":")[0]:
                 raise
@@ -354,7 +355,7 @@ def import_garment(
                              path) from None
         placement, unit = shape_fit.placement, shape_fit.unit
         info["why"] = "asked" if refused is None else refused.problem.split(";")[0].split(" (")[0]
-        pushed_verts, moved = _push(fitted, faces, lm, clearance, path, "after the fit's drape")
+        pushed_verts, moved = _push(fitted, faces, lm, clearance, path, *_drape_refusal(shape_fit.shape, refused))
     verts = pushed_verts
     pushed = {"max_mm": round(1e3 * float(moved.max()), 2),
               "mean_mm": round(1e3 * float(moved[moved > 0].mean()) if (moved > 0).any() else 0.0, 2),
@@ -421,17 +422,34 @@ def check_attached(verts: np.ndarray, faces: np.ndarray, pieces: np.ndarray, lm,
                 f"one with --piece largest|N", path)
 
 
-def _push(verts, faces, lm, clearance: float, path, where: str):
-    """:func:`~loosefit.garment.fitting.push_out_bounded`, refused over :func:`max_push`. Returns
-    ``(verts, moved)``."""
+def _push(verts, faces, lm, clearance: float, path, where: str, hint: str = ""):
+    """:func:`~loosefit.garment.fitting.push_out_bounded`, refused over :func:`max_push` (the refusal says
+    ``where`` first and ends with ``hint``). Returns ``(verts, moved)``."""
     pushed, moved = push_out_bounded(verts, faces, lm.sdf, clearance)
     limit = max_push(clearance)
     if moved.max() > limit:
-        hint = "" if "fit" in where else " (made for another body? --fit drapes it from the body it fits)"
         raise InputError(f"{where}, {int((moved > limit).sum())} vertices are too deep inside the body: pushing them "
                          f"out would move them up to {1e3 * moved.max():.0f} mm, over the {1e3 * limit:.0f} mm "
                          f"limit{hint}", path)
     return pushed, moved
+
+
+def _drape_refusal(shape, refused: InputError | None) -> tuple[str, str]:
+    """What a refusal after a fit's drape says first and last (:func:`_push`'s ``where`` and ``hint``): how the
+    fit came about (asked with --fit, or because the direct placement was refused: ``refused``), the body it was
+    draped from, and the way out: that body's ``--shape`` (the garment sits on it as made, so it is imported there
+    without a drape)."""
+    from loosefit.garment.body_fit import shape_option
+
+    option = shape_option(shape)
+    found = f"the body it fits best ({option})"
+    if refused is None:
+        where = f"with --fit, after the drape from {found} onto this one"
+    else:
+        where = (f"{refused.problem.split(';')[0].split(' (')[0]}; fitted instead as a garment made for another "
+                 f"body, after the drape from {found} onto this one")
+    return where, (f". The garment was made for a body like that one: import it onto that body, "
+                   f"`loosefit garment import FILE {option}`, and simulate with the same --shape")
 
 
 def _has_shapes(body) -> bool:

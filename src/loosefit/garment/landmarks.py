@@ -9,7 +9,7 @@ from scipy.spatial import ConvexHull
 
 from loosefit.body.base import BodyModel
 from loosefit.errors import InputError
-from loosefit.geometry.signed_distance import BodySDF
+from loosefit.geometry.signed_distance import BodySDF, PosedBodySDF
 
 #: Joint names per rig family: Anny ``cmu_mb`` first, SMPL / SMPL-X second.
 JOINT_NAMES = {
@@ -73,8 +73,10 @@ class BodyLandmarks:
         return np.maximum(t_upper, t_fore) / (upper + fore)
 
 
-def measure_body(body: BodyModel, shape=None) -> BodyLandmarks:
-    """Measure ``body`` (rest pose of ``shape``) for garment fitting."""
+def measure_body(body: BodyModel, shape=None, like: BodySDF | None = None) -> BodyLandmarks:
+    """Measure ``body`` (rest pose of ``shape``) for garment fitting. ``like``: the signed distance of the same
+    body in another shape, whose edge map the new one reuses (:class:`~loosefit.geometry.signed_distance.
+    PosedBodySDF`: the same distances, in a third less time; the body-shape search measures dozens)."""
     verts = np.asarray(body.rest_verts(shape), dtype=np.float64)
     faces = np.asarray(body.faces, dtype=np.int64)
     rest_joints = np.asarray(body.rest_joints(shape), dtype=np.float64)
@@ -113,7 +115,7 @@ def measure_body(body: BodyModel, shape=None) -> BodyLandmarks:
     return BodyLandmarks(
         verts=verts,
         faces=faces,
-        sdf=BodySDF(verts, faces),
+        sdf=BodySDF(verts, faces) if like is None else PosedBodySDF(verts, like),
         arm_weight=arm_weight,
         joints=joints,
         waist_z=waist_z,

@@ -163,9 +163,14 @@ def attachment_type(verts: np.ndarray, faces: np.ndarray) -> str:
 
 def top_windows(kind: str, lm: BodyLandmarks) -> tuple[float, float]:
     """``(low, high)`` heights (m) where the top of a garment with attachment ``kind`` may lie."""
+    return window_heights(kind, lm.waist_z, lm.armpit_z, float(lm.joints["neck"][0][2]))
+
+
+def window_heights(kind: str, waist_z, armpit_z, neck_z):
+    """:func:`top_windows` from the landmarks' heights (m; floats or arrays of one per body)."""
     if kind == "ring":
-        return lm.waist_z - 0.18, lm.armpit_z + 0.15
-    return lm.armpit_z + 0.03, float(lm.joints["neck"][0][2]) + 0.12
+        return waist_z - 0.18, armpit_z + 0.15
+    return armpit_z + 0.03, neck_z + 0.12
 
 
 def fit_score(dist: np.ndarray, z: np.ndarray, band: float) -> tuple[float, float, float]:
