@@ -53,10 +53,10 @@ on the default body with and without --fit; ``female-tall``, ``female-short``, `
 :mod:`loosefit.body.measures`), ``seconds`` and ``cpu_seconds``; ``passed``: landed with none inside. The summary
 counts ``landed_none_inside`` (target: at least 90 %).
 
-Refusals (``refusals/...``, with ``fit=True``; not with ``--landing-only``): the first case's garment 100 times too small (in metres) and
-too large (in millimetres; 100 times too small in centimetres is the right size in metres), and inside out
-(faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming the
-file, before any simulation.
+Refusals (``refusals/...``, with ``fit=True``; not with ``--landing-only``): the first case's garment 100 times
+too small (in metres) and too large (in millimetres; 100 times too small in centimetres is the right size in
+metres), and inside out (faces wound the other way); each must be an :class:`~loosefit.errors.InputError` naming
+the file, before any simulation.
 
 What was measured, and how it changed: ``benchmarks/README.md`` (garments made for other bodies).
 

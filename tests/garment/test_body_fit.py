@@ -343,7 +343,7 @@ def test_an_import_refused_after_the_drape_names_the_shape_to_use(tmp_path, body
     with pytest.raises(InputError) as err:
         import_garment(path, body, fit=None)
     assert re.match(r"placed on this body, \d+ vertices are too deep inside the body: pushing them out would move "
-                    r"them up to \d+ mm, over the 20 mm limit; fitted instead as a garment made for another body, after "
-                    r"the drape from the body it fits best \(--shape gender=1,weight=0.2\) onto this one, \d+ vertices",
-                    err.value.problem), err.value.problem
+                    r"them up to \d+ mm, over the 20 mm limit; fitted instead as a garment made for another body, "
+                    r"after the drape from the body it fits best \(--shape gender=1,weight=0.2\) onto this one, \d+ "
+                    r"vertices", err.value.problem), err.value.problem
     assert "fit's drape" not in err.value.problem and "--fit drapes" not in err.value.problem

@@ -15,7 +15,8 @@ bring it onto the body without changing its cut:
    the target. The evenness is what tells the body apart: a strapless top cut for a thin Anny (height 0.45,
    weight 0.12, gender 0.4) scores 0.5 mm on it and 1.8-3.4 mm on bodies 0.05-0.35 away in a key (over its
    top 10 cm). The band reaches past a strap dress's or a shirt's shoulders to the bust, a skirt's waistband
-   to the hips; 45 cm would reach a dress's flared skirt (a dress cut at weight 0.3 was found at 1.0). The mean
+   to the hips; 45 cm would reach a dress's flared skirt (with the four-key search that preceded this one, a
+   dress cut at weight 0.3 was found at 1.0). The mean
    gap alone would prefer the largest body the garment does not cut into (2 mm of gap where the garment was
    made with 14 mm of ease), hence its small weight. The prior breaks ties towards the target (the height of a
    body under a skirt's waistband is not seen), so that the drape is short.
@@ -92,8 +93,10 @@ BAND_SAMPLES = 400
 #: Most shapes scored exactly in one search.
 MAX_EVALUATIONS = 36
 #: The youngest age searched unless no adult body can wear the garment (Anny's age 0.5 is the average adult; below
-#: it the body is a child's). A body is needed younger only when the profiles find every adult one more than
-#: :data:`CHILD_INSIDE` of its bins more than 3 mm inside the garment.
+#: it the body is a child's). A younger body is looked for only when the best adult profile scores over 2 m times
+#: :data:`CHILD_INSIDE`: what the profiles' penalty alone gives when that share of the bins is inside the body
+#: (:data:`~loosefit.garment.shape_profile.INSIDE_TOLERANCE`). A skirt and a long shirt made on children (age
+#: 0.2, 0.25) did not get there: they were found on the shortest adult body, within 5 cm of their girths.
 ADULT_AGE = 0.5
 CHILD_INSIDE = 0.03
 #: The ages the profiles try, then, below :data:`ADULT_AGE`.
@@ -330,7 +333,7 @@ class _ProfileSearch:
 
         self.score(grid([max(self.target[age], bounds[age][0])]))
         if min(self.scores.values()) > 2.0 * CHILD_INSIDE and bounds[age][0] > 0.0:  # no adult body wears it
-            bounds[age][0] = 0.0
+            bounds[age][0] = 0.0  # for the exact search too (the caller's bounds)
             self.score(grid(CHILD_AGES))
         starts = self._distinct(self.search.starts)
         for n, start in enumerate(starts):

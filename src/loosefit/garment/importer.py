@@ -39,8 +39,10 @@ or dress for a thin one need no push, a skirt for a thin one 5.4 mm, a long shir
 move 23 mm and is refused.
 
 A garment made for another body (``fit=True``, or ``fit=None`` when the direct placement or the push is
-refused) is fitted as a garment tool does it: :mod:`loosefit.garment.body_fit` finds the Anny shape it fits,
-places it there and drapes it onto the body with Blender cloth while the body changes shape.
+refused) is fitted as a garment tool does it: :mod:`loosefit.garment.body_fit` finds the Anny shape it fits
+(over all six keys), places it there and drapes it onto the body with Blender cloth while the body changes shape.
+A push after that drape over :func:`max_push` is refused saying how the fit came about (asked, or after the direct
+placement's refusal) and naming the shape found as a ``--shape`` to import and simulate the garment on.
 
 Inside out: a garment whose normals point inwards (:func:`outward_flux` negative, its faces consistently
 oriented as most of the file's faces are) is refused.
