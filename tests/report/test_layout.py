@@ -46,8 +46,8 @@ def context() -> dict:
 @pytest.fixture(scope="module")
 def page(tmp_path_factory):
     if not Path(CHROMIUM).is_file():
-        pytest.skip(f"{CHROMIUM} is missing (apt-get install chromium): no browser to lay the report out")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright drives the browser")
+        pytest.fail(f"{CHROMIUM} is missing: `make test` installs it (apt-get install chromium)")
+    from playwright import sync_api
     html, _ = render_pages(context())
     index = tmp_path_factory.mktemp("layout") / "index.html"
     index.write_text(html)
