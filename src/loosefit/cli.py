@@ -407,7 +407,7 @@ def cmd_report(args):
     guard_output(args.out, args.force, names=("index.html", "report.md", "metrics.json", "figures"))
     index = build_report(args.data, args.run, args.out, sequences=args.sequence, split=args.split,
                          results_dir=args.results or DEFAULT_RESULTS, device=args.device, images=not args.no_images,
-                         handling=args.collision)
+                         handling=args.collision, measure_speed=args.measure_speed)
     print(f"wrote {index} (and report.md, metrics.json, figures/)")
 
 
@@ -699,6 +699,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--no-images", action="store_true", help="leave out the rendered error maps")
     sp.add_argument("--collision", choices=["exact", "pushout", "none"], default="exact",
                     help="collision handling of the animations, as loosefit animate (default exact)")
+    sp.add_argument("--measure-speed", action="store_true", help="also time each run's own model on this machine")
     sp.set_defaults(func=cmd_report)
 
     sp = sub.add_parser("view", help="play the simulation and predictions side by side in the browser (or animations "
