@@ -6,7 +6,7 @@ later (a kick) can cross the cloth between two steps. This runs the plan's garme
 frames of one of its motions at each ``--steps`` (``0``: the rule's own count) and saves the quality gate's
 statistics for each, so that the counts can be compared on the frames where it happens::
 
-    .venv/bin/python benchmarks/solver_steps.py configs/datasets/bench-large.yaml --garment dress --motion kick-1 \\
+    .venv/bin/python benchmarks/experiments/solver_steps.py configs/datasets/bench-large.yaml --garment dress --motion kick-1 \\
         --frames 160 --steps 0,24 --name solver-steps-dress-kick1
 
 Output: ``benchmarks/results/<name>.json``; per step count the gate's status and reason, the steps used,
@@ -17,11 +17,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
+from pathlib import Path
 
-from _common import plan_case, save_results
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common
+from _common import plan_case, save_results  # noqa: E402
 
-from loosefit.sim.plan import load_plan
-from loosefit.sim.sequence import simulate_sequence
+from loosefit.sim.plan import load_plan  # noqa: E402
+from loosefit.sim.sequence import simulate_sequence  # noqa: E402
 
 KEYS = ("quality", "strain_p99", "max_strain", "penetration", "penetration_max", "penetration_depth", "ms_per_frame",
         "wall_s")

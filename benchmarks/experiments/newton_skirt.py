@@ -1,7 +1,7 @@
 """Newton backend on the bench skirt: ms/frame, the quality gate, the 10-micrometre noise spread, one rendered frame.
 
 A measurement, not a test. Run from the project root:
-  OMP_NUM_THREADS=1 .venv/bin/python benchmarks/newton_skirt.py --seconds 2 [--noise] [--set KEY=VALUE ...]
+  OMP_NUM_THREADS=1 .venv/bin/python benchmarks/experiments/newton_skirt.py --seconds 2 [--noise] [--set KEY=VALUE ...]
 Writes ``benchmarks/results/newton-skirt-walk.json``, the simulated sequence as ``/tmp/NAME.npz``
 and a PNG of one frame (``--png``).
 """
@@ -11,18 +11,20 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from _common import plan_case
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common
+from _common import plan_case  # noqa: E402
 
-from loosefit.sim import simulate_sequence
-from loosefit.sim.plan import load_plan
-from loosefit.sim.sequence import save_result
+from loosefit.sim import simulate_sequence  # noqa: E402
+from loosefit.sim.plan import load_plan  # noqa: E402
+from loosefit.sim.sequence import save_result  # noqa: E402
 
-RESULTS = Path(__file__).parent / "results"
+RESULTS = Path(__file__).resolve().parents[1] / "results"
 
 
 def main() -> None:

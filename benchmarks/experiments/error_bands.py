@@ -13,7 +13,7 @@ spread around their mean in that band), with the size of the wrinkles in the mea
 perfect smooth garment without wrinkles would score against the mean in the high band). A band whose RMSE against
 the mean is far above its floor is where the model, not the simulator's chaos, loses accuracy.
 
-Run: .venv/bin/python benchmarks/error_bands.py --data DATA.zarr --garment skirt+average \\
+Run: .venv/bin/python benchmarks/experiments/error_bands.py --data DATA.zarr --garment skirt+average \\
          --run VirtualBones=RUNS/skirt+average/virtualbones --run JointNet=... [--name error-bands]
 (writes benchmarks/results/<name>.json; keys ``figures/<motion>/<label>/{all,low,high}/{rmse_mm,rmse_vs_mean_mm}``,
 ``figures/<motion>/floor/{all,low,high}_mm`` and ``figures/<motion>/signal/high_mm``)
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 from accuracy import held_out_sequences  # noqa: E402
 

@@ -14,8 +14,8 @@ alone, as the long windows were measured); ``--summarise`` collects the RMSE per
 (train / val / test) and the training steps and times of every variant into
 ``benchmarks/results/memory-comparison.json``.
 
-Run: .venv/bin/python benchmarks/memory_windows.py --data /work/stores/memory.zarr --runs RUNS --variant windows
-     .venv/bin/python benchmarks/memory_windows.py --summarise
+Run: .venv/bin/python benchmarks/experiments/memory_windows.py --data /work/stores/memory.zarr --runs RUNS --variant windows
+     .venv/bin/python benchmarks/experiments/memory_windows.py --summarise
 (the store: `loosefit simulate configs/datasets/memory.yaml --out memory.zarr`)
 """
 
@@ -27,10 +27,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import RESULTS, save_results  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # benchmarks/, where accuracy.py is
 #: The same networks and epochs for every variant: the CPU preset's VirtualBones, the demo's JointNet sizes,
 #: the demo's epochs.
 COMMON = [

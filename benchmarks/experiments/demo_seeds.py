@@ -10,7 +10,7 @@ held-out sequences (by default the first); the same runs score each sequence in 
 of every run after the demo's (a variant of its training: ``--set train.lr=1e-3``), named by ``--tag``. Runs resume
 (``--runs``: ``<method>-<tag>-seed<k>`` folders).
 
-Run: .venv/bin/python benchmarks/demo_seeds.py --data demo_out/demo.zarr --runs RUNS [--methods virtualbones,jointnet]
+Run: .venv/bin/python benchmarks/experiments/demo_seeds.py --data demo_out/demo.zarr --runs RUNS [--methods virtualbones,jointnet]
          [--seeds 0,1,2] [--set KEY=VALUE ...] [--tag demo] [--sequence NAME] [--name demo-seeds]
 (writes benchmarks/results/<name>.json)
 """
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 
 from _common import save_results  # noqa: E402
 

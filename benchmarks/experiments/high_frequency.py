@@ -12,7 +12,7 @@ fits what it saw), in the canonical frame (RMSE does not change under the rigid 
   result), the part of ``h`` the offsets explain, and the split of the error change into what the offsets
   share with ``h`` and with the low-frequency module's own error.
 
-Run: .venv/bin/python benchmarks/high_frequency.py --data DATA.zarr --runs RUNS [--garments skirt+average,...]
+Run: .venv/bin/python benchmarks/experiments/high_frequency.py --data DATA.zarr --runs RUNS [--garments skirt+average,...]
          [--split test] [--sequences 0] [--name high-frequency]
 (writes benchmarks/results/<name>.json)
 """
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402

@@ -15,7 +15,7 @@ reference run against the stored run) and ``floor_mm``; per garment, its ``asymm
 mirror image's distance from the rest surface: mean, 95th percentile, max); and the body's own check (the full
 body posed by the mirrored motion, read back the same way, against the body posed by the motion).
 
-Run: .venv/bin/python benchmarks/mirror_symmetry.py --data STORE.zarr --sequences skirt+average+spin-1+default,...
+Run: .venv/bin/python benchmarks/experiments/mirror_symmetry.py --data STORE.zarr --sequences skirt+average+spin-1+default,...
          [--name mirror-symmetry]
 (writes benchmarks/results/<name>.json after every sequence; discussion in benchmarks/README.md)
 """
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 
 

@@ -15,7 +15,7 @@ rmse_vs_mean_mm, over_lbs, train_wall_s}`` pooled over the held-out sequences (R
 and vertices), and per held-out motion ``.../motions/<motion>/{rmse_mm, rmse_vs_mean_mm, floor_mm,
 vs_floor}`` (``vs_floor``: ``rmse_vs_mean_mm / floor_mm``, the target being at most 2).
 
-Run: .venv/bin/python benchmarks/learning_curve.py --data DATA.zarr --runs RUNS [--garments skirt+average]
+Run: .venv/bin/python benchmarks/experiments/learning_curve.py --data DATA.zarr --runs RUNS [--garments skirt+average]
          [--fractions 0.25,0.5,1] [--set virtualbones:train.stages.low.epochs=30] [--name learning-curve]
 """
 
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 from accuracy import garment_validation, garments_with_test, held_out_sequences, parse_sets, train_run  # noqa: E402
 

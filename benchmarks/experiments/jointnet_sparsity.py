@@ -22,7 +22,7 @@ change of the garment below the knees). The association itself is summarised by
 ``association_radius``) of every JointNet run; the run folders are named after them
 (``jointnet-hoyer-r0.2-1e-4-seed0``).
 
-Run: .venv/bin/python benchmarks/jointnet_sparsity.py --data memory.zarr --runs RUNS [--lambdas 1e-5,1e-4,3e-4,1e-3]
+Run: .venv/bin/python benchmarks/experiments/jointnet_sparsity.py --data memory.zarr --runs RUNS [--lambdas 1e-5,1e-4,3e-4,1e-3]
          [--seeds 0,1] [--association l1|hoyer] [--radius 0.2] [--name jointnet-sparsity]
 (writes benchmarks/results/<name>.json)
 """
@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 
 from _common import save_results  # noqa: E402
 

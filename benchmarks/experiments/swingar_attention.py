@@ -24,11 +24,11 @@ Five measurements, each a subcommand writing ``benchmarks/results/<name>.json``:
 Store (see ``/work/stores/swingar-attention.yaml`` for the plan used)::
 
     .venv/bin/loosefit simulate PLAN.yaml --out STORE.zarr
-    .venv/bin/python benchmarks/swingar_attention.py entropy --data STORE.zarr
-    .venv/bin/python benchmarks/swingar_attention.py curve --data STORE.zarr --runs RUNS
-    .venv/bin/python benchmarks/swingar_attention.py bands --data STORE.zarr --runs RUNS --match alpha-0,plain-gat
-    .venv/bin/python benchmarks/swingar_attention.py memorise --data STORE.zarr --garment skirt-0+average
-    .venv/bin/python benchmarks/swingar_attention.py scale --data STORE.zarr --runs RUNS [--counts 1,2,4]
+    .venv/bin/python benchmarks/experiments/swingar_attention.py entropy --data STORE.zarr
+    .venv/bin/python benchmarks/experiments/swingar_attention.py curve --data STORE.zarr --runs RUNS
+    .venv/bin/python benchmarks/experiments/swingar_attention.py bands --data STORE.zarr --runs RUNS --match alpha-0,plain-gat
+    .venv/bin/python benchmarks/experiments/swingar_attention.py memorise --data STORE.zarr --garment skirt-0+average
+    .venv/bin/python benchmarks/experiments/swingar_attention.py scale --data STORE.zarr --runs RUNS [--counts 1,2,4]
 """
 
 from __future__ import annotations
@@ -43,11 +43,11 @@ import numpy as np
 import torch
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 from swingar_gpu import window_errors  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CPU_CONFIG = ROOT / "configs" / "models" / "swingar-cpu.yaml"
 #: GAT-LN designs (:class:`loosefit.models.swingar.SwinGarConfig`'s four attention keys).
 DESIGNS = {

@@ -20,7 +20,7 @@ Variants (``--variants``, comma-separated; parts joined with ``+`` apply in orde
 - ``concat`` / ``add``: the Fourier features concatenated with (Fig. 2) / added to (Eq. 4) the bone
   features; ``no-fourier``: their coefficients held at zero; ``scale0.5``: frequencies of 0.5 cycles/m.
 
-Run: .venv/bin/python benchmarks/jointnet_stability.py --data STORE.zarr --garment skirt+average
+Run: .venv/bin/python benchmarks/experiments/jointnet_stability.py --data STORE.zarr --garment skirt+average
          [--steps 60] [--variants paper,rmsprop-torch+init-torch+add,...] [--virtualbones] [--name NAME]
 (writes benchmarks/results/<name>.json)
 """
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import machine, save_results  # noqa: E402
 
 from loosefit.config import load_config  # noqa: E402
@@ -49,7 +49,7 @@ from loosefit.train.protocol import collate_fn  # noqa: E402
 from loosefit.train.seeding import seed_everything  # noqa: E402
 from loosefit.train.trainer import _optimizer  # noqa: E402
 
-CONFIGS = Path(__file__).resolve().parents[1] / "configs" / "models"
+CONFIGS = Path(__file__).resolve().parents[2] / "configs" / "models"
 
 #: Config overrides of each variant part (applied after the config file and the run's window settings).
 OVERRIDES = {
@@ -190,7 +190,7 @@ def main() -> None:
     runs = [("jointnet", v) for v in args.variants.split(",") if v] + [("virtualbones", "low")] * args.virtualbones
     for kind, name in runs:
         results["variants"][f"{kind}/{name}"] = run_variant(kind, name, train, test, args)
-        partial = Path(__file__).resolve().parent / "results" / f"{args.name}.json"  # kept if a later variant fails
+        partial = Path(__file__).resolve().parents[1] / "results" / f"{args.name}.json"  # kept if a later variant fails
         partial.write_text(json.dumps({"benchmark": args.name, "partial": True, "results": results}, indent=2))
     for key, r in results["variants"].items():
         s = r["summary"]

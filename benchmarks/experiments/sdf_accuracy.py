@@ -12,7 +12,7 @@ For each ``--sdf-runs`` network and each ``--sequences`` sequence of ``--data`` 
   one (cosine) at the inside vertices: the direction Eq. 10 moves them in;
 - ``inside_depth_ratio``: mean ``|S| / |S_exact|`` at the inside vertices (1: the right distance).
 
-Run: .venv/bin/python benchmarks/sdf_accuracy.py --data G.zarr --run RUN --sdf-runs SDF1,SDF2
+Run: .venv/bin/python benchmarks/experiments/sdf_accuracy.py --data G.zarr --run RUN --sdf-runs SDF1,SDF2
          --sequences NAME,NAME [--every 20] [--name sdf-accuracy]
 (writes benchmarks/results/<name>.json)
 """
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402

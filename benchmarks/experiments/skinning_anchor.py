@@ -7,7 +7,7 @@ its coarse generator must undo whatever the anchor gets wrong.
 Per sequence of a split, every ``--stride``-th frame: mean per-vertex error (mm) against the simulation and
 against its ``fitgar`` smoothing (FitGar's coarse target), and the share of vertices whose weights were copied.
 
-Run: .venv/bin/python benchmarks/skinning_anchor.py --data STORE [--split test] [--distances 0.02,0.05]
+Run: .venv/bin/python benchmarks/experiments/skinning_anchor.py --data STORE [--split test] [--distances 0.02,0.05]
 (writes benchmarks/results/<--name>.json)
 """
 
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 from accuracy_graph import every_nth_frame  # noqa: E402
 

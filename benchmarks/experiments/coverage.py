@@ -7,7 +7,7 @@ at most half a turn, measures extrapolation, not accuracy. ``covered_by`` counts
 (any kind for a ``mix``) whose extent covers the held-out one; the plan is meant to give every held-out motion at least
 ``--least`` (3).
 
-Run: .venv/bin/python benchmarks/coverage.py --plan configs/datasets/bench-large.yaml [--least 3] [--name NAME]
+Run: .venv/bin/python benchmarks/experiments/coverage.py --plan configs/datasets/bench-large.yaml [--least 3] [--name NAME]
 (writes benchmarks/results/<name>.json, default coverage-<plan name>)
 """
 
@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 
 from _common import save_results  # noqa: E402
 

@@ -15,7 +15,7 @@ position would remove. This measures it on trained runs, per held-out sequence:
   garment explains (what a root-relative origin could at most remove);
 - ``corr_rootz_dz``: correlation of the root's height with that vertical offset over the frames.
 
-Run: .venv/bin/python benchmarks/jump_height.py --data DATA.zarr --runs RUNS/<garment> [--methods virtualbones,jointnet]
+Run: .venv/bin/python benchmarks/experiments/jump_height.py --data DATA.zarr --runs RUNS/<garment> [--methods virtualbones,jointnet]
          [--name jump-height]
 """
 
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import save_results  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402

@@ -35,13 +35,13 @@ widths (``configs/models/fitgar-cpu.yaml`` by default), its learning rate and gr
 and model keys override), Adam, seed 0.
 
 Run:
-    .venv/bin/python benchmarks/capacity.py anchors --name capacity-fitgar
-    .venv/bin/python benchmarks/capacity.py memorise --method fitgar --data S.zarr \
+    .venv/bin/python benchmarks/experiments/capacity.py anchors --name capacity-fitgar
+    .venv/bin/python benchmarks/experiments/capacity.py memorise --method fitgar --data S.zarr \
         --sequences skirt-0+average+walk+default \
         --samples 4 --steps 50,100,200,400 --anchor surface --label surface --name capacity-fitgar
-    .venv/bin/python benchmarks/capacity.py scale --data S.zarr --strides 8,4,2 --name capacity-fitgar
-    .venv/bin/python benchmarks/capacity.py twins --data S.zarr --name capacity-fitgar
-    .venv/bin/python benchmarks/capacity.py lookup --data FS.zarr --strides 8,2 --test-stride 12 --anchor spread \
+    .venv/bin/python benchmarks/experiments/capacity.py scale --data S.zarr --strides 8,4,2 --name capacity-fitgar
+    .venv/bin/python benchmarks/experiments/capacity.py twins --data S.zarr --name capacity-fitgar
+    .venv/bin/python benchmarks/experiments/capacity.py lookup --data FS.zarr --strides 8,2 --test-stride 12 --anchor spread \
         --label fitgar-static --name capacity-fitgar
 (the commands of the published numbers are in benchmarks/README.md, "FitGar's capacity")
 """
@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import RESULTS, save_results  # noqa: E402
 
 from loosefit.config import load_config  # noqa: E402
@@ -68,7 +68,7 @@ from loosefit.training import save_trained_frames_run  # noqa: E402
 from loosefit.models.fitgar_inputs import ANCHOR_MODES, GarmentBodyPair, shared_anchor_fraction  # noqa: E402
 from loosefit.train.protocol import to_device  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KINDS = ("skirt", "dress", "long_shirt", "jumpsuit")
 #: Where the networks train (``--device``; the widths and steps do not depend on it).
 DEVICE = torch.device("cpu")

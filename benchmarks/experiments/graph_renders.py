@@ -9,7 +9,7 @@ The per-vertex error to the simulation (mm) colours the predictions, on one scal
 With ``--collision SDF_RUN`` (and ``--margin``) SwinGar's meshes are also shown after the neural collision
 correction (SwinGar Eq. 10, :func:`~loosefit.models.collision.handle_motion_collisions`).
 
-Run: .venv/bin/python benchmarks/graph_renders.py --data DATA.zarr --sequence NAME [--swingar RUN]
+Run: .venv/bin/python benchmarks/experiments/graph_renders.py --data DATA.zarr --sequence NAME [--swingar RUN]
          [--collision SDF_RUN [--margin 0.01|auto]] [--fitgar RUN] [--run VirtualBones=RUN ...] [--mean-reference]
          [--frames 45,120] [--name graph-render-NAME]
 (writes benchmarks/results/<name>.png)
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import RESULTS  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402

@@ -7,7 +7,7 @@ warm-up runs, both ways, one torch thread, and the largest difference of the out
 between them. With ``--store``, also one VirtualBones optimiser step of the low-frequency stage (the demo's
 settings) on a prepared store, the two ways alternating so that both see the same load.
 
-Run: .venv/bin/python benchmarks/gru_speed.py [--repeats 7] [--store STORE.zarr --garment G]
+Run: .venv/bin/python benchmarks/experiments/gru_speed.py [--repeats 7] [--store STORE.zarr --garment G]
 (writes benchmarks/results/<name>.json)
 """
 
@@ -35,6 +35,8 @@ CASES = [("virtualbones low, demo windows", 191, 600, 4, 90), ("virtualbones low
 #: 11 + 6 x (2 + 3 children)) at the CPU preset (256 units, 50-frame windows) and the demo's (128 units).
 JOINT_CASES = [("jointnet, CPU preset", 24, 41, 256, 8, 50), ("jointnet, demo", 24, 41, 128, 4, 90)]
 
+
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 
 def median_ms(fn, repeats: int) -> float:
     for _ in range(2):
@@ -116,7 +118,7 @@ def virtualbones_step(store_path: str, garment: str, repeats: int) -> dict:
     from loosefit.training import run_config_class
 
     store = DatasetStore.open(store_path, mode="r")
-    cfg = load_config(run_config_class("virtualbones"), Path(__file__).parents[1] / "configs/models/virtualbones.yaml",
+    cfg = load_config(run_config_class("virtualbones"), ROOT / "configs/models/virtualbones.yaml",
                       ["model.global_rank=64", "data.window=90", "data.stride=90", "data.burn_in=0"])
     data = GarmentSequences(store, garment, "train", bones=True)
     torch.manual_seed(0)
@@ -175,7 +177,7 @@ def main() -> None:
         print(f"VirtualBones low-frequency step: torch {row['torch_ms']:.0f} ms, hand-written "
               f"{row['hand_written_ms']:.0f} ms", flush=True)
     results["load_average_at_end"] = os.getloadavg()[0]
-    out = Path(__file__).parent / "results" / f"{args.name}.json"
+    out = Path(__file__).resolve().parents[1] / "results" / f"{args.name}.json"
     out.write_text(json.dumps(results, indent=2) + "\n")
     print(f"wrote {out}")
 

@@ -3,7 +3,7 @@
 A measurement, not a test. The scene of ``tests/sim/test_backends.py::test_cloth_dropped_on_a_moving_box_stays_outside``
 (an 11 x 11 cloth dropped 5 cm onto a 20 cm box that then rises and slides), with the box as
 zero-mass particles and triangles as in :mod:`loosefit.sim.newton`, stepped by Style3D instead.
-Run from the project root: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/newton_style3d_box.py [substeps]``.
+Run from the project root: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/experiments/newton_style3d_box.py [substeps]``.
 
 Measured (CPU, warm kernel cache): with 8 or 24 substeps the cloth falls through the box lid while
 the box is still at rest (70 mm inside at frame 6), then keeps falling; 473 ms/frame at 8 substeps,
@@ -12,6 +12,7 @@ against 77 ms/frame for VBD at 10 substeps, which keeps every vertex outside.
 
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import warp as wp
@@ -20,6 +21,7 @@ wp.config.quiet = True
 import newton  # noqa: E402
 from newton.solvers import style3d  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: tests.sim
 from tests.sim.test_backends import box, box_signed_distance, patch  # noqa: E402
 
 
