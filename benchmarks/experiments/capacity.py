@@ -43,7 +43,7 @@ Run:
     .venv/bin/python benchmarks/experiments/capacity.py twins --data S.zarr --name capacity-fitgar
     .venv/bin/python benchmarks/experiments/capacity.py lookup --data FS.zarr --strides 8,2 --test-stride 12 --anchor spread \
         --label fitgar-static --name capacity-fitgar
-(the commands of the published numbers are in benchmarks/README.md, "FitGar's capacity")
+(the conclusions are in benchmarks/experiments/LOG.md, "FitGar: data, capacity and the detail generator")
 """
 
 from __future__ import annotations

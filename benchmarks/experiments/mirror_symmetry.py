@@ -17,7 +17,7 @@ body posed by the mirrored motion, read back the same way, against the body pose
 
 Run: .venv/bin/python benchmarks/experiments/mirror_symmetry.py --data STORE.zarr --sequences skirt+average+spin-1+default,...
          [--name mirror-symmetry]
-(writes benchmarks/results/<name>.json after every sequence; discussion in benchmarks/README.md)
+(writes benchmarks/results/<name>.json after every sequence; conclusion in benchmarks/experiments/LOG.md)
 """
 
 from __future__ import annotations
