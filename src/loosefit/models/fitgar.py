@@ -118,7 +118,7 @@ class FitGarConfig:
         magnitude_bias: initial bias of the magnitude branches' last layer (their ReLU starts open).
         magnitude_activation: the magnitude branches' last activation: ``"relu"`` (FitGar Sec. 5.1, after every
             layer) or ``"softplus"`` (positive too, but never closed: a vertex whose ReLU output closes gets no
-            gradient and stays on its anchor; see ``benchmarks/capacity.py``).
+            gradient and stays on its anchor; see ``benchmarks/experiments/capacity.py``).
         coarse_weight, detail_weight: weights of the two loss terms.
         output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no FitGar Eq. 4):
             ``"plain"`` (a 3-vector, unbounded) and ``"limited"`` (within plus or minus ``limit_factor``

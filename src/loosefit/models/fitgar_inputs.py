@@ -29,8 +29,8 @@ skinning weights are interpolated, so the anchor stays on the posed surface. The
 projection along the body's interpolated normal field (:func:`~loosefit.geometry.features.normal_projection_points`),
 with the few projections that fall within 1 mm of another one moved apart (``anchor="spread"``, the default;
 :func:`~loosefit.geometry.features.spread_shared_points`); the projection alone (``anchor="normal"``); or the closest
-point (``anchor="surface"``). Chosen by measurement (``benchmarks/capacity.py anchors``, seed-0 templates at 3 cm
-edges on the average Anny body; share of garment vertices whose anchor another one's is within 1 mm, largest group):
+point (``anchor="surface"``). Chosen by measurement (``benchmarks/experiments/capacity.py anchors``, seed-0
+templates at 3 cm edges on the average Anny body; share of garment vertices whose anchor another one's is within 1 mm, largest group):
 
 =========== ======== ============= ====================== ============= ============= ===================
 kind        vertices closest Anny  closest vertex,        closest       projection    projection, shared

@@ -106,7 +106,7 @@ class JointNetConfig:
             ``"hoyer"`` term and ``association_radius`` 0.4 m, where an arm nudge moved the skirt below the knees
             0.06-0.12x as much as VirtualBones' on the three seeds tried; the paper's L1 at 1e-5 left the association
             dense and that ratio a draw of the seed (0.25x or 0.78x), and at 1e-3 it shrank ``A`` so far that on
-            80 bones training lagged (``benchmarks/jointnet_sparsity.py``, ``benchmarks/README.md``).
+            80 bones training lagged (``benchmarks/experiments/jointnet_sparsity.py``, ``benchmarks/experiments/LOG.md``).
         association: ``"l1"`` (the paper): bones read ``relu(A) psi`` and the loss holds ``||relu(A)||_1``;
             or ``"hoyer"`` (ours): bones read each row of ``relu(A)`` normalised to sum 1 (a weighted mean of
             joint features, on the same scale however few joints a bone listens to) and the loss holds the
@@ -122,7 +122,7 @@ class JointNetConfig:
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
         root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
             recent turning and velocity, exponential moving averages; ours, not in the paper). Measured on the
-            demo's held-out spin (``benchmarks/README.md``, "Motion history").
+            demo's held-out spin (``benchmarks/experiments/LOG.md``, "Motion history").
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
     """
@@ -268,7 +268,7 @@ class JointGRU(nn.Module):
     def all_joints_by_hand(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` for training on the CPU: all joints frame by frame in one batched product, differentiated
         by :mod:`~loosefit.models.layers.gru_bptt` (whose weight gradients are formed once per window, not per
-        frame: ``benchmarks/gru_speed.py``)."""
+        frame: ``benchmarks/experiments/gru_speed.py``)."""
         N, T, G, _ = x.shape
         h = x.new_zeros(G, N, self.hidden) if h is None else h.transpose(0, 1)  # (G, N, H)
         out, last = gru_layers(x.permute(2, 0, 1, 3), h, self.weight_ih, self.weight_hh, self.bias_ih[:, 0],

@@ -25,7 +25,7 @@ frame, and with ``vertical`` also of the vertical root displacement (m per frame
 They say how fast and which way the body has been turning and moving over the last fraction of a second (and,
 with ``vertical``, rising or falling), the motion a loose skirt still carries (it lags the body). A recurrent
 network can learn such filters itself; given them, VirtualBones generalised better to a held-out spin
-(``benchmarks/README.md``, "Motion history").
+(``benchmarks/experiments/LOG.md``, "Motion history").
 
 Streaming use: :class:`FeatureStream` computes the same features one frame at a time.
 """

@@ -56,7 +56,7 @@ Rest-position Fourier features (``corrective_fourier``, ours, off by default): :
 garment appended to the corrective's node features. The paper's node inputs are smooth over the garment, and the
 folds left for the corrective are the high frequencies a network learns last: with 6 frequencies the CPU preset
 learns four frames of a skirt to 4.6 mm in 6,000 Adam steps, where it stalls at 6.7 without
-(``benchmarks/README.md``, SwinGar's memorisation). They describe the training garments' absolute positions, and what they do on unseen garments is
+(``benchmarks/experiments/LOG.md``, SwinGar's capacity and memorisation). They describe the training garments' absolute positions, and what they do on unseen garments is
 not measured.
 
 Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather

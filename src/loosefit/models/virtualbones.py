@@ -122,7 +122,7 @@ class VirtualBonesConfig:
             held-out RMSE either way, within 0.2 mm per test motion.
         root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
             recent turning and velocity, exponential moving averages; ours, not in the paper). Compared on the demo's
-            spin (``benchmarks/README.md``, "Motion history"), which was then a test motion and is now the demo's
+            spin (``benchmarks/experiments/LOG.md``, "Motion history"), which was then a test motion and is now the demo's
             validation spin: the comparison is a validation one only from that change on.
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).

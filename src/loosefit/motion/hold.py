@@ -11,7 +11,7 @@ it came: a dress's hem stays where the last stride put it, so one pose has sever
 of the pose learns their mean. ``from_rest`` removes that memory: between keys the body goes back to its
 rest pose (every joint unrotated, the root turned only to the key's heading) and holds it, so that every
 key is reached along the same path from a rested drape. What memory is left is the cloth's own: a dress
-rests in one of several drapes of the same pose (``benchmarks/capacity.py repeats`` measures their spread).
+rests in one of several drapes of the same pose (``benchmarks/experiments/capacity.py repeats`` measures their spread).
 """
 
 from __future__ import annotations

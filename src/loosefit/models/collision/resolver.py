@@ -446,7 +446,8 @@ def push_out(verts: np.ndarray, body: BodySDF, distance: float = 0.004) -> tuple
 
 
 #: Bin side of the cull (:class:`~loosefit.geometry.ray_cull.AxisRayCuller`), metres. Finer bins leave fewer
-#: candidates but cost more to rasterise; over a motion 1.25 cm was as fast as 2 cm or faster (benchmarks/README.md).
+#: candidates but cost more to rasterise; over a motion 1.25 cm was as fast as 2 cm or faster
+#: (benchmarks/experiments/LOG.md).
 #: With a margin, fewer candidates also means fewer vertices moved that the cull could have proved outside.
 CULL_CELL = 0.0125
 

@@ -24,7 +24,7 @@ SwinGar Eq. 4 divides it by the larger of two norms and scales it by ``alpha``::
   normalised scores then has norm ``alpha`` exactly, so ``alpha`` alone sets the attention's sharpness. Under
   ``"node"`` the bound term ``max ||x_j|| * ||[c_dst, c_src]||`` (a Cauchy-Schwarz worst case) is the larger of the
   two in most rows of a trained SwinGar, and its scores span a fraction of ``[-alpha, alpha]``
-  (``benchmarks/README.md``). The scores stay within ``[-alpha, alpha]``, but the layer is no longer Lipschitz
+  (``benchmarks/experiments/LOG.md``). The scores stay within ``[-alpha, alpha]``, but the layer is no longer Lipschitz
   with a constant set by ``alpha``: a row of tiny scores is scaled up as much as a row of large ones.
 
 ``centred=True`` (ours) computes the scores and the feature norms from each neighbourhood's features minus
@@ -69,7 +69,7 @@ neighbour gather moves ``in`` channels instead of ``heads * out`` (SwinGar at th
 dress, one CPU thread: 2.7 s a frame the other way round, 0.2 s this way). Concatenated heads: every output
 channel belongs to one head, so the inputs are projected once (``in -> out``) and the projections gathered and
 weighted by their channel's head; the stacked product would multiply ``heads - 1`` zeros for every weight (SwinGar's
-streaming frame, 9k vertices, one CPU thread: see ``benchmarks/README.md``). Every shape in the forward pass is
+streaming frame, 9k vertices, one CPU thread: see ``benchmarks/experiments/LOG.md``). Every shape in the forward pass is
 fixed by the table, with no data-dependent indexing or host synchronisation, so a layer can be captured in a CUDA
 graph (:mod:`loosefit.models.cuda_graph`).
 
