@@ -113,9 +113,10 @@ class AnyGarmentAnimator:
         chunks: dict[str, list[torch.Tensor]] = {name: [] for name in outputs}
         with torch_threads(self.threads), torch.no_grad():
             for start in range(0, len(items), self.frames_per_pass):
-                out = self.model(to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device))
-                for name in outputs:
-                    chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
+                batch = to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device)
+                out = self.model(batch)
+                for name in outputs:  # the frames share the pair's garment: padding adds no row
+                    chunks[name].append(batch["garments"].padded(out[name]))
         return {name: to_world(torch.cat(c).cpu().numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
 def is_static_run(run_dir: str | Path) -> bool:
