@@ -123,6 +123,8 @@ def test_bad_garments_raise_a_clear_input_error():
     a, b = garments((0, 1))
     with pytest.raises(InputError, match="garment 1: normal has 12 vertices, its verts has 42"):
         GarmentBatch.from_list([a["verts"], b["verts"]], features={"normal": [a["normal"], a["normal"]]})
+    with pytest.raises(InputError, match="garment 'dress': faces name vertices"):
+        GarmentBatch.from_list([a["verts"]], [b["faces"]], names=["dress"])
     with pytest.raises(InputError, match="lists of different lengths"):
         GarmentBatch.from_list([a["verts"], b["verts"]], [a["faces"]])
     with pytest.raises(InputError, match="garment 0: faces name vertices 0..41, the garment has 12"):

@@ -75,7 +75,7 @@ class GarmentBatch:
     @classmethod
     def from_list(cls, verts: Sequence | None = None, faces: Sequence | None = None, edges: Sequence | None = None,
                   features: Mapping[str, Sequence] | None = None, feature_dtype: torch.dtype | None = None,
-                  num_verts: Sequence[int] | None = None) -> "GarmentBatch":
+                  num_verts: Sequence[int] | None = None, names: Sequence[str] | None = None) -> "GarmentBatch":
         """The batch of per-garment arrays (numpy or torch), each list one entry per garment:
 
         Args:
@@ -86,14 +86,20 @@ class GarmentBatch:
             features: name -> ``V_i x ...`` per-vertex arrays.
             feature_dtype: cast ``verts`` and the features to this dtype (None: keep theirs).
             num_verts: ``V_i`` of each garment, for a batch of neither rest vertices nor features (else checked).
+            names: garment names the errors quote (default: their positions in the lists).
 
         Raises:
             InputError: lists of different lengths, a garment whose arrays disagree on its vertex count, faces
                 or edges of the wrong shape or naming a vertex the garment does not have.
         """
         features = dict(features or {})
+
+        def label(i: int) -> str:
+            return str(i) if names is None else repr(names[i])
+
         lengths = {name: len(v) for name, v in [("verts", verts), ("faces", faces), ("edges", edges),
-                                                 ("num_verts", num_verts), *features.items()] if v is not None}
+                                                 ("num_verts", num_verts), ("names", names), *features.items()]
+                   if v is not None}
         if len(set(lengths.values())) > 1:
             raise InputError(f"garment lists of different lengths: {lengths}")
         B = next(iter(lengths.values()), 0)
@@ -109,9 +115,9 @@ class GarmentBatch:
         for name, arrays in arrays_of:
             for i, (x, V) in enumerate(zip(arrays, sizes)):
                 if len(x) != V:
-                    raise InputError(f"garment {i}: {name} has {len(x)} vertices, its {first} has {V}")
+                    raise InputError(f"garment {label(i)}: {name} has {len(x)} vertices, its {first} has {V}")
                 if name == "verts" and tuple(np.shape(x)[1:]) != (3,):
-                    raise InputError(f"garment {i}: verts must be (V, 3), got {tuple(np.shape(x))}")
+                    raise InputError(f"garment {label(i)}: verts must be (V, 3), got {tuple(np.shape(x))}")
         num_verts = torch.tensor(sizes, dtype=torch.int64).reshape(B)
         offsets = _offsets(num_verts)
         if edges is None and faces is not None:
@@ -119,12 +125,12 @@ class GarmentBatch:
         num_faces = num_edges = None
         packed_faces = packed_edges = None
         if faces is not None:
-            parts = [_check_indices(_tensor(f, torch.int64), (-1, 3), V, f"garment {i}: faces")
+            parts = [_check_indices(_tensor(f, torch.int64), (-1, 3), V, f"garment {label(i)}: faces")
                      for i, (f, V) in enumerate(zip(faces, sizes))]
             num_faces = torch.tensor([len(f) for f in parts], dtype=torch.int64).reshape(B)
             packed_faces = torch.cat([f + int(s) for f, s in zip(parts, offsets)]) if parts else None
         if edges is not None:
-            parts = [_check_indices(_tensor(e, torch.int64), (2, -1), V, f"garment {i}: edges")
+            parts = [_check_indices(_tensor(e, torch.int64), (2, -1), V, f"garment {label(i)}: edges")
                      for i, (e, V) in enumerate(zip(edges, sizes))]
             num_edges = torch.tensor([e.shape[1] for e in parts], dtype=torch.int64).reshape(B)
             packed_edges = torch.cat([e + int(s) for e, s in zip(parts, offsets)], 1) if parts else None
