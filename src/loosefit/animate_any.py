@@ -17,6 +17,7 @@ import torch
 from loosefit.animate import load_run
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
+from loosefit.geometry.garment_batch import GarmentBatch
 from loosefit.models.fitgar_data import collate_frames, frame_items
 from loosefit.models.fitgar_inputs import DEFAULT_ANCHOR, GarmentBodyPair
 from loosefit.models.motion_features import to_world
@@ -115,8 +116,9 @@ class AnyGarmentAnimator:
             for start in range(0, len(items), self.frames_per_pass):
                 batch = to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device)
                 out = self.model(batch)
-                for name in outputs:  # the frames share the pair's garment: padding adds no row
-                    chunks[name].append(batch["garments"].padded(out[name]))
+                frames = GarmentBatch(batch["counts"])  # one garment per frame, all the pair's: padding adds no row
+                for name in outputs:
+                    chunks[name].append(frames.padded(out[name]))
         return {name: to_world(torch.cat(c).cpu().numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
 def is_static_run(run_dir: str | Path) -> bool:

@@ -180,18 +180,18 @@ class GarmentFrames(Dataset):
 
 
 def collate_frames(items: list[dict]) -> dict:
-    """Frames (items of :class:`GarmentFrames` or :func:`frame_items`) -> one batched disjoint graph of tensors:
-    ``garments``, the frames' garments packed (:class:`~loosefit.geometry.garment_batch.GarmentBatch`: node arrays
-    as its features), and its views the graph layers read: node arrays ``(N, ...)`` float32, ``batch (N,)``
-    int64, ``edge_index (2, E)``, ``faces (F, 3)`` (shifted to the batch's node numbering), ``counts (G,)``
-    vertices per frame; frame arrays ``(G, ...)`` float32."""
+    """Frames (items of :class:`GarmentFrames` or :func:`frame_items`) -> one batched disjoint graph of tensors, the
+    packed form of the frames' garments (:class:`~loosefit.geometry.garment_batch.GarmentBatch`; ``GarmentBatch(
+    batch["counts"])`` converts a node array to the padded form and back): node arrays ``(N, ...)`` float32,
+    ``batch (N,)`` int64, ``edge_index (2, E)``, ``faces (F, 3)`` (shifted to the batch's node numbering),
+    ``counts (G,)`` vertices per frame; frame arrays ``(G, ...)`` float32."""
     garments = GarmentBatch.from_list(faces=[it["faces"] for it in items], edges=[it["edges"] for it in items],
                                       features={key: [it[key] for it in items] for key in NODE_KEYS if key in items[0]},
                                       feature_dtype=torch.float32)
     out = dict(garments.features)
     for key in (k for k in FRAME_KEYS if k in items[0]):
         out[key] = torch.from_numpy(np.stack([it[key] for it in items]).astype(np.float32))
-    out.update(garments.graph(), garments=garments)
+    out.update(garments.graph())
     return out
 
 
