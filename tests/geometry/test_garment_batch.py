@@ -113,7 +113,8 @@ def test_empty_and_single_garment_batches():
     one = batch_of([g])
     padded, valid = one.verts_padded()
     assert torch.equal(padded[0], torch.from_numpy(g["verts"])) and bool(valid.all())
-    assert torch.equal(one.packed(padded), one.verts) and torch.equal(one.edge_index, torch.from_numpy(directed_edges(g["faces"])))
+    assert torch.equal(one.packed(padded), one.verts)
+    assert torch.equal(one.edge_index, torch.from_numpy(directed_edges(g["faces"])))
     assert one.batch.tolist() == [0] * 12
     counted = GarmentBatch.from_list(num_verts=[3, 1], edges=[np.array([[0], [2]]), np.zeros((2, 0), np.int64)])
     assert counted.valid.tolist() == [[True, True, True], [True, False, False]] and counted.features == {}

@@ -7,7 +7,8 @@ Garments travel through the models in two layouts, and this module is the one pl
   numbering (garment ``i``'s vertex ``v`` is row ``vert_offsets[i] + v``). Graph layers (PyG's ``GATConv``,
   FitGar's generators) read this disjoint union of graphs.
 - **padded**: ``(B, Vmax, D)`` with ``valid (B, Vmax)`` bool, True on a garment's own ``V_i`` rows (the first ones);
-  the rows after them are filler. Dense layers that run one table per garment read this.
+  the rows after them are filler. A model's dense outputs ``(B, V, ...)`` over frames of one garment are this form
+  without filler.
 
 A :class:`GarmentBatch` holds the packed form (tensors; the padded one is computed on demand) of: rest vertices
 ``verts (N, 3)`` metres (optional: frames of a garment carry per-vertex features instead), faces, directed edges
@@ -24,13 +25,13 @@ import numpy as np
 import torch
 
 from loosefit.errors import InputError
+from loosefit.geometry.laplacian import edges as mesh_edges
 
 
 def directed_edges(faces: np.ndarray) -> np.ndarray:
     """``(2, E)`` int64 directed edges of a triangle mesh ``faces (F, 3)``: each undirected edge ``(i, j)``,
     ``i < j``, sorted, then the same edges reversed (both directions, as a graph layer reads a mesh)."""
-    faces = np.asarray(faces, np.int64).reshape(-1, 3)
-    e = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1), axis=0)
+    e = mesh_edges(np.asarray(faces, np.int64).reshape(-1, 3))
     return np.ascontiguousarray(np.concatenate([e, e[:, ::-1]]).T)
 
 
@@ -316,7 +317,8 @@ class GarmentBatch:
         synchronisation on a GPU)."""
         mine = (self.num_verts, self.num_faces, self.num_edges, self.faces, self.edge_index)
         theirs = (other.num_verts, other.num_faces, other.num_edges, other.faces, other.edge_index)
-        return all(a.shape == b.shape and a.device == b.device and bool(torch.equal(a, b)) for a, b in zip(mine, theirs))
+        return all(a.shape == b.shape and a.device == b.device and bool(torch.equal(a, b))
+                   for a, b in zip(mine, theirs))
 
     def graph(self) -> dict[str, torch.Tensor]:
         """The packed graph as PyG-style tensors: ``edge_index (2, E)``, ``faces (F, 3)``, ``batch (N,)`` and

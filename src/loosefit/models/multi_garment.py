@@ -94,7 +94,8 @@ class GarmentGraph:
     def tensors(self) -> dict[str, torch.Tensor]:
         """The graph as tensors (those of :meth:`garment`, then the per-garment ``descriptor``, ``body_shape`` and
         ``rest_joints``), with the attention table (``table``, ``valid`` ``(V, D)``: each vertex's neighbourhood),
-        the mesh ``edges (E, 2)`` (each undirected edge once, ``i < j``) and the ``face_pairs (P, 2)`` the losses use."""
+        the mesh ``edges (E, 2)`` (each undirected edge once, ``i < j``) and the ``face_pairs (P, 2)`` the losses
+        use."""
         garment = self.garment()
         table, valid = attention_table(self.faces, self.num_verts)
         out = {"rest": garment.verts, "faces": garment.faces, **garment.features}
