@@ -126,6 +126,8 @@ def test_bad_garments_raise_a_clear_input_error():
         GarmentBatch.from_list([a["verts"], b["verts"]], features={"normal": [a["normal"], a["normal"]]})
     with pytest.raises(InputError, match="garment 'dress': faces name vertices"):
         GarmentBatch.from_list([a["verts"]], [b["faces"]], names=["dress"])
+    with pytest.raises(InputError, match="garment 0: normal has a scalar, its verts has 12"):
+        GarmentBatch.from_list([a["verts"]], features={"normal": [np.float32(1.0)]})
     with pytest.raises(InputError, match="lists of different lengths"):
         GarmentBatch.from_list([a["verts"], b["verts"]], [a["faces"]])
     with pytest.raises(InputError, match="garment 0: faces name vertices 0..41, the garment has 12"):

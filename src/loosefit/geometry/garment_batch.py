@@ -108,15 +108,16 @@ class GarmentBatch:
             raise InputError("a garment batch needs rest vertices, a per-vertex feature or num_verts to count the "
                              "vertices")
         first = "verts" if verts is not None else next(iter(features), "num_verts")
-        sizes = ([len(x) for x in (verts if verts is not None else features[first])] if first != "num_verts"
-                 else [int(V) for V in num_verts])
+        sizes = ([len(x) if np.ndim(x) else 0 for x in (verts if verts is not None else features[first])]
+                 if first != "num_verts" else [int(V) for V in num_verts])
         arrays_of = ([("verts", verts)] if verts is not None else []) + list(features.items())
         if num_verts is not None and [int(V) for V in num_verts] != sizes:
             raise InputError(f"num_verts {[int(V) for V in num_verts]} disagree with the garments' {first} ({sizes})")
         for name, arrays in arrays_of:
             for i, (x, V) in enumerate(zip(arrays, sizes)):
-                if len(x) != V:
-                    raise InputError(f"garment {label(i)}: {name} has {len(x)} vertices, its {first} has {V}")
+                if np.ndim(x) == 0 or len(x) != V:
+                    got = "a scalar" if np.ndim(x) == 0 else f"{len(x)} vertices"
+                    raise InputError(f"garment {label(i)}: {name} has {got}, its {first} has {V}")
                 if name == "verts" and tuple(np.shape(x)[1:]) != (3,):
                     raise InputError(f"garment {label(i)}: verts must be (V, 3), got {tuple(np.shape(x))}")
         num_verts = torch.tensor(sizes, dtype=torch.int64).reshape(B)
