@@ -64,7 +64,6 @@ import torch
 from loosefit.errors import InputError
 from loosefit.geometry.features import (closest_body_points, coincident_groups, nearest_body_vertex,
                                         normal_projection_points, spread_shared_points)
-from loosefit.geometry.laplacian import edges as mesh_edges
 from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.rotations import axis_angle_to_matrix
@@ -76,9 +75,11 @@ ROOT_TILT = slice(5, 11)
 
 
 def graph_edges(faces: np.ndarray) -> np.ndarray:
-    """``(2, E)`` int64 directed mesh edges, both directions of every undirected edge."""
-    e = mesh_edges(np.asarray(faces, np.int64))
-    return np.ascontiguousarray(np.concatenate([e, e[:, ::-1]]).T)
+    """``(2, E)`` int64 directed mesh edges, both directions of every undirected edge
+    (:func:`loosefit.geometry.garment_batch.directed_edges`, the graph every garment batch builds)."""
+    from loosefit.geometry.garment_batch import directed_edges
+
+    return directed_edges(faces)
 
 
 def pose_vector(motion: Motion) -> np.ndarray:
