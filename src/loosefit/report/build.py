@@ -45,7 +45,7 @@ REFERENCE_KEYS = ("rmse_vs_mean_mm", "rmse_vs_mean_corrected_mm", "floor_mm")
 #: columns with the reference runs) measured 1,728 pixels in Chromium with four-digit millimetres, cut off in a
 #: 1280-pixel window; two fit (``tests/report/test_layout.py``).
 SURFACE_KEYS = ("collision_pct", "surface_inside_pct", "deepest_mm", "laplacian_consistency", "collapsed_pct",
-                "roughness_deg")
+                "roughness_deg", "bend_ratio")
 
 
 def _fmt(value, fmt: str) -> str:
