@@ -89,7 +89,7 @@ class GarmentFrames(Dataset):
     def __init__(self, store, split: str | None = "train", body=None, sim_params: dict | None = None,
                  names: list[str] | None = None, frame_stride: int = 1, frame_offset: int = 0,
                  smoothing: str = "fitgar", anchor: str = DEFAULT_ANCHOR):
-        from loosefit.rig.prepare import load_fit_attribute
+        from loosefit.rig.prepared import load_fit_attribute
 
         check_frame_choice(frame_stride, frame_offset)
         self.anchor = check_anchor_mode(anchor)

@@ -65,7 +65,7 @@ from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
 from loosefit.models.layers.gru_bptt import by_hand, gru_layers
 from loosefit.models.layers.mlp import MLP
-from loosefit.rig.prepare import load_rig
+from loosefit.rig.prepared import load_rig
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import masked_errors_mm, normal_loss, vertex_l1
 

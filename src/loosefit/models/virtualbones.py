@@ -62,7 +62,7 @@ from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
 from loosefit.models.layers.gru import GRUHead
 from loosefit.models.layers.mlp import MLP, NEGATIVE_SLOPE
 from loosefit.rig.normalization import RunningStats
-from loosefit.rig.prepare import load_rig
+from loosefit.rig.prepared import load_rig
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import (
     collision_loss,
