@@ -19,7 +19,7 @@ from loosefit.device import resolve_device
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import collate_frames, frame_items
 from loosefit.models.fitgar_inputs import DEFAULT_ANCHOR, GarmentBodyPair
-from loosefit.models.motion_features import to_world
+from loosefit.motion.heading import to_world
 from loosefit.models.registry import model_class
 from loosefit.train.protocol import to_device
 from loosefit.motion.motion import Motion

@@ -352,7 +352,7 @@ def test_bone_frames_are_the_points_in_each_bone(posed_proxy):
     (their columns start at zero, as the code's), and a code too short for its bones is refused."""
     from loosefit.body import AnnyBody
     from loosefit.models.collision import bone_frame_code, bone_local_points, motion_sdf_inputs, posed_joints
-    from loosefit.models.motion_features import heading_frames, to_canonical
+    from loosefit.motion.heading import heading_frames, to_canonical
     from loosefit.motion.procedural import generate
 
     body = AnnyBody()

@@ -11,7 +11,7 @@ import pytest
 
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import GarmentFrames, Smoother
-from loosefit.models.motion_features import heading_frames, to_canonical
+from loosefit.motion.heading import heading_frames, to_canonical
 
 from .fitgar_fixtures import TINY, TINY_CONFIG, synthetic_store
 

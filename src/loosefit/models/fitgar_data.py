@@ -27,7 +27,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.smoothing import get_preset, smoothing_operator
 from loosefit.models.fitgar_inputs import (ANCHOR_MODES, DEFAULT_ANCHOR, GarmentBodyPair, PosedSkeleton,
                                           check_anchor_mode, pose_motion)
-from loosefit.models.motion_features import to_canonical
+from loosefit.motion.heading import to_canonical
 
 #: Per-node arrays of an item and of a batch.
 NODE_KEYS = ("anchor", "body_normal", "body_rel", "garment_rel", "verts", "smooth")

@@ -135,7 +135,8 @@ def body_sdf_samples(shapes, motions, config: SDFTrainConfig) -> dict[str, np.nd
     ``normals (P, N, 3)``, ``code (P, C)`` and ``bones (P, 12 J)`` (:func:`bone_frame_code`) for ``P`` posed
     frames (``config.frames`` per shape and motion)."""
     from loosefit.body import AnnyBody
-    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+    from loosefit.models.motion_features import motion_features
+    from loosefit.motion.heading import heading_frames, to_canonical
 
     rng = np.random.default_rng(config.seed)
     out: dict[str, list] = {"points": [], "sdf": [], "normals": [], "code": [], "bones": []}
