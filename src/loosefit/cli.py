@@ -232,8 +232,8 @@ def cmd_evaluate(args):
 
 
 def cmd_simulate(args):
-    from loosefit.sim import SimParams, run_plan, simulate_file
-    from loosefit.sim.runner import summary_line
+    from loosefit.sim import SimParams
+    from loosefit.simulate import run_plan, simulate_file, summary_line
 
     if args.plan is not None:
         if args.garment or args.motion:
