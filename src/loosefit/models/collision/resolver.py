@@ -391,7 +391,7 @@ class CollisionResolver:
         weighted = np.bincount(rows, w * np.abs(np.where(free, value[nbr], 0.0)), len(ins))
         delta = np.divide(weighted, wsum, out=np.zeros(len(ins)), where=wsum > 0)
         direction = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
-        moved = x_in + direction * (np.abs(s_cand[hit]) + delta)[:, None]
+        moved = x_in + direction * (np.abs(s_cand[hit]) + delta)[:, None]  # SwinGar Eq. 10
         out[torch.from_numpy(ins).to(dev)] = torch.from_numpy(moved).to(out)
         return value
 

@@ -148,6 +148,7 @@ def attention_entropy(P: torch.Tensor, valid: torch.Tensor) -> tuple[torch.Tenso
 def lipschitz(c_dst: torch.Tensor, c_src: torch.Tensor) -> torch.Tensor:
     """``(H,)``: the norm of each head's score function ``[c_dst, c_src]`` (SwinGar Eq. 4), kept off 0 (the square
     root's gradient there is infinite)."""
+    # SwinGar Eq. 4's L_F(g)
     return (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(NORM_EPS * NORM_EPS).sqrt()
 
 
@@ -274,6 +275,7 @@ class GATLN(nn.Module):
         inplace = not torch.is_grad_enabled()
         slots = valid[None, :, None, :]  # (1, V, 1, D)
         mu = None
+        # the linear score function g of SwinGar Eq. 2, per head and edge j -> i
         if self.centred:
             mu = neighbourhood_mean(x, table, valid, gathered)
             # c . (x_j - mu_i): the scores of the centred features (the projections are linear)
@@ -293,11 +295,11 @@ class GATLN(nn.Module):
                 norm = rows
             else:
                 norm = self._bound(x, rows, lipschitz(c_dst, c_src), table, valid, gathered, mu, inplace)
-            scale = (self.alpha / norm)[..., None]  # (B, V or 1, H, 1)
+            scale = (self.alpha / norm)[..., None]  # SwinGar Eq. 4: (B, V or 1, H, 1)
             s = s.mul_(scale) if inplace else s * scale
         s = nn.functional.leaky_relu_(s, SCORE_SLOPE) if inplace else nn.functional.leaky_relu(s, SCORE_SLOPE)
         bounded = self.alpha is not None and self.alpha <= MAX_BOUNDED_ALPHA
-        return slot_softmax(s, slots, bounded, inplace).transpose(2, 3)
+        return slot_softmax(s, slots, bounded, inplace).transpose(2, 3)  # SwinGar Eq. 2's softmax
 
     def _bound(self, x: torch.Tensor, rows: torch.Tensor, lip: torch.Tensor, table: torch.Tensor,
                valid: torch.Tensor, gathered: torch.Tensor | None, mu: torch.Tensor | None,
@@ -318,7 +320,7 @@ class GATLN(nn.Module):
         feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
         if self.norm == "graph":
             rows, feat = rows.amax(1, keepdim=True), feat.amax(1, keepdim=True)  # (B, 1, H), (B, 1)
-        return torch.maximum(rows, feat[..., None] * lip)
+        return torch.maximum(rows, feat[..., None] * lip)  # SwinGar Eq. 4's denominator
 
     def _native_applies(self, x: torch.Tensor) -> bool:
         """Whether the fused CPU kernel computes this call: the default design (concatenated heads, centred scores,

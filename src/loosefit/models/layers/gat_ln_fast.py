@@ -158,7 +158,7 @@ def project_then_sum(x: torch.Tensor, weight: torch.Tensor, padded_index: torch.
     # heads padded to equal widths (zero columns), so that a head's weight broadcasts over its channels
     padded = weight.new_zeros(weight.shape[0], H * widest).index_copy(1, padded_index, weight)
     y = x @ padded  # (B, V, H * widest)
-    out = neighbour_sum(y.view(B, V, H, widest), table, P).flatten(-2)
+    out = neighbour_sum(y.view(B, V, H, widest), table, P).flatten(-2)  # SwinGar Eq. 2's aggregation
     if H * widest != out_channels:  # drop the padding (a gather: index_select on the last axis is ~10x slower)
         out = torch.gather(out, -1, padded_index.expand(B, V, -1))
     return out
