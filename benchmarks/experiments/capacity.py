@@ -395,7 +395,7 @@ def against_mean(args) -> dict:
     ``floor_detail`` the runs' distance to their mean and ``floor_coarse`` that of their smoothings (what no
     deterministic model removes from the base figures)."""
     from loosefit.animate import load_run
-    from loosefit.models.motion_features import to_canonical
+    from loosefit.motion.heading import to_canonical
 
     store = DatasetStore.open(args.data, mode="r")
     _, model, _ = load_run(args.run, checkpoint="last")

@@ -25,7 +25,7 @@ from _common import save_results  # noqa: E402
 def coverage(plan_path: str | Path, least: int = 3) -> dict:
     from loosefit.motion_range import MotionExtent
     from loosefit.sim.plan import ProceduralMotion, load_plan
-    from loosefit.sim.runner import load_plan_motion
+    from loosefit.simulate import load_plan_motion
 
     plan = load_plan(plan_path)
     test = sorted({j.motion for j in plan.jobs if j.split == "test"})

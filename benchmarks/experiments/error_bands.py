@@ -37,7 +37,7 @@ from loosefit.data.store import DatasetStore  # noqa: E402
 from loosefit.errors import InputError  # noqa: E402
 from loosefit.geometry.smoothing import frequency_split  # noqa: E402
 from loosefit.metrics.reference import BandedReferences, rmse_m  # noqa: E402
-from loosefit.rig.prepare import prepared_split  # noqa: E402
+from loosefit.rig.prepared import prepared_split  # noqa: E402
 
 
 def band_split(store: DatasetStore, garment: str):

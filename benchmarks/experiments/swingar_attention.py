@@ -303,7 +303,7 @@ def cmd_bands(args) -> None:
     from loosefit.body import AnnyBody
     from loosefit.data.store import DatasetStore
     from loosefit.geometry.smoothing import frequency_split
-    from loosefit.rig.prepare import prepared_split
+    from loosefit.rig.prepared import prepared_split
 
     torch.set_num_threads(1)
     store, body = DatasetStore.open(args.data), AnnyBody()

@@ -20,7 +20,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.garment_batch import GarmentBatch
 from loosefit.models.fitgar_data import collate_frames, frame_items
 from loosefit.models.fitgar_inputs import DEFAULT_ANCHOR, GarmentBodyPair
-from loosefit.models.motion_features import to_world
+from loosefit.motion.heading import to_world
 from loosefit.models.registry import model_class
 from loosefit.train.protocol import to_device
 from loosefit.motion.motion import Motion

@@ -81,7 +81,7 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     from loosefit.metrics.report import SequencePair, evaluate
     from loosefit.models.collision import handle_motion_collisions
     from loosefit.rig.prepare import prepare
-    from loosefit.sim import run_plan
+    from loosefit.simulate import run_plan
     from loosefit.sim.plan import load_plan
     from loosefit.viz.render import render_video, save_png, render_frames
     from loosefit.viz.scene import BODY_COLOR, MeshTrack

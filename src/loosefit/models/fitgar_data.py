@@ -28,7 +28,7 @@ from loosefit.geometry.garment_batch import GarmentBatch
 from loosefit.geometry.smoothing import get_preset, smoothing_operator
 from loosefit.models.fitgar_inputs import (ANCHOR_MODES, DEFAULT_ANCHOR, GarmentBodyPair, PosedSkeleton,
                                           check_anchor_mode, pose_motion)
-from loosefit.models.motion_features import to_canonical
+from loosefit.motion.heading import to_canonical
 
 #: Per-node arrays of an item and of a batch.
 NODE_KEYS = ("anchor", "body_normal", "body_rel", "garment_rel", "verts", "smooth")
@@ -90,7 +90,7 @@ class GarmentFrames(Dataset):
     def __init__(self, store, split: str | None = "train", body=None, sim_params: dict | None = None,
                  names: list[str] | None = None, frame_stride: int = 1, frame_offset: int = 0,
                  smoothing: str = "fitgar", anchor: str = DEFAULT_ANCHOR):
-        from loosefit.rig.prepare import load_fit_attribute
+        from loosefit.rig.prepared import load_fit_attribute
 
         check_frame_choice(frame_stride, frame_offset)
         self.anchor = check_anchor_mode(anchor)

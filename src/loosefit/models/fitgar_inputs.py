@@ -67,7 +67,8 @@ from loosefit.geometry.features import (closest_body_points, coincident_groups, 
 from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.rotations import axis_angle_to_matrix
-from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+from loosefit.models.motion_features import motion_features
+from loosefit.motion.heading import heading_frames, to_canonical
 from loosefit.motion.motion import Motion
 
 #: Columns of :func:`motion_features`' ``root`` block holding the root rotation without its heading (6D).

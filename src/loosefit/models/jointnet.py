@@ -65,7 +65,7 @@ from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
 from loosefit.models.layers.gru_bptt import by_hand, gru_layers
 from loosefit.models.layers.mlp import MLP
-from loosefit.rig.prepare import load_rig
+from loosefit.rig.prepared import load_rig
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import masked_errors_mm, normal_loss, vertex_l1
 
@@ -414,6 +414,7 @@ class JointNet(GarmentModel):
     def fourier_features(self) -> torch.Tensor:
         """Garment prior ``(B, K)`` from the bone rest positions (JointNet Eq. 3)."""
         phase = 2 * math.pi * self.bone_rest @ self.fourier_freqs.T  # (B, K/2)
+        # JointNet Eq. 3
         return torch.cat([self.fourier_alpha * torch.cos(phase), self.fourier_alpha * torch.sin(phase)], -1)
 
     def join_prior(self, features: torch.Tensor) -> torch.Tensor:
@@ -421,7 +422,7 @@ class JointNet(GarmentModel):
         f_V] (..., B, 2K)`` (``fourier="concat"``, Fig. 2) or ``relu(A) psi + f_V (..., B, K)`` (``"add"``, Eq. 4)."""
         prior = self.fourier_features()
         if self.config.fourier == "add":
-            return features + prior
+            return features + prior  # JointNet Eq. 4
         return torch.cat([features, prior.expand(features.shape[:-1] + prior.shape[-1:])], -1)
 
     def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
@@ -457,14 +458,16 @@ class JointNet(GarmentModel):
         psi = grouped_linear(self.joint_out_weight, hidden.transpose(0, 2).flatten(1, 2)) + self.joint_out_bias
         psi = psi.unflatten(1, (T, N)).permute(2, 1, 0, 3)  # (N, T, J_s, K)
         association = self.association_matrix()
+        # JointNet Eq. 2 (its Eq. 4 with fourier="add", in join_prior)
         bone_features = self.join_prior(association @ psi)  # (N, T, B, 2K) or (N, T, B, K)
         R, trans = self.bone_transforms(bone_features)
         rest, displacement = self.rig_rest, None
         if psd:
+            # JointNet Eq. 5: the joint-specific PSD, added in the canonical rest space
             weights = self.psd_mlp(psi)  # (N, T, J_s, |X|)
             displacement = (weights.flatten(-2) @ self.psd_basis.flatten(0, 1).flatten(-2)).unflatten(-1, (-1, 3))
             rest = rest + displacement
-        verts = self.skin(rest, R, trans)
+        verts = self.skin(rest, R, trans)  # JointNet Eq. 1
         return {"verts": verts, "bones": (R, trans), "association": association, "displacement": displacement, "state": state}
 
     # ------------------------------------------------------------------ trainer protocol
@@ -485,7 +488,7 @@ class JointNet(GarmentModel):
         if self.config.association == "hoyer":
             l1, l2 = A.sum(-1), A.norm(dim=-1)
             return torch.where(l2 > 0, l1 / l2.clamp_min(1e-12) - 1, torch.zeros_like(l1)).sum()
-        return A.sum()
+        return A.sum()  # JointNet Eq. 8
 
     @staticmethod
     def mask(batch: dict) -> torch.Tensor:
@@ -499,10 +502,10 @@ class JointNet(GarmentModel):
         self.carry.keep(batch, out["state"])
         pred = out["verts"]
         target, mask = batch["verts"][:, frames], mask[:, frames]
-        l1 = vertex_l1(pred, target, mask)
+        l1 = vertex_l1(pred, target, mask)  # JointNet Eq. 7
         normal = normal_loss(pred, target, self.faces, mask)
         sparse = self.sparsity_loss()
-        loss = l1 + self.config.lambda_norm * normal + self.config.lambda_sparse * sparse
+        loss = l1 + self.config.lambda_norm * normal + self.config.lambda_sparse * sparse  # JointNet Eq. 6
         return loss, {"l1_mm": l1.item() * 1e3, "normal": normal.item(), "sparsity": sparse.item()}
 
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:

@@ -62,7 +62,7 @@ from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
 from loosefit.models.layers.gru import GRUHead
 from loosefit.models.layers.mlp import MLP, NEGATIVE_SLOPE
 from loosefit.rig.normalization import RunningStats
-from loosefit.rig.prepare import load_rig
+from loosefit.rig.prepared import load_rig
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import (
     collision_loss,
@@ -343,7 +343,7 @@ class VirtualBones(GarmentModel):
             self.carry.keep(batch, (h_low, None))
             vertex = vertex_distance(lf, batch["lf"], mask)
             lap = laplacian_difference(lf, batch["lf"], self.laplacian(), mask)
-            loss = vertex + c.laplacian_weight * lap
+            loss = vertex + c.laplacian_weight * lap  # VirtualBones Eq. 2
             terms = {"vertex": vertex.item(), "laplacian": lap.item()}
             if c.bone_weight > 0:
                 sq = ((raw - self.encode_bones(batch["bone_rot"], batch["bone_trans"])) ** 2).mean((-1, -2))

@@ -21,7 +21,7 @@ import torch
 
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix, axis_angle_to_quaternion, quaternion_to_axis_angle
-from loosefit.models.motion_features import heading_angles
+from loosefit.motion.heading import heading_angles
 from loosefit.motion.motion import Motion
 from loosefit.motion.resample import slerp
 

@@ -4,8 +4,8 @@ import yaml
 
 from loosefit.data.store import DatasetStore
 from loosefit.io.mesh_sequence import MeshSequence
-from loosefit.sim import runner
-from loosefit.sim.runner import CRASHED, run_plan, simulate_file
+import loosefit.simulate as runner
+from loosefit.simulate import CRASHED, run_plan, simulate_file
 from tests.sim.conftest import jump, ring_skirt, spin, walk
 
 FRAMES = 12

@@ -1,4 +1,6 @@
-"""Runs: one sequence from files, or a whole plan into a dataset store (resumable, in parallel with Ray).
+"""The ``simulate`` stage: one sequence from files, or a whole plan into a dataset store (resumable, in parallel
+with Ray). It sits above the simulator (:mod:`loosefit.sim`), the garments that drape with it
+(:mod:`loosefit.garment`) and the store (:mod:`loosefit.data`).
 
 A plan run adds the plan's body shapes, garments and motions to the store, then simulates every
 job whose sequence is not already stored with the same content hash. Each finished sequence is
@@ -34,11 +36,11 @@ import numpy as np
 from tqdm import tqdm
 
 from loosefit.errors import InputError
+from loosefit.extras import require
 from loosefit.interrupts import held_signals
 from loosefit.sim.params import SimParams
 from loosefit.sim.plan import Plan, ProceduralMotion, SequenceJob, TemplateGarment, load_plan
 from loosefit.sim.quality import QualityGate
-from loosefit.extras import require
 from loosefit.sim.sequence import SimResult, backend_run_cloth, check_backend, save_result, simulate_sequence
 
 log = logging.getLogger(__name__)
