@@ -12,6 +12,7 @@ from loosefit.geometry.laplacian import (
     cotangent_laplacian_diagonal,
     edges,
     mass_matrix,
+    smoothest_modes,
     uniform_laplacian,
 )
 
@@ -111,3 +112,23 @@ def test_bad_meshes_are_rejected():
         mass_matrix(verts, faces, "lumped")
     with pytest.raises(InputError, match="NaN"):
         cotangent_laplacian(np.full_like(verts, np.nan), faces)
+
+
+def test_smoothest_modes_of_a_square_are_its_neumann_cosines():
+    """On the unit square (free edges) the Laplacian's eigenpairs are cos(m pi x) cos(n pi y) with
+    lambda = pi^2 (m^2 + n^2): 0, then pi^2 twice, then 2 pi^2. The discrete modes come back mass-orthonormal,
+    the first constant, the next eigenvalues within 1 % of those, and the second mode's span holds cos(pi x)."""
+    verts, faces = grid(40, 1 / 40)
+    phi = smoothest_modes(verts, faces, 4)
+    M = mass_matrix(verts, faces)
+    np.testing.assert_allclose(phi.T @ (M @ phi), np.eye(4), atol=1e-8)
+    assert np.ptp(phi[:, 0]) < 1e-8  # constant
+    L = -cotangent_laplacian(verts, faces)
+    rayleigh = np.einsum("vk,vk->k", phi, L @ phi)  # the eigenvalues (mass-normalised modes)
+    np.testing.assert_allclose(rayleigh[1:], np.pi**2 * np.array([1, 1, 2]), rtol=1e-2)
+    target = np.cos(np.pi * verts[:, 0])
+    target /= np.sqrt(target @ (M @ target))
+    in_span = phi[:, 1:3] @ (phi[:, 1:3].T @ (M @ target))
+    assert np.sqrt((target - in_span) @ (M @ (target - in_span))) < 0.02
+    with pytest.raises(InputError, match="no 1681 smoothest modes"):
+        smoothest_modes(verts, faces, len(verts))

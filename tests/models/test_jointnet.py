@@ -447,3 +447,66 @@ def test_grouped_gru_on_cuda_equals_cpu(frames):
         expected = gru(x, h0)
         got = gru.cuda()(x.cuda(), h0.cuda())
     assert all((g.cpu() - e).abs().max() < 5e-6 for g, e in zip(got, expected))
+
+
+def test_psd_in_the_smoothest_modes(tiny_train):
+    """psd_modes k: D_j = Phi C_j, Phi the rig rest mesh's k smoothest modes; the displacement is Phi times the
+    blended coefficients (JointNet Eq. 5 in the modes' basis), and the model round-trips through its state."""
+    from loosefit.geometry.laplacian import cotangent_laplacian, mass_matrix, smoothest_modes
+
+    model = _model(tiny_train, dataclasses.replace(TINY, psd_modes=6))
+    rest, faces = model.rig_rest.double().numpy(), model.faces.numpy()
+    phi, buffer = smoothest_modes(rest, faces, 6), model.psd_modes.double().numpy()
+    # the same modes up to a basis of equal-frequency pairs: mass-orthonormal, the same frequencies
+    M, L = mass_matrix(rest, faces), -cotangent_laplacian(rest, faces)
+    np.testing.assert_allclose(buffer.T @ (M @ buffer), np.eye(6), atol=1e-5)
+    np.testing.assert_allclose(np.linalg.eigvalsh(buffer.T @ (L @ buffer)), np.einsum("vk,vk->k", phi, L @ phi),
+                               rtol=1e-3, atol=1e-6)
+    assert model.psd_basis.shape == (len(model.joint_names), TINY.psd_shapes, 6, 3)
+    batch = _batch(tiny_train, 8)
+    with torch.no_grad():
+        model.psd_basis.normal_(0.0, 1e-3)
+        seen = []
+        hook = model.psd_mlp.register_forward_hook(lambda module, args, output: seen.append(output))
+        out = model(batch["root"], batch["joints"])
+        hook.remove()
+        # brute force: every joint, every shape, every mode
+        expected = torch.einsum("ntjx,jxkc,vk->ntvc", seen[0].double(), model.psd_basis.double(),
+                                model.psd_modes.double())
+        assert expected.abs().max() > 1e-5
+        torch.testing.assert_close(out["displacement"].double(), expected, atol=1e-7, rtol=1e-4)  # float32 sums
+        again = JointNet(model.sizes(), model.config)
+        again.load_state_dict(model.state_dict())
+        torch.testing.assert_close(again(batch["root"], batch["joints"])["verts"], out["verts"])
+    with pytest.raises(InputError, match="psd_modes must be >= 0"):
+        dataclasses.replace(TINY, psd_modes=-1)
+
+
+def test_projecting_a_free_psd_keeps_its_smooth_part(tiny_train):
+    """project_psd: C_j = Phi^T M D_j. A free basis already in the modes' span comes back exactly (same
+    garment); a random one becomes Phi Phi^T M D (numpy), everything else unchanged."""
+    from loosefit.geometry.laplacian import mass_matrix, smoothest_modes
+    from loosefit.models.jointnet import project_psd
+
+    model = _model(tiny_train)
+    rest, faces = model.rig_rest.double().numpy(), model.faces.numpy()
+    phi, m = smoothest_modes(rest, faces, 5), mass_matrix(rest, faces).diagonal()
+    G, X = model.psd_basis.shape[:2]
+    batch = _batch(tiny_train, 8)
+    with torch.no_grad():
+        coeff = torch.randn(G, X, 5, 3, dtype=torch.float64) * 1e-3
+        model.psd_basis.copy_(torch.einsum("vk,gxkc->gxvc", torch.from_numpy(phi), coeff).float())
+        projected = project_psd(model, 5)
+        torch.testing.assert_close(projected.psd_basis.double(), coeff, atol=1e-7, rtol=1e-4)
+        torch.testing.assert_close(projected(batch["root"], batch["joints"])["verts"],
+                                   model(batch["root"], batch["joints"])["verts"], atol=1e-6, rtol=0)
+        model.psd_basis.normal_(0.0, 1e-3)
+        projected = project_psd(model, 5)
+        dense = model.psd_basis.double().numpy()
+        smooth = np.einsum("vk,wk,w,gxwc->gxvc", phi, phi, m, dense)
+        got = np.einsum("vk,gxkc->gxvc", projected.psd_modes.double().numpy(), projected.psd_basis.double().numpy())
+        np.testing.assert_allclose(got, smooth, atol=1e-9)
+        assert all(torch.equal(v, model.state_dict()[k]) for k, v in projected.state_dict().items()
+                   if k not in ("psd_basis", "psd_modes"))
+    with pytest.raises(InputError, match="already in 5 modes"):
+        project_psd(projected, 5)

@@ -124,3 +124,26 @@ def cotangent_laplacian_diagonal(verts: np.ndarray, faces: np.ndarray) -> np.nda
     lead = contrib.shape[:-2]
     flat = contrib.reshape(-1, faces.size).T  # (3F, batch)
     return -(scatter @ flat).T.reshape(lead + (V,))
+
+
+def smoothest_modes(verts: np.ndarray, faces: np.ndarray, count: int) -> np.ndarray:
+    """The ``count`` smoothest vibration modes of the surface ``(V, count)`` float64: the eigenvectors of the
+    cotangent Laplacian with the lowest eigenvalues, ``-L phi = lambda M phi`` (:func:`cotangent_laplacian`,
+    :func:`mass_matrix`), orthonormal in the mass inner product (``Phi^T M Phi = I``), lowest frequency first; the
+    first is the constant on a connected mesh. A field ``f (V, C)`` keeps its smooth part as ``Phi Phi^T M f``. Modes
+    of equal frequency (a symmetric garment's pairs) are one orthonormal basis of their span, not a unique one.
+
+    Raises:
+        InputError: ``count`` outside ``1 .. V - 1``.
+    """
+    from scipy.sparse.linalg import eigsh
+
+    verts, faces = check_mesh(verts, faces)
+    if not 1 <= count < len(verts):
+        raise InputError(f"the mesh of {len(verts)} vertices has no {count} smoothest modes (1 to {len(verts) - 1})")
+    L, M = -cotangent_laplacian(verts, faces), mass_matrix(verts, faces)
+    # shift-invert just below zero: the lowest eigenvalues come first and the shifted matrix is not singular; a
+    # fixed start vector and each mode's largest entry made positive give the same modes on every call
+    values, modes = eigsh(L.tocsc(), k=count, M=M.tocsc(), sigma=-1e-6, which="LM", v0=np.ones(len(verts)))
+    modes = modes[:, np.argsort(values)]
+    return modes * np.sign(modes[np.abs(modes).argmax(0), np.arange(count)])
