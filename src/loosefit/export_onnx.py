@@ -66,8 +66,8 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
     """
     import torch
 
-    from loosefit.animate import load_run
-    from loosefit.extras import require, read_run_meta
+    from loosefit.animate import load_run, read_run_meta
+    from loosefit.extras import require
     from loosefit.models.step_graph import STEP_METHODS, StepGraph
 
     onnx = require("onnx", "loosefit export-onnx")
