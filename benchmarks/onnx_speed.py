@@ -1,23 +1,26 @@
 """Speed of the exported step model: frames per second of ``loosefit export-onnx`` models in onnxruntime on one
 CPU thread, beside PyTorch eager (:meth:`loosefit.animate.AnimationStream.step`, one torch thread), for
-VirtualBones and JointNet at the papers' sizes (and body-LBS).
+VirtualBones and JointNet at the papers' sizes, at the CPU sizes the other benchmarks share, and body-LBS.
 
-The networks are untrained: each is built at its paper size (``configs/models/<method>.yaml``: VirtualBones'
+The networks are untrained: each is built at its size (``configs/models/<method>.yaml``, the papers': VirtualBones'
 600-unit GRUs and per-vertex global layer, JointNet's 600-unit GRU per joint, 480 features, (1024, 2048, 1024)
-bone MLP and 64 PSD shapes per joint) on the dress of ``configs/datasets/bench.yaml`` (about 4.2k vertices) and on
-the same template remeshed to about ``--vertices`` vertices, with ``--bones`` virtual bones placed on the garment
-and 8-bone skinning weights, and random weights: the time per frame does not depend on their values. The run
-folder is written as training writes one (``model.json``, ``method.yaml``, a checkpoint) and exported by
-:func:`loosefit.export_onnx.export_onnx`, so the timed file is the one a user gets.
+bone MLP and 64 PSD shapes per joint; ``-rank64`` and ``-reduced``: ``_common.CPU_MODEL`` on top) on the dress of
+``configs/datasets/bench.yaml`` (about 4.2k vertices) and on the same template remeshed to about ``--vertices``
+vertices, with ``--bones`` virtual bones placed on the garment, 8-bone skinning weights and random network weights:
+the time per frame does not depend on their values. Each is written as a run folder (``model.json``,
+``method.yaml``, a checkpoint) and exported by :func:`loosefit.export_onnx.export_onnx`: the timed file is the one
+a user gets.
 
-Per garment and method: the model file's size, milliseconds per frame (mean, median, 95th percentile) over
-``--frames`` frames of a procedural motion after ``--warmup`` untimed ones, feeding ``next_state`` back, for
-onnxruntime (``intra_op_num_threads = inter_op_num_threads = 1``) and for PyTorch eager, and the largest vertex
-difference between the two over those frames. The machine is shared: the load average is recorded.
+Per garment and variant: the model file's size, milliseconds per frame (mean, median, 95th percentile of the wall
+clock, and the process's CPU time per frame) over ``--frames`` frames of a procedural motion after ``--warmup``
+untimed ones, feeding ``next_state`` back, for onnxruntime (``intra_op_num_threads = inter_op_num_threads = 1``)
+and for PyTorch eager, and the largest vertex difference between the two. The machine is shared: the load average
+is recorded, and the CPU time (which leaves out the time spent waiting for a core) is the steadier figure.
 
 Run: .venv/bin/python benchmarks/onnx_speed.py [--vertices 12000] [--frames 200] [--warmup 20] [--bones 80]
-         [--profile]   (writes benchmarks/results/onnx-speed.json; --profile: onnxruntime's per-operator profile
-                        of each model, the ten slowest operator types, in the results)
+         [--variants body-lbs,virtualbones,...] [--profile]
+     (writes benchmarks/results/onnx-speed.json; --profile: onnxruntime's profile of each model, the ten slowest
+     operator types, in the results)
 """
 
 from __future__ import annotations
