@@ -194,7 +194,8 @@ def bench_garment(body, garment, motion, args, folder: Path) -> dict:
         with torch.no_grad():
             ort_verts, ort_time = run_onnx(onnx_session(path), meta, motion, args.warmup)
         torch_verts, torch_time = run_torch(run, motion, args.warmup)
-        entry = {"method": method, "overrides": overrides, "parameters": parameter_count(model), "model_bytes": path.stat().st_size,
+        entry = {"method": method, "overrides": overrides, "parameters": parameter_count(model),
+                 "model_bytes": path.stat().st_size,
                  "model_mb": path.stat().st_size / 2**20, "export_s": export_s, "onnxruntime": ort_time,
                  "torch_eager": torch_time, "speedup_over_torch": torch_time["ms_mean"] / ort_time["ms_mean"],
                  "max_vertex_difference_mm": float(np.abs(ort_verts - torch_verts).max() * 1e3)}
@@ -204,7 +205,8 @@ def bench_garment(body, garment, motion, args, folder: Path) -> dict:
             entry["profile"] = profile_summary(Path(sess.end_profiling()))
         out["methods"][variant] = entry
         print(f"{len(garment.verts)} vertices, {variant}: onnxruntime {ort_time['fps']:.0f} fps "
-              f"({ort_time['ms_mean']:.2f} ms), torch eager {torch_time['fps']:.0f} fps ({torch_time['ms_mean']:.2f} ms), "
+              f"({ort_time['ms_mean']:.2f} ms), torch eager {torch_time['fps']:.0f} fps "
+              f"({torch_time['ms_mean']:.2f} ms), "
               f"{entry['model_mb']:.1f} MB, max difference {entry['max_vertex_difference_mm']:.2e} mm", flush=True)
     return out
 
@@ -232,8 +234,9 @@ def main() -> None:
         for garment in garments:
             results["garments"].append(bench_garment(body, garment, motion, args, Path(tmp)))
     first = results["garments"][0]["methods"]
-    results["targets"] = {m: {"fps": first[m]["onnxruntime"]["fps"], "pass": first[m]["onnxruntime"]["fps"] >= TARGET_FPS}
-                          for m in ("virtualbones", "jointnet") if m in first}
+    results["targets"] = {m: {"fps": first[m]["onnxruntime"]["fps"], "fps_by_cpu_time": first[m]["onnxruntime"][
+        "fps_by_cpu_time"], "pass": first[m]["onnxruntime"]["fps"] >= TARGET_FPS} for m in ("virtualbones", "jointnet")
+        if m in first}
     results["load_average_at_end"] = os.getloadavg()
     save_results(args.name, results)
 

@@ -26,7 +26,8 @@ def grid_garment(n: int = 8):
     """A ``n x n`` vertex sheet around the hips (metres, Z up) and its triangles."""
     u, v = np.meshgrid(np.linspace(-0.25, 0.25, n), np.linspace(0.5, 1.0, n))
     verts = np.stack([u.ravel(), np.full(n * n, -0.15), v.ravel()], 1).astype(np.float32)
-    quads = [(i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1) for i in range(n - 1) for j in range(n - 1)]
+    quads = [(i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1)
+             for i in range(n - 1) for j in range(n - 1)]
     faces = np.array([f for a, b, c, d in quads for f in ((a, b, c), (b, d, c))], np.int64)
     return verts, faces
 
@@ -50,7 +51,8 @@ def build(cls, config, body, history: MotionHistory | None):
                "bone_rest": torch.from_numpy(verts[:: V // BONES][:BONES].copy()),
                "root_std": 0.5 + torch.rand(model.root_features, generator=g),
                "joints_mean": 0.1 * torch.randn(body.num_joints - 1, 6, generator=g),
-               "euler_std": 0.2 + torch.rand(BONES, 3, generator=g), "offset_std": 0.02 + 0.01 * torch.rand(BONES, 3, generator=g)}
+               "euler_std": 0.2 + torch.rand(BONES, 3, generator=g),
+               "offset_std": 0.02 + 0.01 * torch.rand(BONES, 3, generator=g)}
     if cls is VirtualBones:
         buffers["neighbours"] = torch.from_numpy(neighbour_table(faces, V))
         buffers["offset_std"] = torch.full((3,), 0.01)
