@@ -182,13 +182,14 @@ class StepGraph(nn.Module):
             return world, next_state
         rot_w = Rh @ bone_R  # (B, 3, 3)
         trans_w = bone_T @ Rh.T + origin
-        centre = self._bone_rest()
+        centre = self.bone_rest_positions()
         position = (rot_w * centre[:, None, :]).sum(-1) + trans_w  # where the bone's rest position went
         B = rot_w.shape[0]
         bottom = torch.cat([torch.zeros(B, 1, 3), torch.ones(B, 1, 1)], -1)
         return world, next_state, torch.cat([torch.cat([rot_w, position[:, :, None]], -1), bottom], 1)
 
-    def _bone_rest(self) -> torch.Tensor:
+    def bone_rest_positions(self) -> torch.Tensor:
+        """``(B, 3)`` rest positions of the bones the graph outputs (body-LBS: the body joints), metres."""
         return self.model.rest_joints if self.method == "body-lbs" else self.model.bone_rest
 
     def _recurrent(self, state: torch.Tensor, name: str, started: torch.Tensor) -> torch.Tensor:
