@@ -14,7 +14,7 @@ from loosefit.cli import main
 from loosefit.errors import InputError
 from loosefit.export_onnx import METADATA_KEY, export_onnx, read_metadata
 from loosefit.export_rig import predict_bones
-from loosefit.models.motion_features import heading_frames
+from loosefit.motion.heading import heading_frames
 from loosefit.motion.procedural import generate
 from loosefit.training import train_model
 

@@ -124,14 +124,3 @@ def motion_file_options(sp) -> None:
     """The options of every verb that reads motion files: ``--joint-map`` and ``--keep-first-frame``."""
     joint_map_option(sp)
     keep_first_frame_option(sp)
-
-
-def export_onnx_parser(sub) -> None:
-    """The ``export-onnx`` verb: its arguments and its call (:mod:`loosefit.export_onnx`)."""
-    from loosefit.export_onnx import add_arguments, cli_command
-
-    sp = sub.add_parser("export-onnx", help="a body-lbs / virtualbones / jointnet garment as one ONNX model that "
-                        "animates one frame per call (onnxruntime, onnxruntime-web)")
-    add_arguments(sp)
-    force_option(sp)
-    sp.set_defaults(func=cli_command)

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import argparse
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, export_onnx_parser, finite_float, force_option, int_at_least,
+from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least,
                                motion_file_options, nonnegative_float, piece_choice, positive_float)
 from loosefit.cli_commands import (
     cmd_animate,
     cmd_body,
     cmd_demo,
     cmd_evaluate,
+    cmd_export_onnx,
     cmd_export_rig,
     cmd_garment_import,
     cmd_garment_make,
@@ -26,6 +27,7 @@ from loosefit.cli_commands import (
     cmd_train,
     cmd_view,
 )
+from loosefit.export_onnx import add_arguments as onnx_arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -244,7 +246,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "nothing), last or a checkpoint path")
     sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.set_defaults(func=cmd_export_rig)
-    export_onnx_parser(sub)
+
+    sp = sub.add_parser("export-onnx", help="a body-lbs / virtualbones / jointnet garment as one ONNX model that "
+                        "animates one frame per call (onnxruntime, onnxruntime-web)")
+    onnx_arguments(sp)
+    force_option(sp)
+    sp.set_defaults(func=cmd_export_onnx)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
     sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")

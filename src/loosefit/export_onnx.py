@@ -175,22 +175,9 @@ def read_metadata(path: str | Path) -> dict:
 
 
 def add_arguments(sp: argparse.ArgumentParser) -> None:
-    """The ``export-onnx`` verb's arguments (the CLI calls :func:`export_onnx` with them)."""
+    """The ``export-onnx`` verb's arguments (``loosefit.cli_commands.cmd_export_onnx`` calls :func:`export_onnx`)."""
     sp.add_argument("run", help="run folder written by loosefit train (body-lbs, virtualbones or jointnet)")
     sp.add_argument("--out", required=True, help="garment.onnx")
     sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
                     "nothing), last or a checkpoint path")
     sp.add_argument("--bones", action="store_true", help="also output the bones' world transforms (GPU skinning)")
-
-
-def cli_command(args) -> None:
-    """``loosefit export-onnx RUN --out garment.onnx [--checkpoint best] [--bones] [--force]``."""
-    from loosefit.cli_args import writable
-    from loosefit.paths import guard_output
-
-    writable(args.out, folder=False)
-    guard_output(args.out, args.force)
-    s = export_onnx(args.run, args.out, checkpoint=args.checkpoint, bones=args.bones)
-    bones = f", {s['bones']} bone transforms" if s["bones"] else ""
-    print(f"wrote {s['path']}: {s['bytes']} bytes, {s['method']}, {s['joints']} joints in, {s['vertices']} vertices "
-          f"out, state of {s['state_size']} floats{bones}")
