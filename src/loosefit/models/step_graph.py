@@ -150,7 +150,7 @@ class StepGraph(nn.Module):
         and with ``bones`` also ``bone_transforms (B, 4, 4)`` (module doc)."""
         R = axis_angle_to_matrix(joint_rotations)  # (J, 3, 3)
         root_rot = R[0]
-        # heading psi: the rest forward -Y turned by the root, projected on the floor (loosefit.motion.heading.heading_angles)
+        # heading psi: the rest forward -Y turned by the root, projected on the floor (motion.heading.heading_angles)
         psi = torch.atan2(-root_rot[0, 1], root_rot[1, 1])
         c, s = torch.cos(psi), torch.sin(psi)
         zero, one = torch.zeros_like(c), torch.ones_like(c)
