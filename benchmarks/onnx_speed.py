@@ -17,10 +17,13 @@ untimed ones, feeding ``next_state`` back, for onnxruntime (``intra_op_num_threa
 and for PyTorch eager, and the largest vertex difference between the two. The machine is shared: the load average
 is recorded, and the CPU time (which leaves out the time spent waiting for a core) is the steadier figure.
 
+With ``--runs``, trained run folders (``pretrained:skirt``, the garments loosefit ships) are timed the same way.
+
 Run: .venv/bin/python benchmarks/onnx_speed.py [--vertices 12000] [--frames 200] [--warmup 20] [--bones 80]
-         [--variants body-lbs,virtualbones,...] [--profile]
-     (writes benchmarks/results/onnx-speed.json; --profile: onnxruntime's profile of each model, the ten slowest
-     operator types, in the results)
+         [--variants body-lbs,virtualbones,...] [--runs RUN,...] [--profile] [--name onnx-speed]
+     (writes benchmarks/results/<name>.json; --profile: onnxruntime's profile of each model, the ten slowest
+     operator types, in the results). The shipped garments: --variants '' --runs
+     pretrained:skirt,pretrained:skirt/jointnet --name onnx-speed-shipped
 """
 
 from __future__ import annotations
@@ -157,8 +160,8 @@ def run_onnx(sess, meta: dict, motion, warmup: int):
     return np.stack(verts), timing(times, cpu)
 
 
-def run_torch(run: Path, motion, warmup: int):
-    stream = Animator(run, checkpoint="last", threads=1).stream()
+def run_torch(run, motion, warmup: int, checkpoint: str = "best"):
+    stream = Animator(run, checkpoint=checkpoint, threads=1).stream()
     verts, times, cpu = [], [], 0.0
     for t in range(motion.num_frames):
         start, cpu_start = time.perf_counter(), time.process_time()
@@ -180,34 +183,43 @@ def profile_summary(path: Path, top: int = 10) -> list[dict]:
     return [{"op": op, "share": us / total, "us_total": us} for op, us in ranked]
 
 
+def time_run(run, path: Path, motion, args, checkpoint: str = "best") -> dict:
+    """Export ``run`` to ``path`` and time it in onnxruntime and in torch eager along ``motion``."""
+    start = time.perf_counter()
+    export_onnx(run, path, checkpoint=checkpoint)
+    export_s = time.perf_counter() - start
+    meta = read_metadata(path)
+    with torch.no_grad():
+        ort_verts, ort_time = run_onnx(onnx_session(path), meta, motion, args.warmup)
+    torch_verts, torch_time = run_torch(run, motion, args.warmup, checkpoint)
+    entry = {"vertices": meta["vertex_count"], "model_bytes": path.stat().st_size,
+             "model_mb": path.stat().st_size / 2**20, "export_s": export_s, "onnxruntime": ort_time,
+             "torch_eager": torch_time, "speedup_over_torch": torch_time["ms_mean"] / ort_time["ms_mean"],
+             "max_vertex_difference_mm": float(np.abs(ort_verts - torch_verts).max() * 1e3)}
+    if args.profile:
+        sess = onnx_session(path, profile=path.with_suffix(""))
+        run_onnx(sess, meta, motion.slice(0, args.warmup + 20), args.warmup)
+        entry["profile"] = profile_summary(Path(sess.end_profiling()))
+    return entry
+
+
+def summary_line(e: dict) -> str:
+    o, t = e["onnxruntime"], e["torch_eager"]
+    return (f"onnxruntime {o['fps']:.0f} fps ({o['ms_mean']:.2f} ms, CPU {o['cpu_ms_per_frame']:.2f} ms), torch eager "
+            f"{t['fps']:.0f} fps ({t['ms_mean']:.2f} ms, CPU {t['cpu_ms_per_frame']:.2f} ms), {e['model_mb']:.1f} MB, "
+            f"max difference {e['max_vertex_difference_mm']:.2e} mm")
+
+
 def bench_garment(body, garment, motion, args, folder: Path) -> dict:
     out = {"vertices": len(garment.verts), "faces": len(garment.faces), "methods": {}}
-    for variant in args.variants.split(","):
+    for variant in [v for v in args.variants.split(",") if v]:
         method, overrides = VARIANTS[variant]
         model, cfg = paper_model(method, garment, body, args.bones, overrides)
         run = write_run(model, cfg, folder / f"{variant}-{len(garment.verts)}")
-        path = folder / f"{variant}-{len(garment.verts)}.onnx"
-        start = time.perf_counter()
-        export_onnx(run, path, checkpoint="last")
-        export_s = time.perf_counter() - start
-        meta = read_metadata(path)
-        with torch.no_grad():
-            ort_verts, ort_time = run_onnx(onnx_session(path), meta, motion, args.warmup)
-        torch_verts, torch_time = run_torch(run, motion, args.warmup)
         entry = {"method": method, "overrides": overrides, "parameters": parameter_count(model),
-                 "model_bytes": path.stat().st_size,
-                 "model_mb": path.stat().st_size / 2**20, "export_s": export_s, "onnxruntime": ort_time,
-                 "torch_eager": torch_time, "speedup_over_torch": torch_time["ms_mean"] / ort_time["ms_mean"],
-                 "max_vertex_difference_mm": float(np.abs(ort_verts - torch_verts).max() * 1e3)}
-        if args.profile:
-            sess = onnx_session(path, profile=folder / f"profile-{variant}-{len(garment.verts)}")
-            run_onnx(sess, meta, motion.slice(0, args.warmup + 20), args.warmup)
-            entry["profile"] = profile_summary(Path(sess.end_profiling()))
+                 **time_run(run, folder / f"{variant}-{len(garment.verts)}.onnx", motion, args, "last")}
         out["methods"][variant] = entry
-        print(f"{len(garment.verts)} vertices, {variant}: onnxruntime {ort_time['fps']:.0f} fps "
-              f"({ort_time['ms_mean']:.2f} ms), torch eager {torch_time['fps']:.0f} fps "
-              f"({torch_time['ms_mean']:.2f} ms), "
-              f"{entry['model_mb']:.1f} MB, max difference {entry['max_vertex_difference_mm']:.2e} mm", flush=True)
+        print(f"{len(garment.verts)} vertices, {variant}: {summary_line(entry)}", flush=True)
     return out
 
 
@@ -219,7 +231,8 @@ def main() -> None:
     parser.add_argument("--bones", type=int, default=80, help="virtual bones (the rig's default)")
     parser.add_argument("--profile", action="store_true", help="onnxruntime's per-operator profile")
     parser.add_argument("--name", default="onnx-speed", help="results file name")
-    parser.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated variants (VARIANTS)")
+    parser.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated variants (VARIANTS; '' none)")
+    parser.add_argument("--runs", default="", help="comma-separated trained runs timed too (pretrained:skirt ...)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     body = AnnyBody()
@@ -230,10 +243,15 @@ def main() -> None:
                        "onnxruntime and torch eager on one CPU thread each, on a shared 2-core machine",
                "garments": []}
     with tempfile.TemporaryDirectory() as tmp:
-        garments = [bench_dress(body)[0]] + ([bench_dress(body, args.vertices)[0]] if args.vertices else [])
+        garments = [] if not args.variants else [bench_dress(body)[0]] + (
+            [bench_dress(body, args.vertices)[0]] if args.vertices else [])
         for garment in garments:
             results["garments"].append(bench_garment(body, garment, motion, args, Path(tmp)))
-    first = results["garments"][0]["methods"]
+        results["runs"] = {}
+        for i, run in enumerate(r for r in args.runs.split(",") if r):
+            results["runs"][run] = time_run(run, Path(tmp) / f"run-{i}.onnx", motion, args)
+            print(f"{run}: {summary_line(results['runs'][run])}", flush=True)
+    first = results["garments"][0]["methods"] if results["garments"] else {}
     results["targets"] = {m: {"fps": first[m]["onnxruntime"]["fps"], "fps_by_cpu_time": first[m]["onnxruntime"][
         "fps_by_cpu_time"], "pass": first[m]["onnxruntime"]["fps"] >= TARGET_FPS} for m in ("virtualbones", "jointnet")
         if m in first}
