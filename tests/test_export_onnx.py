@@ -170,9 +170,12 @@ def test_a_damaged_run_is_refused_naming_the_file(runs, tmp_path, capsys):
     with pytest.raises(InputError, match="not a loosefit run folder"):
         export_onnx(tmp_path, tmp_path / "a.onnx")
     meta = json.loads((run / "model.json").read_text())
-    (run / "model.json").write_text(json.dumps({**meta, "method": "swingar"}))
-    with pytest.raises(InputError, match="SwinGar"):
-        export_onnx(run, tmp_path / "a.onnx")
+    for method, says in (("swingar", "SwinGar animates any garment"), ("fitgar", "FitGar is a static"),
+                         ("collision", "body distance field")):
+        (run / "model.json").write_text(json.dumps({**meta, "method": method}))
+        with pytest.raises(InputError, match=says) as info:
+            export_onnx(run, tmp_path / "a.onnx")
+        assert info.value.path == run
     (tmp_path / "b.onnx").write_bytes(b"\x00 not protobuf")
     with pytest.raises(InputError, match="not an ONNX model") as info:
         read_metadata(tmp_path / "b.onnx")
