@@ -41,7 +41,7 @@ LAYERS = [
     ("models",),
     ("training", "pretrained"),
     ("animate",),
-    ("animate_any", "export_rig"),
+    ("animate_any", "export_rig", "export_onnx"),
     ("viz",),
     ("report",),
     ("demo",),

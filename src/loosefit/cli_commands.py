@@ -426,6 +426,17 @@ def cmd_export_rig(args):
                   f"influences: moved {m['rms_mm']:.2f} mm RMS, {m['max_mm']:.2f} mm at most")
 
 
+def cmd_export_onnx(args):
+    from loosefit.export_onnx import export_onnx
+
+    writable(args.out, folder=False)
+    guard_output(args.out, args.force)
+    s = export_onnx(args.run, args.out, checkpoint=args.checkpoint, bones=args.bones)
+    bones = f", {s['bones']} bone transforms" if s["bones"] else ""
+    print(f"wrote {s['path']}: {s['bytes']} bytes, {s['method']}, {s['joints']} joints in, {s['vertices']} vertices "
+          f"out, state of {s['state_size']} floats{bones}")
+
+
 def cmd_view(args):
     from loosefit.viz.viewer import view
 

@@ -12,6 +12,7 @@ from loosefit.cli_commands import (
     cmd_body,
     cmd_demo,
     cmd_evaluate,
+    cmd_export_onnx,
     cmd_export_rig,
     cmd_garment_import,
     cmd_garment_make,
@@ -26,6 +27,7 @@ from loosefit.cli_commands import (
     cmd_train,
     cmd_view,
 )
+from loosefit.export_onnx import add_arguments as onnx_arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -244,6 +246,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "nothing), last or a checkpoint path")
     sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.set_defaults(func=cmd_export_rig)
+
+    sp = sub.add_parser("export-onnx", help="a body-lbs / virtualbones / jointnet garment as one ONNX model that "
+                        "animates one frame per call (onnxruntime, onnxruntime-web)")
+    onnx_arguments(sp)
+    force_option(sp)
+    sp.set_defaults(func=cmd_export_onnx)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
     sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")
