@@ -23,9 +23,10 @@ from loosefit.train.losses import normal_loss
 from loosefit.train.trainer import OPTIMIZERS
 
 CONFIG_FILE = Path(__file__).parents[2] / "configs" / "models" / "jointnet.yaml"
-#: The paper's association (``relu(A) psi``, its L1) from a random start, so that its tests read the paper's form.
+#: The paper's association (``relu(A) psi``, its L1) from a random start and its free PSD basis, so that its tests
+#: read the paper's form.
 TINY = JointNetConfig(gru_hidden=32, features=32, bone_mlp=[64, 64], psd_mlp=[32, 16], psd_shapes=8, association="l1",
-                      association_radius=0.0, lambda_sparse=1e-3)
+                      association_radius=0.0, lambda_sparse=1e-3, psd_modes=0)
 PSD_PARAMS = ("psd_mlp.", "psd_basis")
 
 

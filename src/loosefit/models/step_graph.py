@@ -264,8 +264,11 @@ class StepGraph(nn.Module):
         psi = (h[:, None] @ m.joint_out_weight.transpose(1, 2))[:, 0] + m.joint_out_bias[:, 0]  # (J_s, K)
         R, trans = self._bones(psi)
         weights = m.psd_mlp(psi)  # (J_s, |X|)
-        basis = m.psd_basis.reshape(-1, m.rig_rest.numel())  # (J_s |X|, 3V)
-        rest = m.rig_rest + nn.functional.linear(weights.reshape(1, -1), basis.T).reshape(-1, 3)
+        basis = m.psd_basis.reshape(-1, m.psd_basis[0, 0].numel())  # (J_s |X|, 3V), or (J_s |X|, 3k) in modes
+        displacement = nn.functional.linear(weights.reshape(1, -1), basis.T).reshape(-1, 3)
+        if m.psd_mode_count:  # the mode coefficients to the vertices
+            displacement = m.psd_modes @ displacement
+        rest = m.rig_rest + displacement
         return skin_dense(rest, m.skin_weights, R, trans), R, trans, [h]
 
     def _bones(self, psi: torch.Tensor):
