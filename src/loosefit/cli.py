@@ -10,7 +10,7 @@ import signal
 import sys
 from pathlib import Path
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least,
+from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least, live_options,
                                motion_file_options, nonnegative_float, piece_choice, positive_float, writable)
 from loosefit.errors import InputError, LoosefitError
 from loosefit.paths import guard_output
@@ -434,6 +434,10 @@ def cmd_export_rig(args):
 def cmd_view(args):
     from loosefit.viz.viewer import view
 
+    if args.live:
+        from loosefit.viz.live import view_live_command
+
+        return view_live_command(args)
     if args.export is not None:
         writable(args.export, folder=True)  # before the scene is built
         guard_output(args.export, None)  # no --force: an export folder is a new one or an earlier export
@@ -715,6 +719,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--collision", choices=["exact", "pushout", "none"], default="exact",
                     help="collision handling of the runs' animations, as loosefit animate (default exact)")
     motion_file_options(sp)
+    live_options(sp)
     sp.add_argument("--no-collisions", action="store_true", help="skip the per-frame collision ratio")
     sp.add_argument("--collision-frames", type=int_at_least(0), default=100, help="compute the collision ratio at this many "
                     "evenly spaced frames (0: every frame; ~0.5 s a frame for a 13.7k-vertex body)")
