@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.paths import atomic_path
 
 log = logging.getLogger(__name__)
 
@@ -66,8 +67,8 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
     """
     import torch
 
-    from loosefit.animate import load_run
-    from loosefit.extras import require, read_run_meta
+    from loosefit.animate import load_run, read_run_meta
+    from loosefit.extras import require
     from loosefit.models.step_graph import STEP_METHODS, StepGraph
 
     onnx = require("onnx", "loosefit export-onnx")
@@ -85,22 +86,22 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
     J, V = graph.num_joints, int(model.template.shape[0])
     example = (torch.zeros(J, 3), torch.tensor([0.0, 0.0, 1.0]), torch.from_numpy(graph.initial_state()))
     outputs = list(OUTPUTS) + ([BONE_OUTPUT] if bones else [])
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with torch.no_grad(), warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the legacy exporter's deprecation notice and tracer notes
-        torch.onnx.export(graph, example, str(out), input_names=list(INPUTS), output_names=outputs,
-                          opset_version=OPSET, dynamo=False, do_constant_folding=True)
-    proto = onnx.load(str(out))
-    entry = proto.metadata_props.add()
-    entry.key, entry.value = METADATA_KEY, json.dumps(describe(graph, meta, model, run_dir))
-    proto.producer_name = "loosefit"
-    onnx.checker.check_model(proto)
-    onnx.save(proto, str(out))
+    with atomic_path(out) as tmp:  # a failed export leaves an earlier file as it was
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the legacy exporter's deprecation notice and tracer notes
+            torch.onnx.export(graph, example, str(tmp), input_names=list(INPUTS), output_names=outputs,
+                              opset_version=OPSET, dynamo=False, do_constant_folding=True)
+        proto = onnx.load(str(tmp))
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = METADATA_KEY, json.dumps(describe(graph, meta, model))
+        proto.producer_name = "loosefit"
+        onnx.checker.check_model(proto)
+        onnx.save(proto, str(tmp))
     return {"path": str(out), "bytes": out.stat().st_size, "method": graph.method, "vertices": V, "joints": J,
             "state_size": graph.state_size, "bones": int(graph._bone_rest().shape[0]) if bones else 0}
 
 
-def describe(graph, meta: dict, model, run_dir) -> dict:
+def describe(graph, meta: dict, model) -> dict:
     """The model's metadata (module doc) as a JSON-able dict."""
     from loosefit.motion.motion import DEFAULT_FPS
 
