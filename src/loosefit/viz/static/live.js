@@ -223,7 +223,8 @@ async function createSession(bytes) {
 
 async function garmentStep(pose) {
   const feeds = {
-    joint_rotations: new ort.Tensor('float32', pose.aa, [J, 3]),
+    // a copy: the pose stays the one shown, whatever the runtime does with its input buffers
+    joint_rotations: new ort.Tensor('float32', pose.aa.slice(), [J, 3]),
     root_position: new ort.Tensor('float32', Float32Array.from(pose.root), [3]),
     state: new ort.Tensor('float32', state, [state.length]),
   };
@@ -258,7 +259,7 @@ function setPositions(mesh, values) {
 }
 
 function buildScene() {
-  renderer = new THREE.WebGLRenderer({ canvas: $('gl'), antialias: true, preserveDrawingBuffer: true });
+  renderer = new THREE.WebGLRenderer({ canvas: $('gl'), antialias: false, preserveDrawingBuffer: false });
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   scene = new THREE.Scene();
   scene.background = new THREE.Color(0x303238);
@@ -293,8 +294,19 @@ function follow(root) {
   controls.update();
 }
 
+let stale = false, shownFrame = 0;
 function draw() {
   const t0 = performance.now();
+  if (stale && lastPose) {
+    stale = false;  // before follow(): the camera's change event draws again
+    skinBody(lastPose);
+    setPositions(bodyMesh, body.out);
+    garmentMesh.geometry.attributes.position.needsUpdate = true;
+    garmentMesh.geometry.computeVertexNormals();
+    follow(lastPose.root);
+    live.stats.skinMs = 0.9 * live.stats.skinMs + 0.1 * (performance.now() - t0);
+    $('frame-label').textContent = 'frame ' + shownFrame + ' \u00b7 ' + motions[current.m].name + (blend ? ' (blending)' : '');
+  }
   const canvas = renderer.domElement;
   const w = canvas.clientWidth, h = canvas.clientHeight;
   const size = renderer.getSize(new THREE.Vector2());
@@ -315,17 +327,14 @@ async function stepOnce(render) {
   currentPose(shown);
   const t0 = performance.now();
   const verts = await garmentStep(shown);
-  const t1 = performance.now();
-  skinBody(shown);
-  const t2 = performance.now();
-  setPositions(garmentMesh, verts);
-  setPositions(bodyMesh, body.out);
-  live.stats.inferMs = 0.9 * live.stats.inferMs + 0.1 * (t1 - t0);
-  live.stats.skinMs = 0.9 * live.stats.skinMs + 0.1 * (t2 - t1);
+  live.stats.inferMs = 0.9 * live.stats.inferMs + 0.1 * (performance.now() - t0);
+  const pos = garmentMesh.geometry.attributes.position;
+  if (pos.array.length === verts.length) pos.array.set(verts); else setPositions(garmentMesh, verts);
+  shownFrame = live.frame;
   if (live.record) live.log.push({ frame: live.frame, motion: current.m, blend: blend ? blend.i : null,
     joint_rotations: Array.from(shown.aa), root_position: Array.from(shown.root), vertices: Array.from(verts) });
   lastPose = clonePose(shown);
-  follow(shown.root);
+  stale = true;  // the body is skinned and the normals computed when drawn: only the frames drawn need them
   if (render) draw();
   counts.steps++;
   // advance: the motion left keeps playing under the blend; a motion at its end starts again, continuing
@@ -336,24 +345,31 @@ async function stepOnce(render) {
     if (++blend.i > BLEND_FRAMES) blend = null;
   }
   if (current.f >= motions[current.m].numFrames) switchTo(current.m);
-  $('frame-label').textContent = 'frame ' + live.frame + ' \u00b7 ' + motions[current.m].name + (blend ? ' (blending)' : '');
 }
 
 // ---- playing ----------------------------------------------------------------------------------------------
+// The garment advances on its own clock (fps x speed frames per second of wall time, on timers), and the
+// screen is redrawn on animation frames with the latest result: where drawing is slow (software WebGL), the
+// garment still runs at the motion's rate and the screen shows fewer of its frames.
 
-let playing = true, speed = 1, last = null, acc = 0, busy = false;
-async function tick(now) {
+let playing = true, speed = 1, last = null, acc = 0, busy = false, timer = null;
+async function advance() {
+  timer = null;
   if (!playing) return;
-  if (!busy && last !== null) {
-    acc = Math.min(acc + (now - last) / 1000 * M.fps * speed, 2);  // a slow page drops time rather than piling up
-    busy = true;
-    try {
-      while (acc >= 1) { acc -= 1; await stepOnce(acc < 1); }
-    } catch (e) { fail(e); return; } finally { busy = false; }
-  }
+  const now = performance.now();
+  if (last !== null) acc = Math.min(acc + (now - last) / 1000 * M.fps * speed, 2);  // a slow page drops time
   last = now;
+  busy = true;
+  try {
+    while (acc >= 1 && playing) { acc -= 1; await stepOnce(false); }
+  } catch (e) { fail(e); return; } finally { busy = false; }
+  if (playing) timer = setTimeout(advance, Math.max(0, (1 - acc) * 1000 / (M.fps * speed) - (performance.now() - now)));
+}
+
+function onAnimationFrame(now) {
+  if (stale) draw();
   updateCounts(now);
-  requestAnimationFrame(tick);
+  if (playing) requestAnimationFrame(onAnimationFrame);
 }
 
 function updateCounts(now) {
@@ -363,11 +379,20 @@ function updateCounts(now) {
   live.stats.drawsPerSecond = counts.draws * 1000 / dt;
   counts.steps = 0; counts.draws = 0; counts.since = now;
   $('fps').textContent = live.stats.stepsPerSecond.toFixed(1) + ' garment fps (' + live.backend + ', '
-    + live.stats.inferMs.toFixed(1) + ' ms/frame) \u00b7 ' + live.stats.drawsPerSecond.toFixed(1) + ' draws/s';
+    + live.stats.inferMs.toFixed(1) + ' ms/frame) \u00b7 ' + live.stats.drawsPerSecond.toFixed(1) + ' drawn/s';
 }
 
-function play() { if (!playing) { playing = true; last = null; acc = 0; $('play').textContent = 'pause'; requestAnimationFrame(tick); } }
-function pause() { playing = false; $('play').textContent = 'play'; }
+function play() {
+  if (playing) return;
+  playing = true; last = null; acc = 0; $('play').textContent = 'pause';
+  counts.steps = 0; counts.draws = 0; counts.since = performance.now();
+  advance();
+  requestAnimationFrame(onAnimationFrame);
+}
+function pause() {
+  playing = false; $('play').textContent = 'play';
+  if (timer !== null) { clearTimeout(timer); timer = null; }
+}
 
 function fail(err) {
   live.error = String(err && err.message || err);
@@ -408,7 +433,8 @@ async function main() {
   $('status').textContent = M.metadata.method + ' \u00b7 ' + J + ' joints \u00b7 ' + garmentMesh.geometry.attributes.position.count
     + ' garment vertices \u00b7 ' + live.backend;
   live.ready = true;
-  if (auto) { playing = false; play(); } else pause();
+  playing = false;
+  if (auto) play(); else pause();
 }
 
 // Test and scripting API: stepping never uses the animation timer.
