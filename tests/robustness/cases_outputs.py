@@ -1,6 +1,6 @@
 """Cases of the verbs that run a trained model or read mesh sequences and write results: ``animate``,
-``export-rig``, ``evaluate``, ``render``, ``report``, ``view`` (and raw requests to its server), ``demo``
-and the command line itself."""
+``export-rig``, ``export-onnx``, ``evaluate``, ``render``, ``report``, ``view`` (and raw requests to its server),
+``demo`` and the command line itself."""
 
 from __future__ import annotations
 
@@ -98,6 +98,17 @@ def animate_cases() -> list[Case]:
                                             "--threads", "-1"], defect=True, names=("--threads",)),
         bad("export-rig/checkpoint-garbage", ["export-rig", "{tmp}/run", "--motion", "{motion}", "--out", "{tmp}/r.glb"],
             run_edit(lambda r: craft.garbage(r / "checkpoints" / "last.pt")), names=("last.pt",)),
+        # export-onnx
+        ok("export-onnx/bones", ["export-onnx", "{run}", "--out", "{tmp}/g.onnx", "--bones"], check=wrote("{tmp}/g.onnx"),
+           cost=2),
+        bad("export-onnx/out-unsupported", ["export-onnx", "{run}", "--out", "{tmp}/g.pb"], names=("g.pb",),
+            absent=("{tmp}/g.pb",)),
+        bad("export-onnx/out-parent-is-file", ["export-onnx", "{run}", "--out", "{tmp}/file/g.onnx"], parent_file,
+            names=("file/g.onnx",)),
+        bad("export-onnx/run-missing", ["export-onnx", "{tmp}/none", "--out", "{tmp}/g.onnx"], names=("none",),
+            absent=("{tmp}/g.onnx",)),
+        bad("export-onnx/checkpoint-garbage", ["export-onnx", "{tmp}/run", "--out", "{tmp}/g.onnx"],
+            run_edit(lambda r: craft.garbage(r / "checkpoints" / "last.pt")), names=("last.pt",), absent=("{tmp}/g.onnx",)),
     ]
 
 
