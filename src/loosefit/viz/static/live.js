@@ -281,9 +281,9 @@ function buildScene() {
 // The camera keeps its offset from the body's root, so a walk stays in view.
 let followed = null;
 function follow(root) {
-  const target = new THREE.Vector3(root[0], root[1], 1.0);
+  const target = new THREE.Vector3(root[0], root[1], 0.85);
   if (followed === null) {
-    camera.position.copy(target).add(new THREE.Vector3(1.6, -3.6, 0.4));
+    camera.position.copy(target).add(new THREE.Vector3(1.9, -4.3, 0.35));
     controls.target.copy(target);
   } else {
     const d = target.clone().sub(followed);
