@@ -23,7 +23,8 @@ The target is 30 frames per second (the motion's rate). The machine is shared (2
 average before and after is recorded.
 
 Run: .venv/bin/python benchmarks/live_page_speed.py [--frames 150] [--warmup 20] [--seconds 6] [--bones 80]
-         [--backend wasm]   (writes benchmarks/results/live-page-speed.json)
+         [--backend wasm] [--viewport 960x640] [--name live-page-speed]
+         (writes benchmarks/results/<name>.json)
 """
 
 from __future__ import annotations
@@ -89,12 +90,12 @@ def config_overrides(overrides: list[str]):
 
 
 def measure(browser, scene, args) -> dict:
-    """The page's speed on ``scene`` (module docstring)."""
+    """The page's speed on ``scene`` (module docstring) in a ``args.viewport`` window."""
     server = ViewerServer(None, port=0)
     serve_live_scene(server, scene)
     query = "?play=0" + (f"&backend={args.backend}" if args.backend else "")
     with server:
-        page = browser.new_page(viewport=VIEWPORT)
+        page = browser.new_page(viewport=args.viewport)
         start = time.perf_counter()
         page.goto(server.url + "live.html" + query)
         page.wait_for_function("window.loosefitLive && (loosefitLive.ready || loosefitLive.error)", timeout=300000)
@@ -119,8 +120,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=6.0, help="seconds played at each speed")
     parser.add_argument("--bones", type=int, default=80, help="virtual bones (the rig's default)")
     parser.add_argument("--backend", default=None, help="force onnxruntime-web's backend (wasm)")
+    parser.add_argument("--viewport", default=f"{VIEWPORT['width']}x{VIEWPORT['height']}",
+                        help="window size WxH (software WebGL rasterises every pixel on the CPU)")
     parser.add_argument("--name", default="live-page-speed", help="results file name")
     args = parser.parse_args()
+    width, height = (int(x) for x in args.viewport.split("x"))
+    args.viewport = {"width": width, "height": height}
     from playwright.sync_api import sync_playwright
 
     load_before = os.getloadavg()
@@ -129,7 +134,7 @@ def main() -> None:
     variants = {"paper width": [], "global layer through 64 channels": CPU_MODEL["virtualbones"]}
     results = {
         "garment": {"name": "bench dress", "vertices": int(len(garment.verts)), "faces": int(len(garment.faces))},
-        "method": "virtualbones, untrained", "bones": args.bones, "body_vertices": None, "viewport": VIEWPORT,
+        "method": "virtualbones, untrained", "bones": args.bones, "body_vertices": None, "viewport": args.viewport,
         "target_fps": TARGET_FPS, "networks": {},
     }
     with sync_playwright() as p:
