@@ -197,12 +197,15 @@ def _heading(rot: Rotation) -> float:
 
 def expected_switch(scene, s: int, name_from: str, name_to: str):
     """The inputs the page feeds at frames ``s .. s + BLEND - 1`` after switching from ``name_from`` (shown
-    untouched up to frame ``s - 1``) to ``name_to``: ``(rotations (BLEND, J, 3) as Rotation list, roots (BLEND, 3))``."""
+    untouched up to frame ``s - 1``) to ``name_to``: ``(rotations (BLEND, J, 3) as Rotation list, roots (BLEND, 3))``.
+    Joint rotations: slerp with weight smoothstep((k + 1) / BLEND), the new root turned to the body's heading; root:
+    moved on by the same blend of the two motions' horizontal steps, its height blended."""
     old, new = _motion(scene, name_from), _motion(scene, name_to)
     last_root = Rotation.from_rotvec(old.rotations[s - 1, 0])
     yaw = _heading(last_root) - _heading(Rotation.from_rotvec(new.rotations[0, 0]))
     turn = Rotation.from_rotvec([0.0, 0.0, yaw])
-    at, origin = old.translation[s - 1, :2].astype(np.float64), new.translation[0, :2].astype(np.float64)
+    old_t, new_t = old.translation.astype(np.float64), new.translation.astype(np.float64)
+    root = old_t[s - 1].copy()
     rots, roots = [], []
     for k in range(BLEND):
         x = (k + 1) / BLEND
@@ -210,12 +213,15 @@ def expected_switch(scene, s: int, name_from: str, name_to: str):
         r_old = Rotation.from_rotvec(old.rotations[s + k])
         r_new = Rotation.from_rotvec(new.rotations[k])
         r_new = Rotation.concatenate([turn * r_new[0], r_new[1:]])
-        p_new = np.empty(3)
-        p_new[:2] = at + turn.apply(np.r_[new.translation[k, :2] - origin, 0.0])[:2]
-        p_new[2] = new.translation[k, 2]
         rots.append(Rotation.concatenate([Slerp([0, 1], Rotation.concatenate([r_old[j], r_new[j]]))(w)
                                           for j in range(len(r_old))]))
-        roots.append((1 - w) * old.translation[s + k] + w * p_new)
+        # the root moves by the blend of the two motions' steps (the new one's first step for its frame 0)
+        step_old = old_t[s + k, :2] - old_t[s + k - 1, :2]
+        f = max(k, 1)
+        step_new = turn.apply(np.r_[new_t[f, :2] - new_t[f - 1, :2], 0.0])[:2]
+        root[:2] += (1 - w) * step_old + w * step_new
+        root[2] = (1 - w) * old_t[s + k, 2] + w * new_t[k, 2]
+        roots.append(root.copy())
     return rots, np.asarray(roots)
 
 
@@ -263,6 +269,35 @@ def test_switch_blends_the_motion_and_keeps_the_garment_continuous(browser, serv
     restart = Stepper(model_file).step(spin.rotations[0], spin.translation[0])
     assert np.linalg.norm(restart - verts[s - 2], axis=1).max() > bound
     assert page.evaluate("loosefitLive.current()") == {"motion": "spin", "frame": BLEND + 5, "blending": False}
+    assert not errors
+    page.close()
+
+
+def test_motion_list_speed_control_and_looping(browser, server, scene, body):
+    """The list switches motion, the speed control sets the page's speed, and a motion at its end starts again
+    from where the body is (root continuous), the body posed as loosefit poses the page's own inputs."""
+    page, errors = open_live(browser, server.url)
+    page.select_option("#motions", label="spin")
+    page.evaluate("loosefitLive.step(3)")
+    assert page.evaluate("loosefitLive.current()") == {"motion": "spin", "frame": 3, "blending": True}
+    page.select_option("#speed", "2")
+    assert page.evaluate("loosefitLive.speed()") == 2
+    page.select_option("#motions", label="walk")
+    frames = round(SECONDS * 30)
+    page.evaluate("loosefitLive.record = true; loosefitLive.log = []")
+    page.evaluate(f"loosefitLive.step({frames + 5})")  # past the walk's end: it starts again, continuing
+    assert page.evaluate("loosefitLive.current()") == {"motion": "walk", "frame": 5, "blending": True}
+    log = page.evaluate("loosefitLive.log")
+    root = np.asarray([e["root_position"] for e in log])
+    steps = np.linalg.norm(np.diff(root[:, :2], axis=0), axis=1)
+    walk = _motion(scene, "walk")
+    walk_steps = np.linalg.norm(np.diff(walk.translation[:, :2], axis=0), axis=1)
+    assert steps.max() <= 1.5 * walk_steps.max()  # no jump back to the walk's start at the loop
+    assert np.linalg.norm(root[-1, :2] - walk.translation[4, :2]) > 0.5  # it walks on from where it was
+    rot = np.asarray(log[-1]["joint_rotations"], np.float32).reshape(1, -1, 3)
+    posed = body.pose(Motion(rot, root[-1:].astype(np.float32), 30.0, body.rig, body.joint_names)).verts[0]
+    shown_body = np.asarray(page.evaluate("loosefitLive.body()"), np.float32).reshape(-1, 3)
+    assert np.abs(shown_body - posed).max() < 5e-4
     assert not errors
     page.close()
 

@@ -129,6 +129,7 @@ function sampleTrack(track, out) {
 }
 
 let current = null, blend = null, lastPose = null;
+const lastStep = [0, 0];  // the root's last horizontal step shown, metres
 let scratchOld, scratchNew;
 
 // The pose shown at the current frame: the current track, or during a switch the slerp from the track left
@@ -142,7 +143,23 @@ function currentPose(out) {
     slerp(scratchOld.q, 4 * j, scratchNew.q, 4 * j, w, out.q, 4 * j);
     quatToAa(out.q, 4 * j, out.aa, 3 * j);
   }
-  for (let k = 0; k < 3; k++) out.root[k] = (1 - w) * scratchOld.root[k] + w * scratchNew.root[k];
+  // The root moves on by the blend of the two tracks' steps (no stall, no overshoot), its height blends; the new
+  // motion's anchor follows, so that it continues from the blended root once the blend is over.
+  const a = trackStep(blend.from), b = trackStep(current);
+  for (let k = 0; k < 2; k++) out.root[k] = lastPose.root[k] + (1 - w) * a[k] + w * b[k];
+  out.root[2] = (1 - w) * scratchOld.root[2] + w * scratchNew.root[2];
+  current.at = [current.at[0] + out.root[0] - scratchNew.root[0], current.at[1] + out.root[1] - scratchNew.root[1]];
+}
+
+// Horizontal root step into a track's current frame (metres), turned as the track is: a motion past its end (a
+// loop) keeps its last step, and a frozen pose the step shown when it was frozen.
+function trackStep(track) {
+  if (track.kind === 'pose') return track.velocity;
+  const tr = motions[track.m].translation, T = motions[track.m].numFrames;
+  const f1 = Math.max(1, Math.min(track.f, T - 1)), f0 = f1 - 1;
+  const dx = tr[3 * f1] - tr[3 * f0], dy = tr[3 * f1 + 1] - tr[3 * f0 + 1];
+  const c = Math.cos(track.yaw), s = Math.sin(track.yaw);
+  return [c * dx - s * dy, s * dx + c * dy];
 }
 
 // Switch to motion m (index or name) from the pose shown last; its root continues from there.
@@ -154,7 +171,8 @@ function switchTo(m) {
   const first = newPose();
   sampleTrack(motionTrack(m, 0, null), first);
   const yaw = heading(lastPose.q, 0) - heading(first.q, 0);
-  const from = blend ? { kind: 'pose', pose: clonePose(lastPose) } : current;  // mid-switch: from what is shown
+  // mid-switch: from what is shown, moving on as it moved
+  const from = blend ? { kind: 'pose', pose: clonePose(lastPose), velocity: lastStep.slice() } : current;
   current = motionTrack(m, yaw, [lastPose.root[0], lastPose.root[1]]);
   blend = { from, i: 1 };  // the first frame after a switch already moves towards the new motion
 }
@@ -333,6 +351,7 @@ async function stepOnce(render) {
   shownFrame = live.frame;
   if (live.record) live.log.push({ frame: live.frame, motion: current.m, blend: blend ? blend.i : null,
     joint_rotations: Array.from(shown.aa), root_position: Array.from(shown.root), vertices: Array.from(verts) });
+  if (lastPose) { lastStep[0] = shown.root[0] - lastPose.root[0]; lastStep[1] = shown.root[1] - lastPose.root[1]; }
   lastPose = clonePose(shown);
   stale = true;  // the body is skinned and the normals computed when drawn: only the frames drawn need them
   if (render) draw();
@@ -441,6 +460,7 @@ async function main() {
 Object.assign(live, {
   play, pause, switchTo,
   setSpeed: (s) => { speed = s; $('speed').value = String(s); },
+  speed: () => speed,
   motionNames: () => motions.map((m) => m.name),
   // Step n frames now (the timer paused), drawing each when render is true; resolves to the frame count.
   step: async (n, render = false) => {
