@@ -38,7 +38,7 @@ def plan_case(plan, garment: str, motion: str, frames: int | None = None):
     """``(body, garment, motion)``: a plan's (a :class:`~loosefit.sim.plan.Plan`) garment and motion on the average
     Anny body, as its simulation makes them; the motion's first ``frames`` only when given."""
     from loosefit.body import AnnyShape
-    from loosefit.sim.runner import load_plan_garment, load_plan_motion, plan_body
+    from loosefit.simulate import load_plan_garment, load_plan_motion, plan_body
 
     shape = tuple(AnnyShape().to_array().tolist())
     played = load_plan_motion(plan, motion)

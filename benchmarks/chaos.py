@@ -10,7 +10,7 @@ per probe, each compared with the base (RMSE over the garment, per half second, 
             accuracy benchmark's robustness perturbation at a fixed angle)
   repeat    the base again, in another process: ``bit_identical`` and the largest difference
   mean-steps  step-count convergence of the mean run: ``--references`` K runs with start noise (seeds 1..K,
-            as a store's reference runs, :func:`loosefit.sim.runner.perturb_start`) at the base's N solver
+            as a store's reference runs, :func:`loosefit.simulate.perturb_start`) at the base's N solver
             steps a frame and K at 2N; the mean of each set with its base (the base, and the ``steps`` run at 2N)
             and the RMS distance between the two means, ``<garment>/<motion>/mean_steps_mm``, beside the floor
             of each set (``floor_mm`` at N, ``floor_2n_mm``: :mod:`loosefit.metrics.reference`). When the two
@@ -84,7 +84,7 @@ def simulate(task: Task) -> dict:
 
     from loosefit.sim import SimParams, simulate_sequence
     from loosefit.sim.plan import load_plan
-    from loosefit.sim.runner import perturb_start
+    from loosefit.simulate import perturb_start
 
     body, garment, motion = plan_case(load_plan(task.plan), task.garment, task.motion, task.frames)
     params = SimParams.from_dict(task.params)

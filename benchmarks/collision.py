@@ -306,7 +306,7 @@ def speed(net, sdf_summary: dict, store, test_seqs, kinds: list[str], widths: li
     from loosefit.models.collision import (BodySDFConfig, BodySDFNet, CollisionResolver, ExactSDF,
                                            SDFTrainConfig, body_sdf_samples, correct_frame, correct_motion,
                                            flushed_denormals, motion_sdf_inputs, sdf_and_gradient, train_body_sdf)
-    from loosefit.models.motion_features import to_canonical
+    from loosefit.motion.heading import to_canonical
     from loosefit.threads import torch_threads
 
     body = AnnyBody()

@@ -21,7 +21,7 @@ from _common import save_results  # noqa: E402
 
 from loosefit.data import DatasetStore  # noqa: E402
 from loosefit.sim.quality import QualityGate, measure  # noqa: E402
-from loosefit.sim.runner import plan_body  # noqa: E402
+from loosefit.simulate import plan_body  # noqa: E402
 
 
 def gate_sequence(store: DatasetStore, name: str, gate: QualityGate) -> dict:

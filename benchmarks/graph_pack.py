@@ -39,6 +39,7 @@ import torch
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "benchmarks" / "experiments"))  # capacity and swingar_attention (pack, score)
 sys.path.insert(0, str(ROOT / "src"))
 
 

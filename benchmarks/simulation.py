@@ -25,7 +25,8 @@ from loosefit.body import AnnyBody  # noqa: E402
 from loosefit.data import DatasetStore  # noqa: E402
 from loosefit.garment import make_garment  # noqa: E402
 from loosefit.motion.procedural import generate  # noqa: E402
-from loosefit.sim import SimParams, run_plan, simulate_sequence  # noqa: E402
+from loosefit.sim import SimParams, simulate_sequence  # noqa: E402
+from loosefit.simulate import run_plan
 
 SKIRT = {"flare": 25.0, "length": 0.55}
 STATS = ("ms_per_frame", "quality", "penetration", "penetration_max", "penetration_depth", "max_strain", "strain_p99",

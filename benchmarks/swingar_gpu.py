@@ -242,6 +242,7 @@ def curve(windows: Path, out: Path, designs: list[str], variants: list[str], see
     from loosefit.config import load_config
     from loosefit.models.swingar import Config
 
+    sys.path.insert(0, str(ROOT / "benchmarks" / "experiments"))  # swingar_attention
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from swingar_attention import design_overrides
 

@@ -71,7 +71,7 @@ def main() -> None:
     from loosefit.body import AnnyBody
     from loosefit.cli import main as cli
     from loosefit.data.store import DatasetStore
-    from loosefit.sim import run_plan
+    from loosefit.simulate import run_plan
     from loosefit.sim.attach import body_lbs
 
     work = Path(args.work)

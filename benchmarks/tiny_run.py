@@ -17,7 +17,8 @@ from pathlib import Path
 import torch
 
 from loosefit.rig.prepare import prepare
-from loosefit.sim import load_plan, run_plan
+from loosefit.sim import load_plan
+from loosefit.simulate import run_plan
 
 try:
     from loosefit.training import train_model

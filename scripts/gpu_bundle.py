@@ -150,7 +150,7 @@ def record_anny(out: Path) -> None:
 
 def make_store(out: Path) -> None:
     from loosefit.rig.prepare import prepare
-    from loosefit.sim import run_plan
+    from loosefit.simulate import run_plan
 
     store = out / "train.zarr"
     shutil.rmtree(store, ignore_errors=True)

@@ -53,7 +53,7 @@ def pieces(frames: int, longest: int = PIECE_FRAMES) -> list[tuple[int, int]]:
 
 def main() -> None:
     from loosefit.motion.io import load_motion
-    from loosefit.sim.runner import plan_body
+    from loosefit.simulate import plan_body
     from loosefit.body import AnnyShape
 
     body = plan_body(tuple(AnnyShape().to_array().tolist()))

@@ -4,6 +4,10 @@ with what it was trained on and its test scores from an ``accuracy.py`` JSON.
 Run: .venv/bin/python scripts/ship_pretrained.py --accuracy benchmarks/results/accuracy-real-skirt.json \\
          --runs RUNS --garment skirt+average --name skirt [--methods virtualbones jointnet]
 (writes src/loosefit/pretrained/<name>-<method>/)
+
+Each shipped garment is checked against its run on the test sequences of the JSON's store (when the store is here):
+the largest vertex distance between the two animations and both RMSEs against the simulation, kept in its
+``pretrained.json`` under ``storage_check``.
 """
 
 from __future__ import annotations
@@ -12,7 +16,26 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 from loosefit.pretrained import ROOT, ship
+
+
+def storage_check(run: Path, shipped: Path, data: Path, sequences: list[str]) -> dict:
+    """How far the shipped checkpoint (float16 or int8) moves the animation of ``sequences`` from the run's
+    float32 one: the largest vertex distance (mm) and the pooled RMSE of each against the simulation (mm)."""
+    from loosefit.animate import Animator
+    from loosefit.data import DatasetStore
+
+    store = DatasetStore.open(data)
+    motions = [store.motion(store.sequence(name).motion) for name in sequences]
+    gt = [np.asarray(store.sequence(name).verts[:], np.float64) for name in sequences]
+    run_pred, shipped_pred = (Animator(folder, threads=2).animate_batch(motions) for folder in (run, shipped))
+    rmse = [1000 * np.sqrt(np.mean(np.concatenate([np.sum((p - g) ** 2, -1).ravel() for p, g in zip(preds, gt)])))
+            for preds in (run_pred, shipped_pred)]
+    largest = max(float(np.abs(np.linalg.norm(a - b, axis=-1)).max()) for a, b in zip(run_pred, shipped_pred))
+    return {"sequences": len(sequences), "max_vertex_distance_mm": 1000 * largest,
+            "run_rmse_mm": rmse[0], "shipped_rmse_mm": rmse[1]}
 
 
 def main() -> None:
@@ -38,6 +61,13 @@ def main() -> None:
             "results": Path(a.accuracy).name,
         }
         out = ship(Path(a.runs) / a.garment / method, ROOT / f"{a.name}-{method}", info)
+        if Path(results["data"]).is_dir():
+            meta = json.loads((out / "pretrained.json").read_text())
+            meta["storage_check"] = storage_check(Path(a.runs) / a.garment / method, out, Path(results["data"]),
+                                                  garment["sequences"]["test"])
+            (out / "pretrained.json").write_text(json.dumps(meta, indent=1))
+            print(f"{out}: int8 {meta['int8'] or 'nothing'}, float16 the rest; it moves the test animations by at most "
+                  f"{meta['storage_check']['max_vertex_distance_mm']:.2f} mm")
         print(f"{out}: {info['test']['rmse_mm']:.1f} mm RMSE on the test split "
               f"(body-LBS {info['test']['body_lbs_rmse_mm']:.1f})")
 

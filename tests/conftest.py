@@ -94,7 +94,7 @@ sim_params:
 
 def _build(tmp_root, name: str, plan_text: str, bones: int):
     from loosefit.rig.prepare import prepare
-    from loosefit.sim import run_plan
+    from loosefit.simulate import run_plan
 
     plan = tmp_root / f"{name}.yaml"
     plan.write_text(plan_text)

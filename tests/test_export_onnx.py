@@ -96,7 +96,7 @@ def test_onnx_steps_reproduce_animate(runs, motion, method, tmp_path):
 
 def test_metadata_round_trips_and_describes_the_state(runs, motion, body, tmp_path):
     path = tmp_path / "jn.onnx"
-    export_onnx(runs / "jointnet", path)
+    assert main(["export-onnx", str(runs / "jointnet"), "--out", str(path)]) == 0  # the command line, no --bones
     meta = read_metadata(path)
     proto = onnx.load(str(path))
     assert json.loads({p.key: p.value for p in proto.metadata_props}[METADATA_KEY]) == meta
@@ -109,7 +109,8 @@ def test_metadata_round_trips_and_describes_the_state(runs, motion, body, tmp_pa
     offsets = np.cumsum([0] + [int(np.prod(f["shape"])) for f in fields])
     assert [f["offset"] for f in fields] == offsets[:-1].tolist() and offsets[-1] == meta["state_size"]
     assert meta["initial_state"] == [0.0] * meta["state_size"]
-    assert [f["name"] for f in fields] == ["started", "previous_root_position", "previous_heading", "history", "gru_joints"]
+    assert [f["name"] for f in fields] == ["started", "previous_root_position", "previous_heading", "history",
+                                           "gru_joints"]
     assert fields[-1]["shape"] == [len(model.selected), model.gru.hidden]
     sess = session(path)
     assert [(i.name, i.shape) for i in sess.get_inputs()] == [

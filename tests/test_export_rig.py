@@ -15,7 +15,8 @@ from loosefit.cli import main
 from loosefit.data import DatasetStore
 from loosefit.errors import InputError
 from loosefit.export_rig import body_rig, export_rig, garment_rig
-from loosefit.models.motion_features import heading_frames, motion_features, to_world
+from loosefit.models.motion_features import motion_features
+from loosefit.motion.heading import heading_frames, to_world
 from loosefit.motion import Motion
 from loosefit.training import train_model
 from tests.io.conftest import blender_skinned_frames

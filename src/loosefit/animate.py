@@ -19,7 +19,8 @@ import torch
 from loosefit.config import load_config
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
-from loosefit.models.motion_features import FeatureStream, heading_frames, motion_features, to_world
+from loosefit.models.motion_features import FeatureStream, motion_features
+from loosefit.motion.heading import heading_frames, to_world
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
 from loosefit.motion_range import range_warnings

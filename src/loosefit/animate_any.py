@@ -17,9 +17,10 @@ import torch
 from loosefit.animate import load_run
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
+from loosefit.geometry.garment_batch import GarmentBatch
 from loosefit.models.fitgar_data import collate_frames, frame_items
 from loosefit.models.fitgar_inputs import DEFAULT_ANCHOR, GarmentBodyPair
-from loosefit.models.motion_features import to_world
+from loosefit.motion.heading import to_world
 from loosefit.models.registry import model_class
 from loosefit.train.protocol import to_device
 from loosefit.motion.motion import Motion
@@ -113,9 +114,11 @@ class AnyGarmentAnimator:
         chunks: dict[str, list[torch.Tensor]] = {name: [] for name in outputs}
         with torch_threads(self.threads), torch.no_grad():
             for start in range(0, len(items), self.frames_per_pass):
-                out = self.model(to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device))
+                batch = to_device(collate_frames(items[start:start + self.frames_per_pass]), self.device)
+                out = self.model(batch)
+                frames = GarmentBatch(batch["counts"])  # one garment per frame, all the pair's: padding adds no row
                 for name in outputs:
-                    chunks[name].append(out[name].reshape(-1, pair.num_verts, 3))
+                    chunks[name].append(frames.padded(out[name]))
         return {name: to_world(torch.cat(c).cpu().numpy(), inputs["rot"], inputs["origin"]) for name, c in chunks.items()}
 
 def is_static_run(run_dir: str | Path) -> bool:

@@ -34,8 +34,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 #: Short training for the demo, in minutes on 2 cores: the paper's layer sizes for VirtualBones (its global
 #: layer factorised through 64 channels), a narrower JointNet (its paper sizes need a GPU to train). Every 3 s
 #: motion is one training window from the zero state, as animation starts (90 frames, no warm-up), four to a
-#: batch. These settings were chosen on the spin of seed 11, a validation motion of the plan (benchmarks/README.md,
-#: "The demo's training"): VirtualBones' rate 2e-3 over 1e-3 and then 150 low-frequency epochs; the high-frequency
+#: batch. These settings were chosen on the spin of seed 11, a validation motion of the plan
+#: (benchmarks/experiments/LOG.md, "The demo's training"): VirtualBones' rate 2e-3 over 1e-3 and then 150 low-frequency epochs; the high-frequency
 #: loss on 30 random frames of a window (the same error, that stage 2.6x faster); not taken: GRUs of 256 units,
 #: batches of 8 (both worse on it). The held-out motions never chose anything.
 WHOLE_SEQUENCES = ["data.window=90", "data.stride=90", "data.burn_in=0", "train.batch_size=4", "train.progress=false"]
@@ -81,7 +81,7 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
     from loosefit.metrics.report import SequencePair, evaluate
     from loosefit.models.collision import handle_motion_collisions
     from loosefit.rig.prepare import prepare
-    from loosefit.sim import run_plan
+    from loosefit.simulate import run_plan
     from loosefit.sim.plan import load_plan
     from loosefit.viz.render import render_video, save_png, render_frames
     from loosefit.viz.scene import BODY_COLOR, MeshTrack

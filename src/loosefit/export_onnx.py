@@ -98,7 +98,7 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
         onnx.checker.check_model(proto)
         onnx.save(proto, str(tmp))
     return {"path": str(out), "bytes": out.stat().st_size, "method": graph.method, "vertices": V, "joints": J,
-            "state_size": graph.state_size, "bones": int(graph._bone_rest().shape[0]) if bones else 0}
+            "state_size": graph.state_size, "bones": int(graph.bone_rest_positions().shape[0]) if bones else 0}
 
 
 def describe(graph, meta: dict, model) -> dict:
@@ -116,7 +116,7 @@ def describe(graph, meta: dict, model) -> dict:
          "inputs": {"joint_rotations": [graph.num_joints, 3], "root_position": [3], "state": [graph.state_size]},
          "outputs": {"vertices": [int(model.template.shape[0]), 3], "next_state": [graph.state_size]}}
     if graph.bones:
-        rest = graph._bone_rest().detach().cpu().numpy()
+        rest = graph.bone_rest_positions().detach().cpu().numpy()
         d["outputs"][BONE_OUTPUT] = [len(rest), 4, 4]
         d["bones"] = {"count": len(rest), "rest_positions": rest.astype(np.float64).round(7).reshape(-1).tolist(),
                       "kind": "body joints" if graph.method == "body-lbs" else "virtual bones"}

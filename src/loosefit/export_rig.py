@@ -20,7 +20,8 @@ import torch
 from loosefit.animate import Animator
 from loosefit.errors import InputError
 from loosefit.io.skinned_mesh import SkinnedMesh, dense_to_sparse
-from loosefit.models.motion_features import heading_frames, motion_features
+from loosefit.models.motion_features import motion_features
+from loosefit.motion.heading import heading_frames
 from loosefit.motion.motion import Motion
 from loosefit.threads import torch_threads
 

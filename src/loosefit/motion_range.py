@@ -14,7 +14,7 @@ The quantities, per motion of ``T`` frames at ``fps`` (Z up):
 - root height ``z_t`` (metres): its minimum and maximum;
 - root horizontal speed ``fps * ||(x, y)_{t+1} - (x, y)_t||`` (m/s): its maximum;
 - root turn rate ``fps * |wrap(psi_{t+1} - psi_t)|`` (rad/s) about the up axis, ``psi`` the root's heading
-  as the networks see it (:func:`~loosefit.models.motion_features.heading_angles`): its maximum.
+  as the networks see it (:func:`~loosefit.motion.heading.heading_angles`): its maximum.
 
 Tolerances (:data:`HEIGHT_TOLERANCE_M`, :data:`SPEED_TOLERANCE`, :data:`TURN_TOLERANCE`): a motion is
 out of range when a value passes the training range by more than the tolerance, so that another take of a
@@ -58,7 +58,7 @@ def root_turn_rates(motion: Motion) -> np.ndarray:
     import torch
 
     from loosefit.geometry.rotations import axis_angle_to_matrix
-    from loosefit.models.motion_features import heading_angles
+    from loosefit.motion.heading import heading_angles
 
     root = axis_angle_to_matrix(torch.from_numpy(motion.rotations[:, 0]).double()).numpy()
     dpsi = np.diff(heading_angles(root))
@@ -171,7 +171,7 @@ def turn_bouts(motion: Motion) -> list[TurnBout]:
     import torch
 
     from loosefit.geometry.rotations import axis_angle_to_matrix
-    from loosefit.models.motion_features import heading_angles
+    from loosefit.motion.heading import heading_angles
 
     root = axis_angle_to_matrix(torch.from_numpy(motion.rotations[:, 0]).double()).numpy()
     dpsi = np.diff(heading_angles(root))

@@ -26,7 +26,7 @@ def copy(tiny_store, tmp_path):
 
 def test_damaged_chunk_stops_train_and_view_and_resume_simulates_it_again(copy, tiny_store, tmp_path):
     from loosefit.models.dataset import GarmentSequences
-    from loosefit.sim.runner import run_plan
+    from loosefit.simulate import run_plan
     from loosefit.viz.inputs import dataset_panel
 
     chunk = copy / "sequences" / WALK / "verts" / "0.0.0"

@@ -185,7 +185,7 @@ def test_repair_of_a_damaged_garment_drops_the_sequences_made_from_it(store, thr
 
 def test_resume_simulates_damaged_sequences_again(store, three):
     from loosefit.sim.plan import SequenceJob
-    from loosefit.sim.runner import _done
+    from loosefit.simulate import _done
 
     def job(name):
         return SequenceJob(id=name, garment="g", shape="b", motion="m70", sim_params="p", split="train", hash="h")

@@ -149,7 +149,7 @@ def test_remove_if_empty_keeps_a_store_with_sequences(store):
 
 def test_failed_first_plan_run_leaves_no_store(tmp_path):
     """(Its time is the import of the simulator and the body model, shared with the other plan tests.)"""
-    from loosefit.sim.runner import run_plan
+    from loosefit.simulate import run_plan
 
     (tmp_path / "bad.obj").write_text("v 0 0 0\nthis is not an OBJ file\n")
     plan = tmp_path / "plan.yaml"

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from loosefit.data import DatasetStore, format_info
+from loosefit.data.run_spread import floor_m
 from loosefit.errors import InputError
-from loosefit.metrics.reference import floor_m
 from tests.data.conftest import random_verts
 
 

@@ -8,6 +8,7 @@ import trimesh
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import cotangent_laplacian
 from loosefit.metrics.surface import (
+    bend_ratio,
     collapsed_faces,
     collapsed_pct,
     dihedral_angles_deg,
@@ -130,6 +131,20 @@ def test_roughness_of_a_fold_along_one_interior_edge():
         assert roughness_deg(other_way, folded, faces) == pytest.approx(min(2 * a, 360 - 2 * a) / (2 * n - 1))
 
 
+def test_bend_ratio_of_folds_of_known_angles():
+    """One rung folded by a in the prediction and by b in the simulation: a / b, whichever way each folds (the
+    unsigned angles); over two frames, the ratio of the sums. Flat in both: None."""
+    n = 4
+    flat, faces = strip(n)
+    for a, b in ((30.0, 60.0), (90.0, 45.0), (150.0, 150.0)):
+        pred, gt = fold(flat, 2.0, a), fold(flat, 2.0, -b)
+        assert bend_ratio(pred, gt, faces) == pytest.approx(a / b)
+        # two frames: the ratio of the sums, not the mean of the frames' ratios
+        two = bend_ratio(np.stack([pred, flat]), np.stack([gt, fold(flat, 1.0, 10.0)]), faces)
+        assert two == pytest.approx(a / (b + 10.0))
+    assert bend_ratio(flat, flat, faces) is None
+
+
 def test_identical_and_rigidly_moved_meshes_score_zero():
     m = trimesh.creation.icosphere(2)
     v, f = np.asarray(m.vertices), np.asarray(m.faces)
@@ -139,5 +154,6 @@ def test_identical_and_rigidly_moved_meshes_score_zero():
     turn = trimesh.transformations.rotation_matrix(0.7, [1, 2, 3])[:3, :3]
     moved = gt @ turn.T + [0.3, -1.0, 2.0]
     assert collapsed_pct(moved, gt, f) == 0.0 and roughness_deg(moved, gt, f) < 1e-6
+    assert bend_ratio(gt, gt, f) == 1.0 and bend_ratio(moved, gt, f) == pytest.approx(1.0, abs=1e-9)
     with pytest.raises(InputError, match="no edge shared"):
         roughness_deg(gt[:, :3], gt[:, :3], TRI)

@@ -10,7 +10,8 @@ import torch
 from loosefit.config import load_config
 from loosefit.geometry.rotations import axis_angle_to_matrix
 from loosefit.models.body_lbs import BodyLBS, BodyLBSConfig, Config, training_body
-from loosefit.models.motion_features import heading_frames, motion_features, to_world
+from loosefit.models.motion_features import motion_features
+from loosefit.motion.heading import heading_frames, to_world
 from loosefit.motion.motion import Motion
 from loosefit.sim.attach import skin_garment
 

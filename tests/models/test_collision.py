@@ -352,7 +352,7 @@ def test_bone_frames_are_the_points_in_each_bone(posed_proxy):
     (their columns start at zero, as the code's), and a code too short for its bones is refused."""
     from loosefit.body import AnnyBody
     from loosefit.models.collision import bone_frame_code, bone_local_points, motion_sdf_inputs, posed_joints
-    from loosefit.models.motion_features import heading_frames, to_canonical
+    from loosefit.motion.heading import heading_frames, to_canonical
     from loosefit.motion.procedural import generate
 
     body = AnnyBody()
@@ -390,7 +390,7 @@ def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, m
     """:class:`MotionBodySDF` (many frames in one pass, the frame folded into the first layer) gives each
     frame's :class:`FramedSDF` values and world gradients; :func:`correct_motion` (chunks of frames, one after
     another or in three threads) moves the vertices :func:`correct_frame` moves, by the same amounts."""
-    import loosefit.models.collision.resolver as resolver_module
+    import loosefit.models.collision.handling as handling_module
     from loosefit.geometry.ray_cull import AxisRayCuller
     from loosefit.models.collision import (CollisionResolver, FramedSDF, MotionBodySDF, correct_frame,
                                            correct_motion)
@@ -428,7 +428,7 @@ def test_motion_field_and_chunked_correction_match_frame_by_frame(posed_proxy, m
     # the cull about samples the vertices' moves carried out of it, which the network with a margin may call inside
     by_frame = np.stack([correct_frame(verts[t], resolver, net.bind(codes[t]).offset(0.01), (rot[t], origin[t]),
                                        culler.update(frames[t], verts[t]))[0] for t in range(T)])
-    monkeypatch.setattr(resolver_module, "FRAME_CHUNK", 4)  # several chunks
+    monkeypatch.setattr(handling_module, "FRAME_CHUNK", 4)  # several chunks
     serial, moved = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, workers=1)
     overlapped, moved_too = correct_motion(verts, resolver, net, codes, rot, origin, frames, culler, 0.01, workers=3)
     assert moved.sum() > 100 and np.array_equal(moved, moved_too) and np.array_equal(serial, overlapped)

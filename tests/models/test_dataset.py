@@ -4,8 +4,9 @@ import numpy as np
 import torch
 
 from loosefit.models.dataset import WindowDataset
-from loosefit.models.motion_features import HISTORY_ROOT_FEATURES, to_world
-from loosefit.rig.prepare import load_rig
+from loosefit.models.motion_features import HISTORY_ROOT_FEATURES
+from loosefit.motion.heading import to_world
+from loosefit.rig.prepared import load_rig
 from loosefit.rig.virtual_bones import skin_bones
 
 

@@ -11,7 +11,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.features import closest_body_points, relative_skinning_features
 from loosefit.geometry.normals import vertex_normals
 from loosefit.models.fitgar_inputs import GarmentBodyPair, graph_edges, pose_vector, shared_anchor_fraction
-from loosefit.models.motion_features import to_canonical
+from loosefit.motion.heading import to_canonical
 
 
 @pytest.fixture(scope="module")

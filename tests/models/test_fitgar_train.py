@@ -11,7 +11,7 @@ import pytest
 
 from loosefit.errors import InputError
 from loosefit.models.fitgar_data import GarmentFrames, Smoother
-from loosefit.models.motion_features import heading_frames, to_canonical
+from loosefit.motion.heading import heading_frames, to_canonical
 
 from .fitgar_fixtures import TINY, TINY_CONFIG, synthetic_store
 
@@ -81,7 +81,7 @@ def test_loosefit_train_fitgar(store, run, body):
     """The CLI trains both stages on the store, validates on the held-out dress, writes a run folder that
     rebuilds the model; the coarse loss falls over the epochs."""
     from loosefit.models.fitgar import FitGar
-    from loosefit.rig.prepare import load_fit_attribute
+    from loosefit.rig.prepared import load_fit_attribute
     from loosefit.train.run import load_weights
 
     out = run

@@ -1,4 +1,4 @@
-"""Heading-frame canonicalisation and motion features."""
+"""Motion features in the heading frame: invariance, history, streaming."""
 
 import numpy as np
 import pytest
@@ -13,12 +13,10 @@ from loosefit.models.motion_features import (
     FeatureStream,
     MotionHistory,
     check_history,
-    heading_frames,
     motion_features,
-    to_canonical,
-    to_world,
 )
 from loosefit.motion import Motion
+from loosefit.motion.heading import heading_frames
 
 
 def turned(motion: Motion, yaw: float, shift) -> Motion:
@@ -94,22 +92,6 @@ def test_history_time_constants_below_a_frame_or_not_finite_are_refused(bad):
         MotionHistory(bad)
     with pytest.raises(InputError, match="at least one time constant"):
         MotionHistory(())
-
-
-def test_canonical_round_trip_and_invariance():
-    m = random_motion(seed=1)
-    rng = np.random.default_rng(2)
-    pts = rng.normal(size=(m.num_frames, 7, 3))
-    rot, origin = heading_frames(m)
-    canon = to_canonical(pts, rot, origin)
-    assert np.abs(to_world(canon, rot, origin) - pts).max() < 1e-5
-    assert np.abs(to_world(torch.from_numpy(canon), rot, origin).numpy() - pts).max() < 1e-5
-    # Points carried along with a turned and shifted body keep their canonical coordinates.
-    m2 = turned(m, -2.0, [0.5, 0.3, 0.0])
-    Rz = axis_angle_to_matrix(torch.tensor([0.0, 0.0, -2.0], dtype=torch.float64)).numpy()
-    rot2, origin2 = heading_frames(m2)
-    assert np.abs(to_canonical(pts @ Rz.T + [0.5, 0.3, 0.0], rot2, origin2) - canon).max() < 1e-5
-    assert np.allclose(origin[:, 2], 0)
 
 
 def test_heading_of_a_turn_in_place_and_its_rate():

@@ -12,7 +12,7 @@ import torch
 from loosefit.models.fitgar import FitGar
 from loosefit.models.fitgar_data import collate_frames
 from loosefit.models.fitgar_stream import FRAME_INPUTS, GRAPH_ROUNDS, FitGarStream
-from loosefit.models.layers import gat_ln
+from loosefit.models.layers import gat_ln_fast
 from loosefit.models.layers.edge_pool import EdgeContractionPooling, greedy_contraction, greedy_contraction_rounds
 from loosefit.models.layers.gat_block import GATBlock, incoming_table
 from loosefit.models.layers.gat_ln import GATLN, attention_table
@@ -31,7 +31,7 @@ MANY_HEADS = SwinGarConfig(**{**SMALL, "graph_heads": [6, 6], "state_heads": 6, 
 def test_project_first_heads_are_the_layer_by_hand(heads, norm, centred):
     """Concatenated heads project first (on the CPU always, elsewhere past PROJECT_FIRST_HEADS): the same layer as
     written out by hand (float64), as the stacked product computes it and as the slot-by-slot sum of CUDA does."""
-    assert heads > gat_ln.PROJECT_FIRST_HEADS
+    assert heads > gat_ln_fast.PROJECT_FIRST_HEADS
     torch.manual_seed(0)
     layer = GATLN(IN, 2 * OUT + 1, heads=heads, alpha=2.0, norm=norm, centred=centred, concat=True).double()
     with torch.no_grad():
@@ -40,14 +40,14 @@ def test_project_first_heads_are_the_layer_by_hand(heads, norm, centred):
     x = torch.randn(3, V, IN, generator=torch.Generator().manual_seed(1), dtype=torch.float64) * 2.0 + 1.0
     got = layer(x, table, valid)
     torch.testing.assert_close(got[1], by_hand(layer, x[1]), rtol=1e-10, atol=1e-12)
-    before = gat_ln.PROJECT_FIRST_HEADS, gat_ln.CPU_EMBEDDING_BAG
+    before = gat_ln_fast.PROJECT_FIRST_HEADS, gat_ln_fast.CPU_EMBEDDING_BAG
     try:
-        gat_ln.CPU_EMBEDDING_BAG = False  # the slot-by-slot sum of CUDA
+        gat_ln_fast.CPU_EMBEDDING_BAG = False  # the slot-by-slot sum of CUDA
         by_slot = layer(x, table, valid)
-        gat_ln.PROJECT_FIRST_HEADS = 10 ** 6  # the stacked product, as the layer was first written
+        gat_ln_fast.PROJECT_FIRST_HEADS = 10 ** 6  # the stacked product, as the layer was first written
         stacked = layer(x, table, valid)
     finally:
-        gat_ln.PROJECT_FIRST_HEADS, gat_ln.CPU_EMBEDDING_BAG = before
+        gat_ln_fast.PROJECT_FIRST_HEADS, gat_ln_fast.CPU_EMBEDDING_BAG = before
     torch.testing.assert_close(got, stacked, rtol=1e-12, atol=1e-12)
     torch.testing.assert_close(got, by_slot, rtol=1e-12, atol=1e-12)
 
@@ -61,7 +61,7 @@ def test_neighbour_sums_and_their_gradients_agree():
     written = (P[..., None] * y[:, table]).sum(2)  # (B, V, D, H, C) summed over the slots
     up = torch.randn_like(written)
     expected = torch.autograd.grad(written, (y, P), up)
-    for fn in (gat_ln.neighbour_sum, gat_ln.neighbour_sum_by_slot):
+    for fn in (gat_ln_fast.neighbour_sum, gat_ln_fast.neighbour_sum_by_slot):
         out = fn(y, table, P)
         torch.testing.assert_close(out, written, rtol=1e-12, atol=1e-12)
         for got, want in zip(torch.autograd.grad(out, (y, P), up), expected):

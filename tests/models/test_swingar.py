@@ -516,7 +516,8 @@ def test_cli_trains_on_a_multi_garment_store(trained_run):
 def test_skeleton_follows_the_posed_body_in_the_canonical_frame(model, body):
     """The model's forward kinematics from motion features, plus the root translation it adds last, put every
     joint where the posed body has it in the canonical heading frame (a spin: the heading turns)."""
-    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+    from loosefit.models.motion_features import motion_features
+    from loosefit.motion.heading import heading_frames, to_canonical
 
     proxy = body.collision_proxy()
     motion = generate("spin", 1.0, 2, body)

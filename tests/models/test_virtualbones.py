@@ -13,7 +13,7 @@ from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences, WindowDataset
 from loosefit.models.motion_features import HISTORY_FRAMES, HISTORY_ROOT_FEATURES, ROOT_FEATURES, MotionHistory
 from loosefit.models.virtualbones import Config, VirtualBones, VirtualBonesConfig
-from loosefit.rig.prepare import load_rig
+from loosefit.rig.prepared import load_rig
 from loosefit.train import StageConfig, TrainConfig, seed_everything, train
 
 TINY = VirtualBonesConfig(lf_hidden=32, hf_hidden=32, global_channels=8, edge_channels=(16, 16))

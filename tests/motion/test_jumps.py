@@ -121,7 +121,7 @@ def test_plan_start_counts_the_files_frames(body, clips, tmp_path, caplog):
     """A plan reads every frame of a file: ``start: 1`` skips the rest frame as it did before the importer
     dropped such frames (the frames bench-real.yaml and demo.yaml simulate stay the same); ``start: 0`` keeps
     it, and the jump is warned about."""
-    from loosefit.sim.runner import load_plan_motion
+    from loosefit.simulate import load_plan_motion
     from loosefit.sim.plan import load_plan
 
     _, _, rested = clips

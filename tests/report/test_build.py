@@ -154,6 +154,26 @@ def test_claims_and_speed_tables_carry_the_benchmark_results(report):
     assert f"| {jn['measured']:.3f} | {jn['limit']:g} | {'pass' if jn['pass'] else 'FAIL'} |" in md
 
 
+def test_measure_speed_times_the_runs_own_models(report, tiny_store, tmp_path):
+    root, out = report
+    assert "were not timed" in (out / "index.html").read_text()  # not asked: said so, nothing measured
+    assert json.loads((out / "metrics.json").read_text())["own_speed"] == []
+    build_report(tiny_store, [root / "lbs", root / "jn"], tmp_path / "s", results_dir=None, images=False,
+                 handling="none", measure_speed=True)
+    doc = json.loads((tmp_path / "s" / "metrics.json").read_text())
+    html, md = (tmp_path / "s" / "index.html").read_text(), (tmp_path / "s" / "report.md").read_text()
+    store = DatasetStore.open(tiny_store)
+    (name,) = store.sequence_names(split="test")
+    vertices = store.sequence(name).verts.shape[1]
+    assert [r["method"] for r in doc["own_speed"]] == ["body-lbs", "jointnet"]
+    for row, run in zip(doc["own_speed"], (root / "lbs", root / "jn")):
+        assert row["run"] == str(run) and row["vertices"] == vertices and name in row["source"]
+        assert row["parameters"] == sum(p.numel() for p in Animator(run).model.parameters())
+        assert 0 < row["stream_fps"] < 1e6 and 0 < row["batch_fps"] < 1e6
+        assert f"{row['stream_fps']:.1f}" in html and f"{row['batch_fps']:.1f}" in md
+    assert "measured now on this machine" in html and "were not timed" not in html
+
+
 def test_bad_input_names_the_problem(report, tiny_store, tmp_path, capsys):
     root, out = report
     other = tmp_path / "other"

@@ -12,14 +12,8 @@ import loosefit.rig.prepare as prep
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.smoothing import frequency_split
-from loosefit.rig.prepare import (
-    load_bone_transforms,
-    load_descriptor,
-    load_fit_attribute,
-    load_rig,
-    prepare,
-    read_stats,
-)
+from loosefit.rig.prepare import prepare
+from loosefit.rig.prepared import load_bone_transforms, load_descriptor, load_fit_attribute, load_rig, read_stats
 from loosefit.rig.spectral import spectral_descriptor
 
 SETTINGS = {"bones": 5, "iterations": 5, "max_solve_frames": 20, "descriptor_samples": 64, "progress": False}

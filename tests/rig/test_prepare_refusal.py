@@ -9,7 +9,8 @@ import pytest
 
 from loosefit.data import DatasetStore
 from loosefit.errors import InputError
-from loosefit.rig.prepare import load_rig, prepare
+from loosefit.rig.prepare import prepare
+from loosefit.rig.prepared import load_rig
 
 
 def digest(root):

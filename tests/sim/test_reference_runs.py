@@ -9,10 +9,10 @@ import yaml
 
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
-from loosefit.sim import runner
+import loosefit.simulate as runner
 from loosefit.sim.params import SimParams
 from loosefit.sim.plan import load_plan
-from loosefit.sim.runner import CRASHED, perturb_start, run_plan
+from loosefit.simulate import CRASHED, perturb_start, run_plan
 from loosefit.sim.sequence import simulate_sequence
 from tests.sim.conftest import jump, ring_skirt, walk
 

@@ -23,6 +23,7 @@ from loosefit.data.layout import (
     COLLECTIONS, NAME_RE, REFERENCES, SINGULAR, SPLITS, STATUSES, attrs_problem, entry_arrays, read_json,
 )
 from loosefit.data.lock import current_holder
+from loosefit.data.run_spread import floor_m, stack_runs
 from loosefit.errors import InputError
 from loosefit.motion.motion import Motion
 
@@ -340,7 +341,7 @@ class StoreReader:
         pinned}, ``bodies`` {name: model, shape}, ``motions`` {name: frames, joints, fps, rig},
         ``sequences`` {count, frames, by_split: {split: {status: count, "frames": frames of ok ones}}},
         ``references`` {sequence: ok, failed, floor_mm} for the sound sequences with reference runs (the floor of
-        the base and its ok runs, :mod:`loosefit.metrics.reference`; None when no run is ok or one is damaged),
+        the base and its ok runs, :mod:`loosefit.data.run_spread`; None when no run is ok or one is damaged),
         ``problems`` (see :meth:`problems`; ``verify``: every chunk read), ``writer`` (the process
         holding the write lock, or None), ``size_bytes`` on disk, and the root attributes.
         Corrupt entries are left out of the counts and listed in ``problems``."""
@@ -404,12 +405,10 @@ class StoreReader:
 
     def _reference_summary(self, name: str) -> dict:
         """``ok`` and ``failed`` reference runs of sequence ``name`` and the floor in mm (None when unreadable)."""
-        from loosefit.metrics.reference import References
-
         try:
             runs = self.reference_runs(name)
             ok = sum(r["status"] == "ok" for r in runs.values())
-            floor = References(self.sequence(name).verts[:], self.references(name)).floor_mm if ok else None
+            floor = 1000.0 * floor_m(stack_runs(self.sequence(name).verts[:], self.references(name))) if ok else None
         except InputError:  # damage is listed among the problems
             return {"ok": 0, "failed": 0, "floor_mm": None, "damaged": True}
         return {"ok": ok, "failed": len(runs) - ok, "floor_mm": floor}

@@ -36,40 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from loosefit.data.run_spread import floor_m, mean_run, mean_square_distance, stack_runs
 from loosefit.errors import InputError
-
-
-def check_runs(runs) -> np.ndarray:
-    """``runs`` as a ``(N, T, V, 3)`` array (any float dtype kept); :class:`InputError` unless N >= 1 and finite."""
-    runs = np.asarray(runs)
-    if runs.ndim != 4 or runs.shape[-1] != 3 or min(runs.shape[:3]) == 0:
-        raise InputError(f"runs must have shape (N, T, V, 3) with N, T, V >= 1, got {runs.shape}")
-    if not np.isfinite(runs).all():
-        raise InputError("runs contain NaN or infinite positions (a failed run cannot be a reference)")
-    return runs
-
-
-def mean_run(runs) -> np.ndarray:
-    """The mean run ``(T, V, 3)`` float64 of ``runs (N, T, V, 3)`` metres."""
-    runs = check_runs(runs)
-    total = np.zeros(runs.shape[1:], np.float64)
-    for run in runs:  # one float64 copy at a time, not N
-        total += run
-    return total / len(runs)
-
-
-def _mean_square(a: np.ndarray, b: np.ndarray) -> float:
-    """Mean over frames and vertices of the squared Euclidean distance of ``a`` and ``b`` ``(T, V, 3)``."""
-    d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
-    return float(np.mean(np.sum(d * d, axis=-1)))
-
-
-def floor_m(runs, mean: np.ndarray | None = None) -> float:
-    """The floor (metres): the RMS distance of ``runs (N, T, V, 3)`` from their mean run (``mean``,
-    computed when None). Zero for a single run."""
-    runs = check_runs(runs)
-    mean = mean_run(runs) if mean is None else mean
-    return float(np.sqrt(np.mean([_mean_square(run, mean) for run in runs])))
 
 
 def corrected_rmse(rmse_vs_mean, floor, runs: int) -> float:
@@ -87,7 +55,7 @@ def rmse_m(pred, target) -> float:
     pred, target = np.asarray(pred), np.asarray(target)
     if pred.shape != target.shape or pred.ndim != 3 or pred.shape[-1] != 3:
         raise InputError(f"prediction {pred.shape} and target {target.shape} must both have shape (T, V, 3)")
-    return float(np.sqrt(_mean_square(pred, target)))
+    return float(np.sqrt(mean_square_distance(pred, target)))
 
 
 @dataclass(frozen=True)
@@ -120,13 +88,9 @@ class References:
     """
 
     def __init__(self, base, references):
-        base, references = np.asarray(base), np.asarray(references)
-        if references.ndim != 4 or references.shape[1:] != base.shape or len(references) == 0:
-            raise InputError(f"references must have shape (K >= 1, *{base.shape}) to match the base run, "
-                             f"got {references.shape}")
-        self.base = base
-        runs = check_runs(np.concatenate([base[None], references]))
-        self.count = len(references)
+        runs = stack_runs(base, references)
+        self.base = np.asarray(base)
+        self.count = len(runs) - 1
         self.mean = mean_run(runs)
         self.floor_m = floor_m(runs, self.mean)
 

@@ -10,7 +10,8 @@ the body than ``EvaluationSettings.surface_depth``, 5 mm by default: a limb pass
 ``deepest_mm`` (the deepest point inside the body, vertices and samples, 0 when none is):
 :func:`~loosefit.metrics.collision.penetration`; ``collapsed_pct`` (triangles under 20 % of their simulated area
 or flipped) and ``roughness_deg`` (mean dihedral-angle difference over interior edges), the bounded surface
-quality of :mod:`~loosefit.metrics.surface` (``None`` for a mesh without interior edges);
+quality of :mod:`~loosefit.metrics.surface` (``None`` for a mesh without interior edges), and ``bend_ratio`` (the
+prediction's mean unsigned dihedral angle over the simulation's, ``sim_bend_deg``: above 1, more folded than cloth);
 ``laplacian_consistency``: SwinGar's Laplacian consistency deviation ``|diag(L_pred) - diag(L_gt)|``
 (:func:`~loosefit.metrics.surface.laplacian_consistency`, half-cotangent weights, dimensionless) of the
 prediction against the simulation, over every vertex and frame: how far the prediction's local surface
@@ -25,7 +26,7 @@ Overall values pool every frame of every sequence, so long sequences weigh more:
 of the pooled mean square; mean errors, STED_s, Laplacian consistency and collision are weighted by frames x vertices,
 STED_t by frame pairs x vertices, Hausdorff by frames, E_norm and the collapsed share by frames x faces, the surface
 share by frames x surface samples (a row's ``surface_samples``), roughness by frames x interior edges (a row's
-``interior_edges``); the deepest point is the deepest of all; the overall STED combines the overall STED_s and
+``interior_edges``), the bend ratio by each row's simulated angle sum (the pooled sums' ratio); the deepest point is the deepest of all; the overall STED combines the overall STED_s and
 STED_t. A sequence of one frame has no temporal STED (``None``).
 RMSE against the mean and the floor pool their mean squares by frames x vertices over the sequences that
 have reference runs only (``references``: how many sequences that is); the corrected figure pools
@@ -54,9 +55,10 @@ from loosefit.metrics.errors import check_pair, hausdorff_per_frame, vertex_erro
 from loosefit.metrics.reference import References
 from loosefit.metrics.surface import (
     collapsed_faces,
+    dihedral_pair_deg,
     face_normal_deviation_deg,
     mean_laplacian_consistency,
-    roughness_per_edge_deg,
+    roughness_from_dihedrals,
 )
 from loosefit.paths import atomic_path
 
@@ -81,6 +83,7 @@ COLUMNS = (
     ("laplacian_consistency", "Lap. cons.", "{:.4f}"),
     ("collapsed_pct", "collapsed %", "{:.3f}"),
     ("roughness_deg", "rough. deg", "{:.2f}"),
+    ("bend_ratio", "bend x sim", "{:.2f}"),
 )
 
 
@@ -184,7 +187,9 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         normals = face_normal_deviation_deg(pred, gt, pair.faces)
         laplacian = mean_laplacian_consistency(gt, pred, pair.faces)
         collapsed = collapsed_faces(pred, gt, pair.faces)
-        rough = roughness_per_edge_deg(pred, gt, pair.faces)
+        theta_pred, theta_gt = dihedral_pair_deg(pred, gt, pair.faces)
+        rough = roughness_from_dihedrals(theta_pred, theta_gt)
+        sim_bend = float(np.abs(theta_gt).mean()) if theta_gt.size else 0.0
         if inside is None and pair.body_verts is not None:
             inside = penetration(pred, pair.faces, pair.body_verts, pair.body_faces, s.collision_tolerance,
                                  s.surface_depth)
@@ -215,6 +220,8 @@ def evaluate_sequence(pair: SequencePair, settings: EvaluationSettings | None = 
         "laplacian_consistency": laplacian,
         "collapsed_pct": float(100 * collapsed.mean()),
         "roughness_deg": float(rough.mean()) if rough.shape[1] else None,
+        "bend_ratio": float(np.abs(theta_pred).mean()) / sim_bend if sim_bend > 0 else None,
+        "sim_bend_deg": sim_bend,
         "faces": int(len(pair.faces)),
         "surface_samples": None if inside is None else inside.samples,
         "interior_edges": int(rough.shape[1]),
@@ -268,6 +275,9 @@ def overall_row(rows: list[dict], settings: EvaluationSettings | None = None) ->
         "laplacian_consistency": _weighted(rows, "laplacian_consistency", tv),
         "collapsed_pct": _weighted(rows, "collapsed_pct", lambda r: r["frames"] * r["faces"]),
         "roughness_deg": _weighted(rows, "roughness_deg", lambda r: r["frames"] * r["interior_edges"]),
+        # the pooled sum of the prediction's angles over the simulation's: rows weighted by their simulated sum
+        "bend_ratio": _weighted(rows, "bend_ratio", lambda r: r["frames"] * r["interior_edges"] * r["sim_bend_deg"]),
+        "sim_bend_deg": _weighted(rows, "sim_bend_deg", lambda r: r["frames"] * r["interior_edges"]),
         "surface_samples": None,
         "interior_edges": None,
     }

@@ -21,6 +21,11 @@ papers' E_norm and Laplacian consistency are unbounded and a few crumpled triang
   two triangles) and frames, ``theta`` the signed angle between the edge's two face normals (0 flat, positive
   folding one way, negative the other, so a crease folded the wrong way counts twice its angle), the difference
   wrapped into [0, 180]. Between 0 and 180.
+- bend ratio: how folded the prediction is, as a multiple of the simulation, ``sum_{t,e} |theta'_te| /
+  sum_{t,e} |theta_te|`` (the mean unsigned dihedral angle of the prediction over the simulation's). 1 is as folded
+  as the simulation; a smooth, averaged prediction scores below it, a crumpled or lumpy one above it. Unlike the
+  roughness it does not ask the folds to be where the simulation's are (no deterministic model can place chaotic
+  wrinkles), only that the surface is not more crumpled than cloth.
 """
 
 from __future__ import annotations
@@ -149,15 +154,34 @@ def dihedral_angles_deg(verts: np.ndarray, faces: np.ndarray, edge: np.ndarray, 
     return np.degrees(np.arctan2((cross(c1, c2) * direction).sum(-1), (c1 * c2).sum(-1)))
 
 
+def dihedral_pair_deg(pred: np.ndarray, gt: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The signed dihedral angles ``(T, Ei)`` degrees of ``pred`` and of ``gt`` (:func:`dihedral_angles_deg`) at
+    every interior edge (:func:`interior_edges`, in its order) and frame."""
+    pred, gt = check_pair(pred, gt)
+    _, faces = check_mesh(gt, faces)
+    edge, pair = interior_edges(faces)
+    return dihedral_angles_deg(pred, faces, edge, pair), dihedral_angles_deg(gt, faces, edge, pair)
+
+
+def roughness_from_dihedrals(theta_pred: np.ndarray, theta_gt: np.ndarray) -> np.ndarray:
+    """``|theta_pred - theta_gt|`` wrapped into [0, 180] degrees (a fold of 170 against one of -170 is 20 apart)."""
+    d = np.abs(theta_pred - theta_gt)
+    return np.minimum(d, 360.0 - d)
+
+
 def roughness_per_edge_deg(pred: np.ndarray, gt: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``(T, Ei)`` degrees in [0, 180]: ``|theta_pred - theta_gt|`` of every interior edge (:func:`interior_edges`,
     in its order) and frame, ``theta`` the signed dihedral angle (:func:`dihedral_angles_deg`), the difference
     wrapped (a fold of 170 degrees against one of -170 is 20 degrees apart)."""
-    pred, gt = check_pair(pred, gt)
-    _, faces = check_mesh(gt, faces)
-    edge, pair = interior_edges(faces)
-    d = np.abs(dihedral_angles_deg(pred, faces, edge, pair) - dihedral_angles_deg(gt, faces, edge, pair))
-    return np.minimum(d, 360.0 - d)
+    return roughness_from_dihedrals(*dihedral_pair_deg(pred, gt, faces))
+
+
+def bend_ratio(pred: np.ndarray, gt: np.ndarray, faces: np.ndarray) -> float | None:
+    """How folded ``pred`` is as a multiple of ``gt``: ``sum |theta_pred| / sum |theta_gt|`` over interior edges and
+    frames (module doc); None where the simulation is flat everywhere (no fold to compare with)."""
+    theta_pred, theta_gt = dihedral_pair_deg(pred, gt, faces)
+    sim = float(np.abs(theta_gt).sum())
+    return float(np.abs(theta_pred).sum()) / sim if sim > 0 else None
 
 
 def roughness_deg(pred: np.ndarray, gt: np.ndarray, faces: np.ndarray) -> float:

@@ -27,10 +27,11 @@ from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.smoothing import frequency_split
-from loosefit.models.motion_features import MotionHistory, heading_frames, motion_features, to_canonical
+from loosefit.models.motion_features import MotionHistory, motion_features
+from loosefit.motion.heading import heading_frames, to_canonical
 from loosefit.motion.mirror import joint_partners, mirror_motion
 from loosefit.motion.motion import Motion
-from loosefit.rig.prepare import load_bone_transforms, prepared_split
+from loosefit.rig.prepared import load_bone_transforms, prepared_split
 
 
 #: Smallest std used to normalise each feature group: root features mix metres per frame and radians

@@ -354,11 +354,12 @@ class RBFEnsemble(nn.Module):
         (the others renormalised): the leave-one-out fit. ``bandwidth``: the factor of ``sigma`` (None: the
         ensemble's own)."""
         sigma = self.config.sigma * (self.bandwidth if bandwidth is None else bandwidth)
+        # the log of VirtualBones Eq. 4's kernel
         logits = -((self.g(theta)[..., None, :] - self.g(self.pivot_theta)) ** 2).sum(-1) / (2 * sigma**2)
         if exclude is not None:
             hit = torch.arange(self.num_pivots, device=logits.device) == exclude[..., None]
             logits = logits.masked_fill(hit, float("-inf"))
-        return torch.softmax(logits, -1)
+        return torch.softmax(logits, -1)  # VirtualBones Eq. 3's normalised weights
 
     def weights_for(self, params: Mapping, bandwidth: float | None = None) -> torch.Tensor:
         """RBF weights ``(K,)`` of one parameter dict (``bandwidth``: as :meth:`weights` takes it)."""
@@ -374,7 +375,7 @@ class RBFEnsemble(nn.Module):
         w = self.weights_for(params)
         states = [None] * self.num_pivots if state is None else state
         outs = [p(root, joints, s) for p, s in zip(self.pivots, states)]
-        verts = sum(wk * o["verts"] for wk, o in zip(w, outs))
+        verts = sum(wk * o["verts"] for wk, o in zip(w, outs))  # VirtualBones Eq. 3
         return {"verts": verts, "weights": w, "state": [o["state"] for o in outs]}
 
     def fit(self, grams: np.ndarray, counts: np.ndarray, theta: np.ndarray, own: Sequence[int] | None = None) -> list[float]:

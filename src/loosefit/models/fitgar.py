@@ -118,7 +118,7 @@ class FitGarConfig:
         magnitude_bias: initial bias of the magnitude branches' last layer (their ReLU starts open).
         magnitude_activation: the magnitude branches' last activation: ``"relu"`` (FitGar Sec. 5.1, after every
             layer) or ``"softplus"`` (positive too, but never closed: a vertex whose ReLU output closes gets no
-            gradient and stays on its anchor; see ``benchmarks/capacity.py``).
+            gradient and stays on its anchor; see ``benchmarks/experiments/capacity.py``).
         coarse_weight, detail_weight: weights of the two loss terms.
         output: ``"decomposed"`` (FitGar Eq. 4); the ablations of FitGar Sec. 5.3 (one branch, no FitGar Eq. 4):
             ``"plain"`` (a 3-vector, unbounded) and ``"limited"`` (within plus or minus ``limit_factor``
@@ -345,7 +345,7 @@ class FitGar(nn.Module):
         a1 = ((batch["alpha"][:, :1] - self.alpha_mean[:1]) / self.alpha_std[:1])[batch["batch"]]
         x = torch.cat([batch["body_normal"], (batch["body_rel"] - self.rel_mean) / self.rel_std, a1], -1)
         h = torch.tanh(self.coarse_first(x, batch["edge_index"]))
-        return self.coarse(h, batch["edge_index"], batch["batch"])
+        return self.coarse(h, batch["edge_index"], batch["batch"])  # FitGar Eq. 6
 
     def attributes(self, batch: dict) -> torch.Tensor:
         """The normalised multi-source attributes ``(G, F + S + P)``: ``alpha``, ``beta``, ``theta``."""
@@ -370,7 +370,7 @@ class FitGar(nn.Module):
             h = h * self.encoding(batch)[idx]  # FitGar Eq. 7
         elif mode == "concat":
             h = torch.cat([h, self.encoding(batch)[idx]], -1)
-        return self.detail(h, batch["edge_index"], idx)
+        return self.detail(h, batch["edge_index"], idx)  # FitGar Eq. 8
 
     def check_anchor(self, batch: dict) -> None:
         """Refuse frames whose garment-body pairs were anchored otherwise than this model's training frames."""

@@ -24,10 +24,11 @@ from torch.utils.data import Dataset
 
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
+from loosefit.geometry.garment_batch import GarmentBatch
 from loosefit.geometry.smoothing import get_preset, smoothing_operator
 from loosefit.models.fitgar_inputs import (ANCHOR_MODES, DEFAULT_ANCHOR, GarmentBodyPair, PosedSkeleton,
                                           check_anchor_mode, pose_motion)
-from loosefit.models.motion_features import to_canonical
+from loosefit.motion.heading import to_canonical
 
 #: Per-node arrays of an item and of a batch.
 NODE_KEYS = ("anchor", "body_normal", "body_rel", "garment_rel", "verts", "smooth")
@@ -89,7 +90,7 @@ class GarmentFrames(Dataset):
     def __init__(self, store, split: str | None = "train", body=None, sim_params: dict | None = None,
                  names: list[str] | None = None, frame_stride: int = 1, frame_offset: int = 0,
                  smoothing: str = "fitgar", anchor: str = DEFAULT_ANCHOR):
-        from loosefit.rig.prepare import load_fit_attribute
+        from loosefit.rig.prepared import load_fit_attribute
 
         check_frame_choice(frame_stride, frame_offset)
         self.anchor = check_anchor_mode(anchor)
@@ -179,19 +180,18 @@ class GarmentFrames(Dataset):
 
 
 def collate_frames(items: list[dict]) -> dict:
-    """Frames (items of :class:`GarmentFrames` or :func:`frame_items`) -> one batched disjoint graph of tensors:
-    node arrays ``(N, ...)``, ``batch (N,)`` int64, ``edge_index (2, E)``, ``faces (F, 3)`` (shifted to the
-    batch's node numbering), ``counts (G,)`` vertices per frame, frame arrays ``(G, ...)``."""
-    counts = [len(it["anchor"]) for it in items]
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    out = {key: torch.from_numpy(np.concatenate([it[key] for it in items]).astype(np.float32))
-           for key in NODE_KEYS if key in items[0]}
+    """Frames (items of :class:`GarmentFrames` or :func:`frame_items`) -> one batched disjoint graph of tensors, the
+    packed form of the frames' garments (:class:`~loosefit.geometry.garment_batch.GarmentBatch`; ``GarmentBatch(
+    batch["counts"])`` converts a node array to the padded form and back): node arrays ``(N, ...)`` float32,
+    ``batch (N,)`` int64, ``edge_index (2, E)``, ``faces (F, 3)`` (shifted to the batch's node numbering),
+    ``counts (G,)`` vertices per frame; frame arrays ``(G, ...)`` float32."""
+    garments = GarmentBatch.from_list(faces=[it["faces"] for it in items], edges=[it["edges"] for it in items],
+                                      features={key: [it[key] for it in items] for key in NODE_KEYS if key in items[0]},
+                                      feature_dtype=torch.float32)
+    out = dict(garments.features)
     for key in (k for k in FRAME_KEYS if k in items[0]):
         out[key] = torch.from_numpy(np.stack([it[key] for it in items]).astype(np.float32))
-    out["edge_index"] = torch.from_numpy(np.concatenate([it["edges"] + s for it, s in zip(items, starts)], 1))
-    out["faces"] = torch.from_numpy(np.concatenate([it["faces"] + s for it, s in zip(items, starts)]))
-    out["batch"] = torch.from_numpy(np.repeat(np.arange(len(items)), counts))
-    out["counts"] = torch.tensor(counts)
+    out.update(garments.graph())
     return out
 
 

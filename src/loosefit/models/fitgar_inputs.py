@@ -29,8 +29,8 @@ skinning weights are interpolated, so the anchor stays on the posed surface. The
 projection along the body's interpolated normal field (:func:`~loosefit.geometry.features.normal_projection_points`),
 with the few projections that fall within 1 mm of another one moved apart (``anchor="spread"``, the default;
 :func:`~loosefit.geometry.features.spread_shared_points`); the projection alone (``anchor="normal"``); or the closest
-point (``anchor="surface"``). Chosen by measurement (``benchmarks/capacity.py anchors``, seed-0 templates at 3 cm
-edges on the average Anny body; share of garment vertices whose anchor another one's is within 1 mm, largest group):
+point (``anchor="surface"``). Chosen by measurement (``benchmarks/experiments/capacity.py anchors``, seed-0
+templates at 3 cm edges on the average Anny body; share of garment vertices whose anchor another one's is within 1 mm, largest group):
 
 =========== ======== ============= ====================== ============= ============= ===================
 kind        vertices closest Anny  closest vertex,        closest       projection    projection, shared
@@ -64,11 +64,11 @@ import torch
 from loosefit.errors import InputError
 from loosefit.geometry.features import (closest_body_points, coincident_groups, nearest_body_vertex,
                                         normal_projection_points, spread_shared_points)
-from loosefit.geometry.laplacian import edges as mesh_edges
 from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.rotations import axis_angle_to_matrix
-from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+from loosefit.models.motion_features import motion_features
+from loosefit.motion.heading import heading_frames, to_canonical
 from loosefit.motion.motion import Motion
 
 #: Columns of :func:`motion_features`' ``root`` block holding the root rotation without its heading (6D).
@@ -76,9 +76,11 @@ ROOT_TILT = slice(5, 11)
 
 
 def graph_edges(faces: np.ndarray) -> np.ndarray:
-    """``(2, E)`` int64 directed mesh edges, both directions of every undirected edge."""
-    e = mesh_edges(np.asarray(faces, np.int64))
-    return np.ascontiguousarray(np.concatenate([e, e[:, ::-1]]).T)
+    """``(2, E)`` int64 directed mesh edges, both directions of every undirected edge
+    (:func:`loosefit.geometry.garment_batch.directed_edges`, the graph every garment batch builds)."""
+    from loosefit.geometry.garment_batch import directed_edges
+
+    return directed_edges(faces)
 
 
 def pose_vector(motion: Motion) -> np.ndarray:

@@ -65,7 +65,7 @@ from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
 from loosefit.models.layers.gru_bptt import by_hand, gru_layers
 from loosefit.models.layers.mlp import MLP
-from loosefit.rig.prepare import load_rig
+from loosefit.rig.prepared import load_rig
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import masked_errors_mm, normal_loss, vertex_l1
 
@@ -106,7 +106,7 @@ class JointNetConfig:
             ``"hoyer"`` term and ``association_radius`` 0.4 m, where an arm nudge moved the skirt below the knees
             0.06-0.12x as much as VirtualBones' on the three seeds tried; the paper's L1 at 1e-5 left the association
             dense and that ratio a draw of the seed (0.25x or 0.78x), and at 1e-3 it shrank ``A`` so far that on
-            80 bones training lagged (``benchmarks/jointnet_sparsity.py``, ``benchmarks/README.md``).
+            80 bones training lagged (``benchmarks/experiments/jointnet_sparsity.py``, ``benchmarks/experiments/LOG.md``).
         association: ``"l1"`` (the paper): bones read ``relu(A) psi`` and the loss holds ``||relu(A)||_1``;
             or ``"hoyer"`` (ours): bones read each row of ``relu(A)`` normalised to sum 1 (a weighted mean of
             joint features, on the same scale however few joints a bone listens to) and the loss holds the
@@ -122,7 +122,7 @@ class JointNetConfig:
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
         root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
             recent turning and velocity, exponential moving averages; ours, not in the paper). Measured on the
-            demo's held-out spin (``benchmarks/README.md``, "Motion history").
+            demo's held-out spin (``benchmarks/experiments/LOG.md``, "Motion history").
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
     """
@@ -268,7 +268,7 @@ class JointGRU(nn.Module):
     def all_joints_by_hand(self, x: torch.Tensor, h: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` for training on the CPU: all joints frame by frame in one batched product, differentiated
         by :mod:`~loosefit.models.layers.gru_bptt` (whose weight gradients are formed once per window, not per
-        frame: ``benchmarks/gru_speed.py``)."""
+        frame: ``benchmarks/experiments/gru_speed.py``)."""
         N, T, G, _ = x.shape
         h = x.new_zeros(G, N, self.hidden) if h is None else h.transpose(0, 1)  # (G, N, H)
         out, last = gru_layers(x.permute(2, 0, 1, 3), h, self.weight_ih, self.weight_hh, self.bias_ih[:, 0],
@@ -414,6 +414,7 @@ class JointNet(GarmentModel):
     def fourier_features(self) -> torch.Tensor:
         """Garment prior ``(B, K)`` from the bone rest positions (JointNet Eq. 3)."""
         phase = 2 * math.pi * self.bone_rest @ self.fourier_freqs.T  # (B, K/2)
+        # JointNet Eq. 3
         return torch.cat([self.fourier_alpha * torch.cos(phase), self.fourier_alpha * torch.sin(phase)], -1)
 
     def join_prior(self, features: torch.Tensor) -> torch.Tensor:
@@ -421,7 +422,7 @@ class JointNet(GarmentModel):
         f_V] (..., B, 2K)`` (``fourier="concat"``, Fig. 2) or ``relu(A) psi + f_V (..., B, K)`` (``"add"``, Eq. 4)."""
         prior = self.fourier_features()
         if self.config.fourier == "add":
-            return features + prior
+            return features + prior  # JointNet Eq. 4
         return torch.cat([features, prior.expand(features.shape[:-1] + prior.shape[-1:])], -1)
 
     def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
@@ -457,14 +458,16 @@ class JointNet(GarmentModel):
         psi = grouped_linear(self.joint_out_weight, hidden.transpose(0, 2).flatten(1, 2)) + self.joint_out_bias
         psi = psi.unflatten(1, (T, N)).permute(2, 1, 0, 3)  # (N, T, J_s, K)
         association = self.association_matrix()
+        # JointNet Eq. 2 (its Eq. 4 with fourier="add", in join_prior)
         bone_features = self.join_prior(association @ psi)  # (N, T, B, 2K) or (N, T, B, K)
         R, trans = self.bone_transforms(bone_features)
         rest, displacement = self.rig_rest, None
         if psd:
+            # JointNet Eq. 5: the joint-specific PSD, added in the canonical rest space
             weights = self.psd_mlp(psi)  # (N, T, J_s, |X|)
             displacement = (weights.flatten(-2) @ self.psd_basis.flatten(0, 1).flatten(-2)).unflatten(-1, (-1, 3))
             rest = rest + displacement
-        verts = self.skin(rest, R, trans)
+        verts = self.skin(rest, R, trans)  # JointNet Eq. 1
         return {"verts": verts, "bones": (R, trans), "association": association, "displacement": displacement, "state": state}
 
     # ------------------------------------------------------------------ trainer protocol
@@ -485,7 +488,7 @@ class JointNet(GarmentModel):
         if self.config.association == "hoyer":
             l1, l2 = A.sum(-1), A.norm(dim=-1)
             return torch.where(l2 > 0, l1 / l2.clamp_min(1e-12) - 1, torch.zeros_like(l1)).sum()
-        return A.sum()
+        return A.sum()  # JointNet Eq. 8
 
     @staticmethod
     def mask(batch: dict) -> torch.Tensor:
@@ -499,10 +502,10 @@ class JointNet(GarmentModel):
         self.carry.keep(batch, out["state"])
         pred = out["verts"]
         target, mask = batch["verts"][:, frames], mask[:, frames]
-        l1 = vertex_l1(pred, target, mask)
+        l1 = vertex_l1(pred, target, mask)  # JointNet Eq. 7
         normal = normal_loss(pred, target, self.faces, mask)
         sparse = self.sparsity_loss()
-        loss = l1 + self.config.lambda_norm * normal + self.config.lambda_sparse * sparse
+        loss = l1 + self.config.lambda_norm * normal + self.config.lambda_sparse * sparse  # JointNet Eq. 6
         return loss, {"l1_mm": l1.item() * 1e3, "normal": normal.item(), "sparsity": sparse.item()}
 
     def validation_metrics(self, batch: dict, stage: str) -> dict[str, float]:

@@ -25,7 +25,7 @@ frame, and with ``vertical`` also of the vertical root displacement (m per frame
 They say how fast and which way the body has been turning and moving over the last fraction of a second (and,
 with ``vertical``, rising or falling), the motion a loose skirt still carries (it lags the body). A recurrent
 network can learn such filters itself; given them, VirtualBones generalised better to a held-out spin
-(``benchmarks/README.md``, "Motion history").
+(``benchmarks/experiments/LOG.md``, "Motion history").
 
 Streaming use: :class:`FeatureStream` computes the same features one frame at a time.
 """
@@ -40,6 +40,7 @@ import torch
 
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_sixd
+from loosefit.motion.heading import heading_angles, rot_z
 from loosefit.motion.motion import Motion
 
 #: Root features without history.
@@ -83,47 +84,6 @@ class MotionHistory:
     def root_features(self) -> int:
         """How many root features :func:`motion_features` gives with this history."""
         return ROOT_FEATURES + self.channels * len(self.frames)
-
-
-#: The body's forward direction at rest (Anny and every loosefit body face -Y).
-FORWARD = np.array([0.0, -1.0, 0.0])
-
-
-def heading_angles(root_rot: np.ndarray) -> np.ndarray:
-    """Heading ``psi (T,)`` radians of root rotations ``(T, 3, 3)``: the rotation about Z that takes the
-    rest forward (-Y) to the horizontal projection of the rotated forward direction."""
-    fwd = root_rot @ FORWARD
-    return np.arctan2(fwd[:, 0], -fwd[:, 1])
-
-
-def rot_z(psi: np.ndarray) -> np.ndarray:
-    """``(T, 3, 3)`` rotations about Z by ``psi (T,)``."""
-    c, s = np.cos(psi), np.sin(psi)
-    R = np.zeros(psi.shape + (3, 3))
-    R[..., 0, 0], R[..., 0, 1], R[..., 1, 0], R[..., 1, 1], R[..., 2, 2] = c, -s, s, c, 1
-    return R
-
-
-def heading_frames(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
-    """Heading frames of a motion: rotations ``(T, 3, 3)`` float64 and origins ``(T, 3)`` (z = 0)."""
-    root_rot = axis_angle_to_matrix(torch.from_numpy(motion.rotations[:, 0]).double()).numpy()
-    origin = motion.translation.astype(np.float64).copy()
-    origin[:, 2] = 0.0
-    return rot_z(heading_angles(root_rot)), origin
-
-
-def to_canonical(points: np.ndarray, rot: np.ndarray, origin: np.ndarray) -> np.ndarray:
-    """World points ``(T, N, 3)`` -> canonical ``(T, N, 3)`` float32 with frames ``rot (T,3,3)``, ``origin (T,3)``."""
-    return ((points - origin[:, None]) @ rot).astype(np.float32)  # p R == (R^T p^T)^T
-
-
-def to_world(points, rot, origin):
-    """Canonical points ``(T, N, 3)`` -> world; numpy or torch (then ``rot``/``origin`` may be numpy)."""
-    if isinstance(points, torch.Tensor):
-        rot = torch.as_tensor(rot, dtype=points.dtype, device=points.device)
-        origin = torch.as_tensor(origin, dtype=points.dtype, device=points.device)
-        return points @ rot.transpose(-1, -2) + origin[:, None]
-    return (points @ rot.transpose(0, 2, 1) + origin[:, None]).astype(np.float32)
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:

@@ -21,7 +21,8 @@ from loosefit.body import AnnyBody, AnnyShape
 from loosefit.body.base import BodyModel
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
-from loosefit.geometry.laplacian import edges, mass_matrix
+from loosefit.geometry.garment_batch import GarmentBatch
+from loosefit.geometry.laplacian import mass_matrix
 from loosefit.geometry.normals import vertex_normals
 from loosefit.models.dataset import STD_FLOOR, GarmentSequences
 from loosefit.models.layers.gat_ln import attention_table
@@ -29,6 +30,8 @@ from loosefit.rig.fit_attribute import body_distances
 from loosefit.rig.spectral import check_distance, spectral_descriptor
 from loosefit.sim.attach import garment_weights
 
+#: The per-vertex arrays of a :class:`GarmentGraph` (besides its rest positions).
+VERTEX_KEYS = ("normals", "fit", "mass", "skin_prior")
 #: Areal density of the garment fabric, kg/m^2, for the gravity term (silk-like; not in the paper).
 DEFAULT_DENSITY = 0.1
 
@@ -81,15 +84,27 @@ class GarmentGraph:
     def num_verts(self) -> int:
         return len(self.rest)
 
+    def garment(self) -> GarmentBatch:
+        """The garment as a one-garment :class:`~loosefit.geometry.garment_batch.GarmentBatch`: ``rest``, ``faces``,
+        its mesh edges both ways and the per-vertex features ``normals``, ``fit``, ``mass``, ``skin_prior`` (an
+        :class:`InputError` when they disagree on the vertex count or a face names a vertex it does not have)."""
+        return GarmentBatch.from_list([self.rest], [self.faces], features={k: [getattr(self, k)] for k in VERTEX_KEYS},
+                                      names=[self.name])
+
     def tensors(self) -> dict[str, torch.Tensor]:
-        """The graph as tensors, with the attention table (``table``, ``valid`` ``(V, D)``), the mesh
-        ``edges (E, 2)`` and the ``face_pairs (P, 2)`` the losses use."""
+        """The graph as tensors (those of :meth:`garment`, then the per-garment ``descriptor``, ``body_shape`` and
+        ``rest_joints``), with the attention table (``table``, ``valid`` ``(V, D)``: each vertex's neighbourhood),
+        the mesh ``edges (E, 2)`` (each undirected edge once, ``i < j``) and the ``face_pairs (P, 2)`` the losses
+        use."""
+        garment = self.garment()
         table, valid = attention_table(self.faces, self.num_verts)
-        out = {k: torch.from_numpy(np.ascontiguousarray(getattr(self, k)))
-               for k in ("rest", "faces", "normals", "fit", "descriptor", "mass", "body_shape", "rest_joints",
-                           "skin_prior")}
-        out.update(table=torch.from_numpy(table), valid=torch.from_numpy(valid),
-                   edges=torch.from_numpy(edges(self.faces)), face_pairs=torch.from_numpy(face_pairs(self.faces)))
+        out = {"rest": garment.verts, "faces": garment.faces, **garment.features}
+        out.update({k: torch.from_numpy(np.ascontiguousarray(getattr(self, k)))
+                    for k in ("descriptor", "body_shape", "rest_joints")})
+        # directed_edges lists each undirected edge (i < j, sorted) first, then the same edges reversed
+        undirected = garment.edge_index[:, : garment.edge_index.shape[1] // 2]
+        out.update(table=torch.from_numpy(table), valid=torch.from_numpy(valid), edges=undirected.T.contiguous(),
+                   face_pairs=torch.from_numpy(face_pairs(self.faces)))
         return out
 
 

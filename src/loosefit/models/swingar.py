@@ -56,7 +56,7 @@ Rest-position Fourier features (``corrective_fourier``, ours, off by default): :
 garment appended to the corrective's node features. The paper's node inputs are smooth over the garment, and the
 folds left for the corrective are the high frequencies a network learns last: with 6 frequencies the CPU preset
 learns four frames of a skirt to 4.6 mm in 6,000 Adam steps, where it stalls at 6.7 without
-(``benchmarks/README.md``, SwinGar's memorisation). They describe the training garments' absolute positions, and what they do on unseen garments is
+(``benchmarks/experiments/LOG.md``, SwinGar's capacity and memorisation). They describe the training garments' absolute positions, and what they do on unseen garments is
 not measured.
 
 Departures, named: the pose is loosefit's heading-invariant motion feature vector (6D rotations) rather
@@ -384,24 +384,24 @@ class SwinGar(nn.Module):
         """Unweighted terms of SwinGar Eqs. 11-14 for ``pred (B, T, V, 3)`` against ``batch``: ``vert`` (m^2),
         ``edge`` (m^2), ``bend``, ``gravity`` (J), ``collision`` (m^2; 0 without a body in the batch)."""
         g, target = batch["graph_tensors"], batch["verts"]
-        terms = {"vert": ((pred - target) ** 2).sum(-1).mean()}
+        terms = {"vert": ((pred - target) ** 2).sum(-1).mean()}  # SwinGar Eq. 11
         e = g["edges"]
 
         def lengths(x):
             return (x[..., e[:, 0], :] - x[..., e[:, 1], :]).norm(dim=-1)
 
-        terms["edge"] = ((lengths(pred) - lengths(target)) ** 2).mean()
+        terms["edge"] = ((lengths(pred) - lengths(target)) ** 2).mean()  # SwinGar Eq. 12, edge term
         n = face_normals_torch(pred, g["faces"])
         pairs = g["face_pairs"]
         diff = n[..., pairs[:, 1], :] - n[..., pairs[:, 0], :]
         lap = torch.zeros_like(n).index_add_(-2, pairs[:, 0], diff).index_add_(-2, pairs[:, 1], -diff)
-        terms["bend"] = lap.square().sum(-1).mean()
-        terms["gravity"] = GRAVITY * (g["mass"] * (pred[..., 2] - target[..., 2])).sum(-1).mean()
+        terms["bend"] = lap.square().sum(-1).mean()  # SwinGar Eq. 12, bending term
+        terms["gravity"] = GRAVITY * (g["mass"] * (pred[..., 2] - target[..., 2])).sum(-1).mean()  # SwinGar Eq. 13
         if "body" in batch:
             idx = batch["body_nearest"][..., None].expand(-1, -1, -1, 3)
             b, bn = torch.gather(batch["body"], 2, idx), torch.gather(batch["body_normals"], 2, idx)
             h = ((pred - b) * bn).sum(-1)
-            terms["collision"] = torch.clamp(h - self.config.collision_eps, max=0.0).square().mean()
+            terms["collision"] = torch.clamp(h - self.config.collision_eps, max=0.0).square().mean()  # SwinGar Eq. 14
         else:
             terms["collision"] = pred.new_zeros(())
         return terms

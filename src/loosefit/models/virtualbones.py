@@ -62,7 +62,7 @@ from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
 from loosefit.models.layers.gru import GRUHead
 from loosefit.models.layers.mlp import MLP, NEGATIVE_SLOPE
 from loosefit.rig.normalization import RunningStats
-from loosefit.rig.prepare import load_rig
+from loosefit.rig.prepared import load_rig
 from loosefit.train import StageConfig, TrainConfig
 from loosefit.train.losses import (
     collision_loss,
@@ -122,7 +122,7 @@ class VirtualBonesConfig:
             held-out RMSE either way, within 0.2 mm per test motion.
         root_history: read the motion's history among the root features (:mod:`loosefit.models.motion_features`:
             recent turning and velocity, exponential moving averages; ours, not in the paper). Compared on the demo's
-            spin (``benchmarks/README.md``, "Motion history"), which was then a test motion and is now the demo's
+            spin (``benchmarks/experiments/LOG.md``, "Motion history"), which was then a test motion and is now the demo's
             validation spin: the comparison is a validation one only from that change on.
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
@@ -343,7 +343,7 @@ class VirtualBones(GarmentModel):
             self.carry.keep(batch, (h_low, None))
             vertex = vertex_distance(lf, batch["lf"], mask)
             lap = laplacian_difference(lf, batch["lf"], self.laplacian(), mask)
-            loss = vertex + c.laplacian_weight * lap
+            loss = vertex + c.laplacian_weight * lap  # VirtualBones Eq. 2
             terms = {"vertex": vertex.item(), "laplacian": lap.item()}
             if c.bone_weight > 0:
                 sq = ((raw - self.encode_bones(batch["bone_rot"], batch["bone_trans"])) ** 2).mean((-1, -2))

@@ -11,7 +11,7 @@ it came: a dress's hem stays where the last stride put it, so one pose has sever
 of the pose learns their mean. ``from_rest`` removes that memory: between keys the body goes back to its
 rest pose (every joint unrotated, the root turned only to the key's heading) and holds it, so that every
 key is reached along the same path from a rested drape. What memory is left is the cloth's own: a dress
-rests in one of several drapes of the same pose (``benchmarks/capacity.py repeats`` measures their spread).
+rests in one of several drapes of the same pose (``benchmarks/experiments/capacity.py repeats`` measures their spread).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import torch
 
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import axis_angle_to_matrix, axis_angle_to_quaternion, quaternion_to_axis_angle
-from loosefit.models.motion_features import heading_angles
+from loosefit.motion.heading import heading_angles
 from loosefit.motion.motion import Motion
 from loosefit.motion.resample import slerp
 

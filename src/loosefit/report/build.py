@@ -28,6 +28,7 @@ from loosefit.errors import InputError
 from loosefit.metrics.report import COLUMNS, SequencePair, evaluate
 from loosefit.paths import atomic_path
 from loosefit.report.claims import claims_table, speed_table
+from loosefit.report.own_speed import own_speed_rows
 from loosefit.report.figures import error_map_png, error_over_time_png, rmse_per_frame_mm
 from loosefit.report.predictions import load_methods, load_sequences
 
@@ -44,7 +45,7 @@ REFERENCE_KEYS = ("rmse_vs_mean_mm", "rmse_vs_mean_corrected_mm", "floor_mm")
 #: columns with the reference runs) measured 1,728 pixels in Chromium with four-digit millimetres, cut off in a
 #: 1280-pixel window; two fit (``tests/report/test_layout.py``).
 SURFACE_KEYS = ("collision_pct", "surface_inside_pct", "deepest_mm", "laplacian_consistency", "collapsed_pct",
-                "roughness_deg")
+                "roughness_deg", "bend_ratio")
 
 
 def _fmt(value, fmt: str) -> str:
@@ -94,6 +95,14 @@ def speed_rows(speed: list[dict]) -> list[dict]:
                             _fmt(r["batch_speedup"], "{:.1f}x")]} for r in speed]
 
 
+def own_speed_cells(rows: list[dict]) -> list[dict]:
+    """The rows of :func:`loosefit.report.own_speed.own_speed_rows` with the formatted ``cells`` of the table of
+    the runs' own speed (garment, vertices, method, parameters, stream fps, batch fps, how it was measured)."""
+    return [{**r, "cells": [r["garment"], str(r["vertices"]), r["method"], _fmt(r["parameters"], "{:,}"),
+                            _fmt(r["stream_fps"], "{:.1f}"), _fmt(r["batch_fps"], "{:.1f}"), r["source"]]}
+            for r in rows]
+
+
 def claim_rows(claims: list[dict]) -> list[dict]:
     """The rows of :func:`loosefit.report.claims.claims_table` with the claims table's formatted texts."""
     return [{**r, "ours_text": _fmt(r["ours"], "{:.3f}"), "limit_text": _fmt(r["limit"], "{:g}"),
@@ -109,10 +118,12 @@ def markdown_text(value) -> str:
 
 def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequences: list[str] | None = None,
                  split: str | None = "test", results_dir: str | Path | None = DEFAULT_RESULTS, device: str = "cpu",
-                 images: bool = True, handling: str = "exact") -> Path:
+                 images: bool = True, handling: str = "exact", measure_speed: bool = False) -> Path:
     """Animate the held-out ``sequences`` (default: the ``split``) of ``data`` with every run, evaluate
     them, draw the figures and write the report into ``out``; returns ``out/index.html``. The animations get
     collision handling ``handling`` (``"exact"``, ``"pushout"`` or ``"none"``), as ``loosefit animate`` does.
+    ``measure_speed``: also time every run's own model on this machine (:mod:`loosefit.report.own_speed`), beside
+    the speed table copied from the benchmark results.
 
     Raises:
         InputError: a missing store or run, a run for a garment none of the sequences wears, an unknown
@@ -164,6 +175,7 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
         plots.append(entry)
 
     claims, speed = claims_table(results_dir), speed_table(results_dir)
+    own_speed = own_speed_rows(methods, seqs) if measure_speed else []
     columns = _shown_columns(evaluations)
     context = {
         "title": f"loosefit report: {data.name}",
@@ -184,13 +196,15 @@ def build_report(data: str | Path, runs: list[str | Path], out: str | Path, sequ
                        "references": len(s.references) if s.references is not None else 0} for s in seqs],
         "plots": plots,
         "speed": speed_rows(speed),
+        "own_speed": own_speed_cells(own_speed),
+        "measured_speed": measure_speed,
         "claims": claim_rows(claims),
         "view_command": f"loosefit view {data}:{seqs[0].name}" if seqs else "",
     }
     context["tables"] = metric_tables(columns, context["methods"])
     page, md = render_pages(context)
     doc = {"data": context["data"], "collision_handling": handling, "methods": evaluations, "sequences": context["sequences"], "plots": plots,
-           "speed": speed, "claims": claims}
+           "speed": speed, "own_speed": own_speed, "claims": claims}
     with atomic_path(out / "metrics.json") as tmp:
         tmp.write_text(json.dumps(doc, indent=2) + "\n")
     with atomic_path(out / "report.md") as tmp:

@@ -1,11 +1,12 @@
 """Garment preparation: virtual bones (SSDR), the spectral descriptor, the fit attribute, normalisation
-statistics, and the ``prepare`` stage that stores them with a dataset (:func:`loosefit.rig.prepare.prepare`;
-the function is not re-exported here, where its name would hide its module)."""
+statistics, the ``prepare`` stage that stores them with a dataset (:func:`loosefit.rig.prepare.prepare`;
+the function is not re-exported here, where its name would hide its module) and the readers of what it
+stored (:mod:`loosefit.rig.prepared`)."""
 
 from loosefit.rig.fit_attribute import FitAttributeModel, distance_vector
 from loosefit.rig.normalization import NormalizationStats, RunningStats
-from loosefit.rig.prepare import (
-    PrepareSettings,
+from loosefit.rig.prepare import PrepareSettings
+from loosefit.rig.prepared import (
     load_bone_transforms,
     load_descriptor,
     load_fit_attribute,

@@ -132,7 +132,7 @@ class FitAttributeModel:
         if X.ndim != 2 or len(X) < 2 or not np.isfinite(X).all():
             raise InputError(f"the fit attribute needs finite distance vectors of 2 pairs or more, got shape {X.shape}")
         F = max(1, min(int(factors), len(X) - 1, X.shape[1]))
-        fa = FactorAnalysis(n_components=F, svd_method="lapack", random_state=seed).fit(X)
+        fa = FactorAnalysis(n_components=F, svd_method="lapack", random_state=seed).fit(X)  # FitGar Eq. 3
         W = fa.components_.copy()
         W *= np.where(W.sum(1, keepdims=True) < 0, -1.0, 1.0)
         info = {"pairs": int(len(X)), "factors_requested": int(factors), "log_likelihood": float(fa.loglike_[-1]),

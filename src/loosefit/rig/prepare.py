@@ -34,6 +34,7 @@ Each statistic is stored as ``<name>.count``, ``.mean``, ``.m2`` and ``.std`` (p
 array is written atomically by the store. Resuming: a garment whose rig (or descriptor) is
 ``"done"`` with the same settings and training sequences is skipped; an interrupted one is redone
 from the start. Frame ``i`` of ``frames/<s>`` is frame ``i`` of sequence ``<s>`` and of its motion.
+The later stages read all this through :mod:`loosefit.rig.prepared`.
 """
 
 from __future__ import annotations
@@ -48,13 +49,14 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from loosefit.config import config_from_dict
-from loosefit.data.mirror import MIRRORED, GarmentMirror, MirroredSequence
+from loosefit.data.mirror import GarmentMirror, MirroredSequence
 from loosefit.data.store import DatasetStore
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_axis_angle
 from loosefit.geometry.smoothing import frequency_split, get_preset
 from loosefit.rig.fit_attribute import DEFAULT_FACTORS, FitAttributeModel, distance_vector
 from loosefit.rig.normalization import NormalizationStats, RunningStats
+from loosefit.rig.prepared import DONE, read_stats
 from loosefit.rig.spectral import DEFAULT_SAMPLES, DEFAULT_SIGMA, spectral_descriptor
 from loosefit.rig.virtual_bones import (
     DEFAULT_BONES,
@@ -62,15 +64,11 @@ from loosefit.rig.virtual_bones import (
     DEFAULT_THREADS,
     DEFAULT_TRANS_AFFINE,
     TRANSFORM_CHUNK,
-    VirtualBoneRig,
     fit_virtual_bones,
     frame_errors,
     solve_bone_transforms,
     solve_frames,
 )
-
-DONE = "done"
-
 
 @dataclass(frozen=True)
 class PrepareSettings:
@@ -406,95 +404,3 @@ def _write_stats(store: DatasetStore, group: str, stats: NormalizationStats) -> 
         store.write_array(group, key, np.asarray(value))
     # The list read back, so that statistics of an earlier run that this one did not make are ignored.
     store.write_attrs(group, {"names": sorted(stats)})
-
-
-# ---------------------------------------------------------------- readers for the later stages
-
-
-def _open(store) -> DatasetStore:
-    return store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
-
-
-def _require_done(store: DatasetStore, group: str, what: str) -> dict:
-    try:
-        attrs = store.read_attrs(group)
-    except InputError:
-        attrs = {}
-    if attrs.get("status") != DONE:
-        status = attrs.get("status", "missing")
-        raise InputError(f"{what} is not prepared (status {status!r}): run `loosefit prepare`", store.path)
-    return attrs
-
-
-def load_rig(store, garment: str) -> VirtualBoneRig:
-    """The virtual bone rig of a prepared garment (``store``: a :class:`DatasetStore` or its path)."""
-    store = _open(store)
-    group = f"garments/{garment}/rig"
-    attrs = _require_done(store, group, f"the rig of garment {garment!r}")
-    names = ("rest_verts", "weight_indices", "weight_values", "bone_rest_positions")
-    arrays = {k: store.read_array(group, k) for k in names}
-    arrays["faces"] = store.garment(garment).faces
-    rig = VirtualBoneRig.from_arrays(arrays)
-    rig.rmse = attrs["rmse_lf_mm"] / 1e3
-    rig.settings = attrs.get("solver", {})
-    return rig
-
-
-def prepared_split(store: DatasetStore, garment: str) -> tuple[dict, str, np.ndarray | None]:
-    """How ``garment``'s rig was prepared: its settings (``{}`` when it was not), and the low/high-frequency split
-    it used, as :func:`loosefit.geometry.smoothing.frequency_split`'s smoothing preset and ``fixed (V,)`` vertices
-    (None: none; stores prepared before ``keep_pinned`` existed smoothed the pinned vertices too)."""
-    try:
-        settings = dict(store.read_attrs(f"garments/{garment}/rig").get("settings", {}))
-    except InputError:
-        settings = {}  # not prepared (yet): the default split
-    fixed = store.garment(garment).pinned if settings.get("keep_pinned", False) else None
-    return settings, settings.get("smoothing", "virtualbones"), fixed
-
-
-def load_bone_transforms(store, garment: str, sequence: str) -> tuple[np.ndarray, np.ndarray]:
-    """``rotations (T, B, 3, 3)`` and ``translations (T, B, 3)`` float32 of a training sequence's frames (or of its
-    mirror's, ``<sequence>=mirrored``, in a store prepared with ``mirror``)."""
-    store = _open(store)
-    group = f"garments/{garment}/rig"
-    attrs = _require_done(store, group, f"the rig of garment {garment!r}")
-    base = sequence.removesuffix(MIRRORED)
-    if base not in attrs["sequences"]:
-        raise InputError(f"sequence {base!r} is not a training sequence of garment {garment!r}", store.path)
-    if base != sequence and not attrs.get("settings", {}).get("mirror", False):
-        raise InputError(f"the rig of garment {garment!r} has no mirrored sequences: prepare the store with the "
-                         "setting mirror=true to train on them", store.path)
-    frames = f"{group}/frames/{sequence}"
-    return store.read_array(frames, "rotations"), store.read_array(frames, "translations")
-
-
-def load_descriptor(store, garment: str) -> np.ndarray:
-    """The spectral descriptor ``(z,)`` float32 of a garment."""
-    store = _open(store)
-    _require_done(store, f"garments/{garment}/descriptor", f"the descriptor of garment {garment!r}")
-    return store.read_array(f"garments/{garment}/descriptor", "spectral")
-
-
-def load_fit_attribute(store) -> tuple[FitAttributeModel, dict[tuple[str, str], np.ndarray]]:
-    """The fitted factor analysis and the fit attribute ``alpha (F,)`` of every ``(garment, body)`` pair."""
-    store = _open(store)
-    group = "prepare/fit_attribute"
-    attrs = _require_done(store, group, "the fit attribute")
-    names = ("mean", "components", "noise_variance", "meta")
-    model = FitAttributeModel.from_arrays({k: store.read_array(group, k) for k in names})
-    alpha = store.read_array(group, "alpha")
-    return model, {(g, b): alpha[i] for i, (g, b, _) in enumerate(attrs["pairs"])}
-
-
-def read_stats(store, garment: str | None = None) -> NormalizationStats:
-    """Normalisation statistics: the dataset's (``garment=None``) or those of one garment's rig."""
-    store = _open(store)
-    if garment is None:
-        _require_done(store, "prepare", "the dataset")
-        group = "prepare/stats"
-    else:
-        _require_done(store, f"garments/{garment}/rig", f"the rig of garment {garment!r}")
-        group = f"garments/{garment}/rig/stats"
-    keys = [f"{n}.{k}" for n in store.read_attrs(group)["names"] for k in ("count", "mean", "m2")]
-    arrays = {key: store.read_array(group, key) for key in keys}
-    return NormalizationStats.from_arrays(arrays)

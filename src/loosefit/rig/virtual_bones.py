@@ -215,10 +215,10 @@ def skin_bones(
         transforms = torch.cat([rotations, translations[..., None]], -1).flatten(-2)  # (..., B, 12)
         picked = transforms.index_select(-2, indices.reshape(-1)).unflatten(-2, indices.shape)  # (..., V, K, 12)
         blend = (values[..., None] * picked).sum(-2).unflatten(-1, (3, 4))
-        return (blend[..., :3] @ rest_verts[..., None])[..., 0] + blend[..., 3]
+        return (blend[..., :3] @ rest_verts[..., None])[..., 0] + blend[..., 3]  # VirtualBones Eq. 1
     blend_R = torch.einsum("vb,...bij->...vij", weights, rotations)
     blend_T = torch.einsum("vb,...bi->...vi", weights, translations)
-    return (blend_R @ rest_verts[..., None])[..., 0] + blend_T
+    return (blend_R @ rest_verts[..., None])[..., 0] + blend_T  # VirtualBones Eq. 1
 
 
 def _check_frames(frames, rest_verts, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -16,7 +16,7 @@ garment-garment pairs never count either. (The reference is used for nothing els
 of the triangles and hinges come from ``garment_frames[0]``.)
 
 Why VBD and not ``SolverStyle3D`` (measured on the CPU, warm kernel cache,
-``benchmarks/newton_style3d_box.py``): with the body built the same way, Style3D let a cloth fall
+``benchmarks/experiments/newton_style3d_box.py``): with the body built the same way, Style3D let a cloth fall
 through a box collider that was standing still (70 mm inside, with 8 or 24 substeps) and took
 473 ms/frame at 8 substeps for 121 cloth particles; VBD kept every vertex outside the box while
 it rose and slid (``tests/sim/test_backends.py``) at 77 ms/frame with 10 substeps, and repeats

@@ -36,7 +36,7 @@ retargeted to, the average body and shared by all shapes.
 
 ``references`` asks for ``count`` extra runs of every *test* sequence (:class:`ReferencePlan`): run ``k``
 (1..count) starts from the garment with every rest vertex moved by Gaussian noise of ``noise`` metres (noise
-seed ``k``, :func:`loosefit.sim.runner.perturb_start`) and is otherwise the base run (its solver steps
+seed ``k``, :func:`loosefit.simulate.perturb_start`) and is otherwise the base run (its solver steps
 included), over the whole motion. They are stored with the base sequence and give the floor of every
 accuracy figure (:mod:`loosefit.metrics.reference`); they never change a sequence's job hash.
 

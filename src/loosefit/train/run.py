@@ -149,8 +149,44 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
             f"epoch {state['epoch']}, step {state['global_step']})",
             path,
         )
+    if "int8_scales" in state:
+        state["model"] = dequantize_int8(state["model"], state.pop("int8_scales"), path)
     _check_finite(state["model"], path)
     return state
+
+
+def quantize_int8(weights: dict[str, torch.Tensor], names: list[str]) -> tuple[dict[str, torch.Tensor],
+                                                                             dict[str, torch.Tensor]]:
+    """The floating-point tensors ``names`` of ``weights`` as int8 with one float32 scale per row (symmetric:
+    ``w ~ q * scale``, ``|w - q scale| <= scale / 2``, the scale ``max |row| / 127``); the others unchanged. A row
+    is the trailing dimensions that first hold at least 64 elements (a weight matrix's input dimension; JointNet's
+    pose-space basis: one shape of one joint, every vertex and axis), so that the scales stay small beside the int8
+    values. Returns ``(weights, scales)``, ``scales`` keyed by the quantized names, each of the tensor's shape with
+    the row's dimensions 1. A shipped garment's storage (a quarter of float32); :func:`load_checkpoint` turns them
+    back into float32."""
+    out, scales = dict(weights), {}
+    for name in names:
+        value, row = weights[name].float(), [weights[name].dim() - 1]
+        while value.shape[row[0]:].numel() < 64 and row[0] > 1:
+            row.insert(0, row[0] - 1)
+        scale = value.abs().amax(dim=row, keepdim=True).clamp_min(1e-30) / 127.0
+        out[name], scales[name] = torch.round(value / scale).to(torch.int8), scale
+    return out, scales
+
+
+def dequantize_int8(weights: dict, scales: dict, path: Path) -> dict:
+    """The float32 weights of a checkpoint stored by :func:`quantize_int8`; a scale without its int8 tensor, or
+    of another shape, is refused naming the file."""
+    if not isinstance(scales, dict):
+        raise InputError(f"checkpoint entry 'int8_scales' has type {type(scales).__name__}", path)
+    out = dict(weights)
+    for name, scale in scales.items():
+        q = weights.get(name)
+        if (not isinstance(q, torch.Tensor) or q.dtype != torch.int8 or not isinstance(scale, torch.Tensor)
+                or scale.dim() != q.dim() or any(s not in (1, n) for s, n in zip(scale.shape, q.shape))):
+            raise InputError(f"checkpoint's int8 tensor {name!r} does not match its scale", path)
+        out[name] = q.float() * scale.float()
+    return out
 
 
 def _check_finite(weights: dict, path: Path) -> None:

@@ -9,8 +9,10 @@ pointing outwards.
 - :mod:`~loosefit.models.collision.fast_eval`: its evaluation and gradient written out for inference
   (:class:`BoundBodySDF`, :class:`MotionBodySDF`, :class:`FramedSDF`).
 - :mod:`~loosefit.models.collision.resolver`: SwinGar Eq. 10 (:class:`CollisionResolver`) and loosefit's surface
-  pass beyond it (the body through a triangle or an edge between vertices), the push-out baseline,
-  the exact field, and the correction of a frame or a whole motion (:func:`handle_motion_collisions`).
+  pass beyond it (the body through a triangle or an edge between vertices), the push-out baseline and
+  the exact field.
+- :mod:`~loosefit.models.collision.handling`: the correction of a frame or a whole motion
+  (:func:`handle_motion_collisions`).
 - :mod:`~loosefit.models.collision.training`: training samples, SwinGar Eqs. 8-9, training, the margin's
   calibration and the run folder of ``loosefit train --method collision``.
 
@@ -22,11 +24,12 @@ from loosefit.models.collision.fast_eval import (BoundBodySDF, FramedSDF, Motion
 from loosefit.models.collision.network import (SOFTPLUS_BETA, BodySDFConfig, BodySDFNet, SDFFunction, body_code,
                                                bone_frame_code, bone_local_points, fold_bone_frames, load_body_sdf,
                                                motion_sdf_inputs, posed_joints, save_body_sdf)
-from loosefit.models.collision.resolver import (CULL_CELL, FRAME_CHUNK, CollisionResolver, ExactSDF, correct_frame,
-                                                correct_motion, handle_motion_collisions, inflated, POST_PROCESSES,
-                                                PROXY_INFLATE, SURFACE_PASSES, SURFACE_TOLERANCE,
-                                                check_post_process, post_process, push_out,
-                                                resolve_collisions, surface_sample_weights, vertex_neighbours)
+from loosefit.models.collision.handling import (CULL_CELL, FRAME_CHUNK, POST_PROCESSES, PROXY_INFLATE,
+                                                check_post_process, correct_frame, correct_motion,
+                                                handle_motion_collisions, inflated, post_process)
+from loosefit.models.collision.resolver import (SURFACE_PASSES, SURFACE_TOLERANCE, CollisionResolver, ExactSDF,
+                                                push_out, resolve_collisions, surface_sample_weights,
+                                                vertex_neighbours)
 from loosefit.models.collision.training import (CALIBRATION_QUANTILE, EIKONAL_WEIGHT, SDF_FILE, SDF_META,
                                                 SDFRunConfig, SDFTrainConfig, body_sdf_samples, calibrate_margin,
                                                 calibrate_sdf_run, calibration_set, collision_margin,
@@ -40,10 +43,11 @@ __all__ = [
     # fast_eval
     "BoundBodySDF", "MotionBodySDF", "FramedSDF", "flushed_denormals", "sdf_and_gradient", "value_and_gradient_fn",
     # resolver
-    "ExactSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out", "CULL_CELL",
-    "correct_frame", "FRAME_CHUNK", "correct_motion", "handle_motion_collisions", "PROXY_INFLATE", "inflated",
-    "POST_PROCESSES", "check_post_process", "post_process", "SURFACE_PASSES", "SURFACE_TOLERANCE",
-    "surface_sample_weights",
+    "ExactSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out", "SURFACE_PASSES",
+    "SURFACE_TOLERANCE", "surface_sample_weights",
+    # handling
+    "CULL_CELL", "correct_frame", "FRAME_CHUNK", "correct_motion", "handle_motion_collisions", "PROXY_INFLATE",
+    "inflated", "POST_PROCESSES", "check_post_process", "post_process",
     # training
     "EIKONAL_WEIGHT", "sdf_loss", "sdf_samples", "SDFTrainConfig", "random_anny_shapes", "random_procedural_motions",
     "body_sdf_samples", "samples_code", "train_body_sdf", "SDF_FILE", "SDF_META", "CALIBRATION_QUANTILE",

@@ -244,7 +244,7 @@ class FramedSDF:
 
     Args:
         sdf: the :data:`SDFFunction` in its own frame (e.g. :meth:`BodySDFNet.bind`, canonical).
-        rot: ``(3, 3)``, origin: ``(3,)``: the frame, as :func:`~loosefit.models.motion_features.to_canonical`
+        rot: ``(3, 3)``, origin: ``(3,)``: the frame, as :func:`~loosefit.motion.heading.to_canonical`
             uses them.
     """
 

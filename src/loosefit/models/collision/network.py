@@ -185,7 +185,8 @@ def motion_sdf_inputs(body, motion, bone_frames: bool = False) -> tuple[torch.Te
     (:func:`body_code`, then with ``bone_frames`` the :func:`bone_frame_code` of the posed skeleton) and each
     frame's canonical frame ``rot (T, 3, 3)``, ``origin (T, 3)``, for :class:`FramedSDF` (the network works in
     the canonical heading frame)."""
-    from loosefit.models.motion_features import heading_frames, motion_features
+    from loosefit.models.motion_features import motion_features
+    from loosefit.motion.heading import heading_frames
 
     feats = motion_features(motion)
     rot, origin = heading_frames(motion)

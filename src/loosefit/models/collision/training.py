@@ -33,11 +33,11 @@ def sdf_loss(net: BodySDFNet, points: torch.Tensor, target: torch.Tensor, normal
         x = points.detach().requires_grad_(True)
         s = net(x, code)
         (g,) = torch.autograd.grad(s.sum(), x, create_graph=True)
-    value = (s - target).abs().mean()
-    normal = (g - normals).norm(dim=-1).mean()
-    eik = ((g.norm(dim=-1) - 1) ** 2).mean()
+    value = (s - target).abs().mean()  # SwinGar Eq. 8, value term
+    normal = (g - normals).norm(dim=-1).mean()  # SwinGar Eq. 8, gradient term
+    eik = ((g.norm(dim=-1) - 1) ** 2).mean()  # SwinGar Eq. 9
     terms = {"value": float(value.detach()), "normal": float(normal.detach()), "eikonal": float(eik.detach())}
-    return value + normal + eikonal * eik, terms
+    return value + normal + eikonal * eik, terms  # SwinGar Eq. 8
 
 
 def sdf_samples(body: BodySDF, surface: int, near: int, inside: int, near_sigma: float = 0.02,
@@ -67,7 +67,7 @@ def sdf_samples(body: BodySDF, surface: int, near: int, inside: int, near_sigma:
         cand = rng.uniform(lo, hi, (max(4 * inside, 64), 3))
         found = np.concatenate([found, cand[body.query(cand) < 0]])
     points = np.concatenate([on, found[:inside]])
-    dist, closest, fid = body.closest(points)
+    dist, closest, fid = body.closest(points)  # SwinGar Eq. 7's s(x), negative inside here
     dist[:surface] = 0.0
     away = points - closest
     norm = np.linalg.norm(away, axis=1, keepdims=True)
@@ -135,7 +135,8 @@ def body_sdf_samples(shapes, motions, config: SDFTrainConfig) -> dict[str, np.nd
     ``normals (P, N, 3)``, ``code (P, C)`` and ``bones (P, 12 J)`` (:func:`bone_frame_code`) for ``P`` posed
     frames (``config.frames`` per shape and motion)."""
     from loosefit.body import AnnyBody
-    from loosefit.models.motion_features import heading_frames, motion_features, to_canonical
+    from loosefit.models.motion_features import motion_features
+    from loosefit.motion.heading import heading_frames, to_canonical
 
     rng = np.random.default_rng(config.seed)
     out: dict[str, list] = {"points": [], "sdf": [], "normals": [], "code": [], "bones": []}

@@ -29,7 +29,7 @@ def unit_direction(raw: torch.Tensor) -> torch.Tensor:
 
 def compose_displacement(magnitude: torch.Tensor, direction: torch.Tensor) -> torch.Tensor:
     """FitGar Eq. 4: ``magnitude (..., 1)`` (>= 0) times unit ``direction (..., 3)`` -> ``(..., 3)``."""
-    return magnitude * direction
+    return magnitude * direction  # FitGar Eq. 4
 
 
 class DecomposedOutput(nn.Module):

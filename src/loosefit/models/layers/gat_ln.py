@@ -24,7 +24,7 @@ SwinGar Eq. 4 divides it by the larger of two norms and scales it by ``alpha``::
   normalised scores then has norm ``alpha`` exactly, so ``alpha`` alone sets the attention's sharpness. Under
   ``"node"`` the bound term ``max ||x_j|| * ||[c_dst, c_src]||`` (a Cauchy-Schwarz worst case) is the larger of the
   two in most rows of a trained SwinGar, and its scores span a fraction of ``[-alpha, alpha]``
-  (``benchmarks/README.md``). The scores stay within ``[-alpha, alpha]``, but the layer is no longer Lipschitz
+  (``benchmarks/experiments/LOG.md``). The scores stay within ``[-alpha, alpha]``, but the layer is no longer Lipschitz
   with a constant set by ``alpha``: a row of tiny scores is scaled up as much as a row of large ones.
 
 ``centred=True`` (ours) computes the scores and the feature norms from each neighbourhood's features minus
@@ -61,24 +61,9 @@ The defaults (``norm="graph"``, ``centred=False``, ``concat=False``) are the lay
 Eq. 4 as printed, heads averaged. :mod:`loosefit.models.swingar` chooses per model (its config says which,
 and why).
 
-The graph is a padded neighbour table (:func:`attention_table`) rather than PyG's edge list: the forward pass
-then scatters nothing (the backward pass scatters one value per vertex, slot and input channel), which matters
-on CPUs where torch's scatter is slow with several threads. Averaged heads: since ``sum_j P_ij W_h x_j = W_h
-sum_j P_ij x_j``, the inputs are aggregated per head first and projected once by all heads' stacked weights: the
-neighbour gather moves ``in`` channels instead of ``heads * out`` (SwinGar at the paper's sizes on a 2.8k-vertex
-dress, one CPU thread: 2.7 s a frame the other way round, 0.2 s this way). Concatenated heads: every output
-channel belongs to one head, so the inputs are projected once (``in -> out``) and the projections gathered and
-weighted by their channel's head; the stacked product would multiply ``heads - 1`` zeros for every weight (SwinGar's
-streaming frame, 9k vertices, one CPU thread: see ``benchmarks/README.md``). Every shape in the forward pass is
-fixed by the table, with no data-dependent indexing or host synchronisation, so a layer can be captured in a CUDA
-graph (:mod:`loosefit.models.cuda_graph`).
-
-On the CPU without autograd (inference), the default design (per-node norm, centred scores, concatenated heads) in
-float32 runs through a fused C kernel (:mod:`loosefit.models.layers.native`): the products here, then the
-neighbourhood means, the scores, their normalisation, the softmax, the aggregation, the bias and the tanh in one
-sweep over the vertices. The eager passes below write and read the ``(B, V, H, D)`` scores about ten times; at
-SwinGar's sizes on a 9k-vertex dress the kernel halves the streaming frame (``benchmarks/README.md``). Training,
-other devices, float64, the other designs and :func:`recording_attention` keep the eager layer.
+The graph is a padded neighbour table (:func:`attention_table`). How the passes below run fast (the gathers,
+the softmax and the sums over the table's slots, the aggregation of concatenated heads, the fused CPU kernel) is
+:mod:`loosefit.models.layers.gat_ln_fast`; this module is the layer as the equations read.
 
 :func:`recording_attention` records each layer's mean attention entropy per vertex (and that of a uniform
 attention over the same neighbourhoods, its upper bound): how far the attention is from a mean filter.
@@ -88,7 +73,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import weakref
 
 import numpy as np
 import torch
@@ -96,7 +80,8 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
-from loosefit.models.layers import native
+from loosefit.models.layers import gat_ln_fast as fast
+from loosefit.models.layers.gat_ln_fast import centred_norms, gather_slots, neighbourhood_mean, slot_softmax
 
 #: Slope of GAT's LeakyReLU on the attention scores (Velickovic et al. 2018).
 SCORE_SLOPE = 0.2
@@ -104,15 +89,6 @@ SCORE_SLOPE = 0.2
 NORM_EPS = 1e-12
 #: Values of ``GATLN(norm=...)``.
 NORMS = ("graph", "node", "row")
-#: Off the CPU, concatenated heads above this count project before aggregating (see the module doc): with few
-#: heads the per-head aggregates are small and one stacked product is cheaper than a gather per slot. On the CPU
-#: every concatenated layer projects first (:func:`neighbour_sum`'s one ``embedding_bag`` is faster either way).
-PROJECT_FIRST_HEADS = 4
-#: On the CPU every concatenated layer projects first and :func:`neighbour_sum` runs as one ``embedding_bag``.
-CPU_EMBEDDING_BAG = True
-#: How many :func:`bag_rows` indices the CPU keeps (tables, batch sizes and head counts together).
-BAG_ROWS_KEPT = 32
-_BAG_ROWS: dict = {}
 #: Up to this ``alpha`` the normalised scores' exponentials stay far inside float32's range (e^40 ~ 2e17).
 MAX_BOUNDED_ALPHA = 40.0
 
@@ -169,103 +145,11 @@ def attention_entropy(P: torch.Tensor, valid: torch.Tensor) -> tuple[torch.Tenso
     return entropy, valid.sum(1).double().log().mean().to(P.dtype)
 
 
-def bag_rows(table: torch.Tensor, batch: int, heads: int) -> torch.Tensor:
-    """``rows (B, V, H, D)`` int64: ``(b V + table[v, d]) H + h``, the row of ``(b, table[v, d], h)`` in a ``(B, V, H,
-    ...)`` tensor flattened over its first three axes. On the CPU it is kept per table (while that tensor lives and
-    is not modified), batch and head count: building it took a tenth of a concatenated layer's time at SwinGar's
-    sizes, and a garment's table does not change."""
-    key = (id(table), table.device, batch, heads)
-    hit = _BAG_ROWS.get(key)
-    if hit is not None and hit[0]() is table and hit[1] == table._version:
-        return hit[2]
-    V = table.shape[0]
-    rows = ((torch.arange(batch, device=table.device)[:, None, None, None] * V + table[None, :, None, :]) * heads
-            + torch.arange(heads, device=table.device)[None, None, :, None])
-    if table.device.type == "cpu" and not torch.compiler.is_compiling():
-        while len(_BAG_ROWS) >= BAG_ROWS_KEPT:
-            _BAG_ROWS.pop(next(iter(_BAG_ROWS)))  # the oldest first
-        _BAG_ROWS[key] = (weakref.ref(table, lambda _, key=key: _BAG_ROWS.pop(key, None)), table._version, rows)
-    return rows
-
-
-def gather_slots(u: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
-    """``out[b, v, h, d] = u[b, table[v, d], h]``: per-vertex, per-head values ``u (B, V, H)`` at the table's slots ->
-    ``(B, V, H, D)`` (the slots last, as the attention's passes read them)."""
-    B, V, H = u.shape
-    return u.index_select(1, table.reshape(-1)).view(B, V, -1, H).transpose(2, 3).contiguous()
-
-
-def neighbourhood_mean(x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,
-                       gathered: torch.Tensor | None = None) -> torch.Tensor:
-    """``mu (B, V, C)``: the mean of ``x (B, V, C)`` over each vertex's valid slots (itself and its neighbours); read
-    off ``gathered`` (``x`` at the slots, ``(B, V, D, C)``) when there is one (a batched product), else as a
-    neighbour sum (no ``(B, V, D, C)`` tensor)."""
-    weight = valid.to(x.dtype) / valid.sum(1, keepdim=True).to(x.dtype)  # (V, D)
-    if gathered is not None:
-        return (weight[None, :, None, :] @ gathered)[:, :, 0]
-    B, V, D = x.shape[0], x.shape[1], table.shape[1]
-    return neighbour_sum(x[:, :, None], table, weight[None, :, :, None].expand(B, V, D, 1))[:, :, 0]
-
-
 def lipschitz(c_dst: torch.Tensor, c_src: torch.Tensor) -> torch.Tensor:
     """``(H,)``: the norm of each head's score function ``[c_dst, c_src]`` (SwinGar Eq. 4), kept off 0 (the square
     root's gradient there is infinite)."""
+    # SwinGar Eq. 4's L_F(g)
     return (c_dst.square().sum(-1) + c_src.square().sum(-1)).clamp_min(NORM_EPS * NORM_EPS).sqrt()
-
-
-def centred_norms(x: torch.Tensor, mu: torch.Tensor, table: torch.Tensor, inplace: bool) -> torch.Tensor:
-    """``out[b, v, d] = ||x[b, table[v, d]] - mu[b, v]||``: features ``x (B, V, C)`` at the table's slots, less a
-    per-vertex centre ``mu (B, V, C)`` -> ``(B, V, D)``, slot by slot (no ``(B, V, D, C)`` tensor). ``inplace`` (no
-    autograd): every slot in one reused buffer; a fresh ``(B, V, C)`` tensor per slot and pass made this ten times
-    slower at SwinGar's 256 channels (9k vertices, one CPU thread)."""
-    columns = table.T.contiguous()
-    if not inplace:
-        return torch.stack([torch.linalg.vector_norm(x.index_select(1, c) - mu, dim=-1) for c in columns], 2)
-    buffer, out = torch.empty_like(x), x.new_empty(*x.shape[:2], len(columns))
-    for d, c in enumerate(columns):
-        torch.linalg.vector_norm(torch.index_select(x, 1, c, out=buffer).sub_(mu), dim=-1, out=out[..., d])
-    return out
-
-
-def slot_softmax(s: torch.Tensor, slots: torch.Tensor, bounded: bool, inplace: bool) -> torch.Tensor:
-    """The softmax of scores ``s (B, V, H, D)`` over their last axis (the table's slots), zero where ``slots (1, V,
-    1, D)`` is False. Written out because torch's CPU softmax over a short last axis is ~15x slower than these
-    passes (SwinGar, 9k vertices, 10 slots: 37 ms against 4). ``bounded``: the scores lie in ``[-alpha, alpha]``
-    (GAT-LN), so no maximum is subtracted first; ``inplace``: overwrite ``s`` (no autograd)."""
-    if not bounded:  # a padded slot holds the vertex's own score: a finite shift like any other
-        s = s.sub_(s.amax(-1, keepdim=True)) if inplace else s - s.amax(-1, keepdim=True)
-    e = s.exp_().masked_fill_(~slots, 0.0) if inplace else s.exp().masked_fill(~slots, 0.0)
-    return e.div_(e.sum(-1, keepdim=True)) if inplace else e / e.sum(-1, keepdim=True)
-
-
-def neighbour_sum(y: torch.Tensor, table: torch.Tensor, P: torch.Tensor) -> torch.Tensor:
-    """``out[b, v, h] = sum_d P[b, v, d, h] y[b, table[v, d], h]``: each head's features ``y (B, V, H, C)`` summed
-    over the table's slots (``table (V, D)``) with that head's weights ``P (B, V, D, H)`` -> ``(B, V, H, C)``.
-
-    On the CPU one ``embedding_bag`` per call (a bag per vertex and head, its slots' rows weighted: no gathered
-    ``(B, V, D, H, C)`` tensor and no temporary per slot; 4-11 times faster than the loop below on SwinGar's
-    layers, one thread; ``P`` is read without a copy where it is a view of a ``(B, V, H, D)`` tensor, as
-    :meth:`GATLN.attention` returns it); elsewhere the slots one by one (the shapes fixed by the table, for CUDA
-    graphs)."""
-    B, V, H, C = y.shape
-    D = table.shape[1]
-    if y.device.type == "cpu" and CPU_EMBEDDING_BAG:
-        weights = P.permute(0, 1, 3, 2).reshape(B * V * H, D)
-        out = nn.functional.embedding_bag(bag_rows(table, B, H).view(B * V * H, D), y.reshape(B * V * H, C),
-                                          per_sample_weights=weights, mode="sum")
-        return out.view(B, V, H, C)
-    return neighbour_sum_by_slot(y, table, P)
-
-
-def neighbour_sum_by_slot(y: torch.Tensor, table: torch.Tensor, P: torch.Tensor) -> torch.Tensor:
-    """:func:`neighbour_sum` slot by slot, on any device: one gather and one multiply-add per slot, no
-    ``(B, V, D, H, C)`` tensor written."""
-    B, V, H, C = y.shape
-    columns = table.T.contiguous()
-    acc = y.new_zeros(B, V, H, C)
-    for d in range(table.shape[1]):
-        acc.addcmul_(P[:, :, d, :, None], y.index_select(1, columns[d]).view(B, V, H, C))
-    return acc
 
 
 class GATLN(nn.Module):
@@ -391,6 +275,7 @@ class GATLN(nn.Module):
         inplace = not torch.is_grad_enabled()
         slots = valid[None, :, None, :]  # (1, V, 1, D)
         mu = None
+        # the linear score function g of SwinGar Eq. 2, per head and edge j -> i
         if self.centred:
             mu = neighbourhood_mean(x, table, valid, gathered)
             # c . (x_j - mu_i): the scores of the centred features (the projections are linear)
@@ -410,11 +295,11 @@ class GATLN(nn.Module):
                 norm = rows
             else:
                 norm = self._bound(x, rows, lipschitz(c_dst, c_src), table, valid, gathered, mu, inplace)
-            scale = (self.alpha / norm)[..., None]  # (B, V or 1, H, 1)
+            scale = (self.alpha / norm)[..., None]  # SwinGar Eq. 4: (B, V or 1, H, 1)
             s = s.mul_(scale) if inplace else s * scale
         s = nn.functional.leaky_relu_(s, SCORE_SLOPE) if inplace else nn.functional.leaky_relu(s, SCORE_SLOPE)
         bounded = self.alpha is not None and self.alpha <= MAX_BOUNDED_ALPHA
-        return slot_softmax(s, slots, bounded, inplace).transpose(2, 3)
+        return slot_softmax(s, slots, bounded, inplace).transpose(2, 3)  # SwinGar Eq. 2's softmax
 
     def _bound(self, x: torch.Tensor, rows: torch.Tensor, lip: torch.Tensor, table: torch.Tensor,
                valid: torch.Tensor, gathered: torch.Tensor | None, mu: torch.Tensor | None,
@@ -435,29 +320,23 @@ class GATLN(nn.Module):
         feat = feats.masked_fill(~valid[None], 0.0).amax(2)  # (B, V): largest over the neighbourhood
         if self.norm == "graph":
             rows, feat = rows.amax(1, keepdim=True), feat.amax(1, keepdim=True)  # (B, 1, H), (B, 1)
-        return torch.maximum(rows, feat[..., None] * lip)
+        return torch.maximum(rows, feat[..., None] * lip)  # SwinGar Eq. 4's denominator
 
     def _native_applies(self, x: torch.Tensor) -> bool:
-        """Whether :meth:`_native_forward` computes this call: the default design (concatenated heads, centred scores,
-        per-node norm, bounded scores) in float32 on the CPU, with no gradient wanted and no attention recorded."""
-        if not (self.concat and self.centred and self.norm == "node" and self.alpha is not None
-                and self.alpha <= MAX_BOUNDED_ALPHA and x.device.type == "cpu" and x.dtype == torch.float32
-                and self._record is None and native.enabled()):
-            return False
-        if torch.is_grad_enabled() and (x.requires_grad or self.weight.requires_grad):
-            return False
-        return not torch.compiler.is_compiling() and native.library() is not None
+        """Whether the fused CPU kernel computes this call: the default design (concatenated heads, centred scores,
+        per-node norm, bounded scores), no attention recorded, and
+        :func:`~loosefit.models.layers.gat_ln_fast.native_applies`."""
+        default = (self.concat and self.centred and self.norm == "node" and self.alpha is not None
+                   and self.alpha <= MAX_BOUNDED_ALPHA)
+        return default and self._record is None and fast.native_applies(x, self.weight)
 
     def _native_forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-        """The layer on ``x (B, V, in)`` through the fused CPU kernel (:mod:`loosefit.models.layers.native`): the
-        products here, the neighbourhood means, the attention and the aggregation in one sweep there."""
-        if table.numel() and (int(table.min()) < 0 or int(table.max()) >= x.shape[1]):
-            raise InputError(f"the attention table indexes vertices outside [0, {x.shape[1]})")
-        if not bool(valid[:, 0].all()):
-            raise InputError("the attention table's first slot (each vertex itself) must be valid")
+        """The layer on ``x (B, V, in)`` through the fused CPU kernel: the products here, the neighbourhood means,
+        the attention and the aggregation in one sweep there (:func:`~loosefit.models.layers.gat_ln_fast.native_forward`
+        checks the table first)."""
         with torch.no_grad():
             c_dst, c_src = self.score_vectors()
-            return native.gat_ln_concat_node_centred(
+            return fast.native_forward(
                 x, x @ self.weight, x @ torch.cat([c_dst, c_src]).T, lipschitz(c_dst, c_src), table, valid,
                 self.head_index, self.bias, self.activation == "tanh", self.alpha, SCORE_SLOPE, NORM_EPS)
 
@@ -469,28 +348,18 @@ class GATLN(nn.Module):
         x = x.reshape(-1, *x.shape[-2:])
         if self._native_applies(x):
             return self._native_forward(x, table, valid).reshape(*lead, x.shape[-2], self.out_channels)
-        flat = table.reshape(-1)
-        gathered = None
-        if not self.concat or (self.heads <= PROJECT_FIRST_HEADS and not (CPU_EMBEDDING_BAG and x.device.type == "cpu")):
-            gathered = x.index_select(1, flat).unflatten(1, table.shape)  # (B, V, D, in)
+        # concatenated heads project before they aggregate where that is faster (gat_ln_fast.projects_first)
+        first = self.concat and fast.projects_first(self.heads, x.device)
+        gathered = None if first else x.index_select(1, table.reshape(-1)).unflatten(1, table.shape)  # (B, V, D, in)
         P = self.attention(x, table, valid, gathered)  # (B, V, D, H)
         if self._record is not None:
             self._record.append(tuple(float(v) for v in attention_entropy(P.detach(), valid)))
-        if self.concat and (self.heads > PROJECT_FIRST_HEADS or (CPU_EMBEDDING_BAG and x.device.type == "cpu")):
-            # each output channel belongs to one head: project once (in -> out), then add up the neighbours'
-            # projections slot by slot, each channel weighted by its head's attention (the stacked product
-            # would multiply H - 1 zeros for every weight; slot by slot, no (B, V, D, out) tensor is written)
-            B, V, H, C = x.shape[0], x.shape[1], self.heads, self._widest
-            # heads padded to equal widths (zero columns), so that a head's weight broadcasts over its channels
-            weight = self.weight.new_zeros(self.in_channels, H * C).index_copy(1, self.padded_index, self.weight)
-            y = x @ weight  # (B, V, H * C)
-            out = neighbour_sum(y.view(B, V, H, C), table, P).flatten(-2)
-            if H * C != self.out_channels:  # drop the padding (a gather: index_select on the last axis is ~10x slower)
-                out = torch.gather(out, -1, self.padded_index.expand(B, V, -1))
+        if first:
+            out = fast.project_then_sum(x, self.weight, self.padded_index, self._widest, table, P)
             out = out + self.bias if torch.is_grad_enabled() else out.add_(self.bias)
         else:
-            # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j): aggregate the inputs per head, then one product with
-            # the heads' stacked projections (averaged heads: H * out columns, all of them used)
+            # sum_j P_ijh W_h x_j = W_h (sum_j P_ijh x_j) (SwinGar Eq. 2's aggregation): aggregate the inputs per
+            # head, then one product with the heads' stacked projections (averaged heads: H * out columns, all used)
             z = torch.einsum("bvdh,bvdc->bvhc", P, gathered)  # (B, V, H, in)
             out = z.flatten(-2) @ self.projection() + self.bias
         if self.activation == "tanh":

@@ -3,9 +3,9 @@
 torch's CPU GRU is differentiated step by step by autograd: at every time step its backward pass multiplies
 the weight gradient of the recurrent matrix out and adds it into the ``(3H, H)`` gradient (a 4 MB read and
 write per step for VirtualBones' 600 units), and copies the step's intermediates. Measured on the 2-core
-machine (``benchmarks/gru_speed.py``, ``gru-speed.json``): forward and backward of a 600-unit GRU over 90 frames of
-4 windows, 383 ms, against 187 ms here (the forward pass alone: 83 ms). Here the forward pass keeps every step's
-gates, the backward pass carries only the state's gradient from step to step (one ``(B, 3H) x (3H, H)`` product
+machine (``benchmarks/experiments/gru_speed.py``, ``gru-speed.json``): forward and backward of a 600-unit GRU
+over 90 frames of 4 windows, 383 ms, against 187 ms here (the forward pass alone: 83 ms). Here the forward
+pass keeps every step's gates, the backward pass carries only the state's gradient from step to step (one ``(B, 3H) x (3H, H)`` product
 per step) and forms the weight and input gradients once for the whole sequence, as three large products. ``G``
 independent GRUs (JointNet's joints) run as one batched product per step: 305 against 1,009 ms for JointNet's 24
 joints at the demo's sizes, where torch's kernel ran joint by joint.

@@ -104,15 +104,15 @@ class LSTMGATLN(nn.Module):
         gx = self.input_map(x, table, valid) if x_gates is None else x_gates
         if state is None:
             gi, gf, gg, go = (gx + self.state_map.bias).chunk(4, -1)
-            c = torch.sigmoid(gi) * _tanh(gg)
+            c = torch.sigmoid(gi) * _tanh(gg)  # SwinGar Eq. 6 from H, C = 0
             return torch.sigmoid(go) * _tanh(c), c
         h, c = state
         gates = gx + self.state_map(h, table, valid)
         gi, gf, gg, go = gates.chunk(4, -1)
-        i = torch.sigmoid(gi + self.peephole[0] * c)
-        f = torch.sigmoid(gf + self.peephole[1] * c)
-        o = torch.sigmoid(go + self.peephole[2] * c)
-        c = i * _tanh(gg) + f * c
+        i = torch.sigmoid(gi + self.peephole[0] * c)  # SwinGar Eq. 6, i^t
+        f = torch.sigmoid(gf + self.peephole[1] * c)  # SwinGar Eq. 6, f^t
+        o = torch.sigmoid(go + self.peephole[2] * c)  # SwinGar Eq. 6, o^t
+        c = i * _tanh(gg) + f * c  # SwinGar Eq. 6, C^t (forget term outside the tanh)
         return o * _tanh(c), c
 
     def forward(self, x: torch.Tensor, table: torch.Tensor, valid: torch.Tensor,

@@ -1,0 +1,237 @@
+"""Collision handling of an animated garment, frame by frame or over a whole motion, with the resolver of
+:mod:`loosefit.models.collision.resolver` (SwinGar Eq. 10 and the surface pass) or the push-out baseline.
+
+- :func:`correct_frame` (one frame, for streaming), :func:`correct_motion` (a whole motion) and
+  :func:`handle_motion_collisions` (any method's animated garment, ``loosefit animate --collision``): the posed
+  collision proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` first proves most vertices outside (an
+  axis-aligned ray that meets no triangle facing back along it), and only the others reach the field. Over a
+  motion, :data:`FRAME_CHUNK` frames go through each step at once (the cull's kernels launched once,
+  :class:`~loosefit.models.collision.fast_eval.MotionBodySDF`, :meth:`CollisionResolver.frames`), and chunks
+  run in two threads (the kernels, torch and NumPy release Python's lock).
+- :func:`post_process`: the exact field or the push-out baseline on a whole motion, by name
+  (:data:`POST_PROCESSES`).
+
+With the exact field the cull changes nothing (beyond float rounding); with the network, a vertex it wrongly
+calls inside but that the cull proves outside is not moved. Timings: ``benchmarks/README.md``.
+"""
+
+from __future__ import annotations
+
+import queue
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import torch
+
+from loosefit.errors import InputError
+from loosefit.geometry.ray_cull import AxisRayCuller
+from loosefit.geometry.signed_distance import posed_body_sdfs
+from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF
+from loosefit.models.collision.network import BodySDFNet, SDFFunction, motion_sdf_inputs
+from loosefit.models.collision.resolver import CollisionResolver, ExactSDF, push_out
+from loosefit.sim.collider import enclosing_frames
+from loosefit.threads import torch_threads
+
+
+#: Bin side of the cull (:class:`~loosefit.geometry.ray_cull.AxisRayCuller`), metres. Finer bins leave fewer
+#: candidates but cost more to rasterise; over a motion 1.25 cm was as fast as 2 cm or faster
+#: (benchmarks/experiments/LOG.md).
+#: With a margin, fewer candidates also means fewer vertices moved that the cull could have proved outside.
+CULL_CELL = 0.0125
+
+
+def correct_frame(verts: np.ndarray, resolver: CollisionResolver, sdf: SDFFunction, frame=None,
+                  culler: AxisRayCuller | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Collision handling of one world frame: SwinGar Eq. 10 where the garment may be inside the body, then the
+    resolver's surface pass (if it has one on) between the vertices.
+
+    Args:
+        verts: ``(V, 3)`` world garment vertices, metres.
+        resolver: the garment's :class:`CollisionResolver`.
+        sdf: the field, in its own frame (:meth:`BodySDFNet.bind` in the canonical frame, :class:`ExactSDF`).
+        frame: ``(rot (3, 3), origin (3,))``: the field's frame, ``p_sdf = (p - origin) @ rot``; None: the world.
+        culler: the posed collision body's :class:`~loosefit.geometry.ray_cull.AxisRayCuller`, updated to this
+            frame: the vertices and surface samples it proves outside are never given to the field (they could
+            not be moved anyway); None: every one is evaluated.
+
+    Returns:
+        ``(V, 3)`` float32 corrected world vertices and the ``(V,)`` bool mask of the vertices moved.
+    """
+    world = np.ascontiguousarray(verts, np.float32)
+    candidates = None if culler is None else ~culler.outside(world)
+    if frame is not None:
+        sdf = FramedSDF(sdf, *frame)
+    out, inside = resolver(torch.from_numpy(world), sdf, candidates, None if culler is None else culler.outside)
+    return out.numpy(), inside.numpy()
+
+
+#: Frames corrected in one pass of the network by :func:`correct_motion`: enough that Python's per-call overhead
+#: is paid rarely, few enough that a chunk's ``(T V, 3)`` arrays stay small and a short motion still gives both
+#: workers a chunk.
+FRAME_CHUNK = 32
+
+
+def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDFNet", code, rot, origin,
+                   posed: np.ndarray | None = None, culler: AxisRayCuller | None = None, margin: float = 0.0,
+                   workers: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """SwinGar Eq. 10 with the network on every frame of an animated garment (and the resolver's surface pass),
+    :data:`FRAME_CHUNK` frames a pass (:class:`MotionBodySDF`, :meth:`CollisionResolver.frames`): what
+    :func:`correct_frame` gives frame by frame, up to float rounding.
+
+    Args:
+        verts: ``(T, V, 3)`` world garment vertices, metres.
+        resolver: the garment's :class:`CollisionResolver`.
+        net: the body SDF network; ``code (T, C)``, ``rot (T, 3, 3)``, ``origin (T, 3)``: its inputs per frame
+            (:func:`motion_sdf_inputs`).
+        posed, culler: the posed collision proxy ``(T, Vb, 3)`` and its
+            :class:`~loosefit.geometry.ray_cull.AxisRayCuller`: only the vertices it cannot prove outside reach
+            the network; None: every vertex does.
+        margin: metres, the network's surface moved outwards (:meth:`BoundBodySDF.offset`).
+        workers: threads correcting chunks side by side (Warp's kernels, torch and NumPy's large operations run
+            without Python's lock, so two use two cores; each has its own culler and one torch thread); 1: one
+            chunk after another, with torch's thread count as it is.
+
+    Returns:
+        ``(T, V, 3)`` float32 corrected vertices and the ``(T, V)`` bool mask of the vertices moved.
+    """
+    if workers < 1:
+        raise InputError(f"collision workers must be >= 1, got {workers}")
+    world = np.array(verts, np.float32, copy=True)
+    T = len(world)
+    inside = np.zeros(world.shape[:2], bool)
+    if resolver.sigma is None and T:  # set before the threads share the resolver
+        resolver.sigma = resolver.mean_edge(torch.from_numpy(world[0]))
+    chunks = [slice(s, min(s + FRAME_CHUNK, T)) for s in range(0, T, FRAME_CHUNK)]
+    workers = min(workers, len(chunks)) or 1
+    cullers = queue.SimpleQueue()  # one culler (its map buffers) per running chunk
+    for k in range(workers if culler is not None else 0):
+        cullers.put(culler if k == 0 else culler.twin())
+
+    def correct(chunk: slice) -> None:  # frames of one chunk, written in place (chunks do not overlap)
+        field = MotionBodySDF(net, code[chunk], rot[chunk], origin[chunk]).offset(margin)
+        if culler is None:
+            cand = np.ones((chunk.stop - chunk.start, world.shape[1]), bool)
+            moved, hit = resolver.frames(torch.from_numpy(world[chunk]), field, cand)
+        else:
+            mine = cullers.get()  # held while the surface pass asks it about the samples
+            try:
+                cand = ~mine.update(posed[chunk], world[chunk]).outside(world[chunk])  # the chunk's frames at once
+                moved, hit = resolver.frames(torch.from_numpy(world[chunk]), field, cand, mine.outside)
+            finally:
+                cullers.put(mine)
+        world[chunk], inside[chunk] = moved.numpy(), hit.numpy()
+
+    if workers == 1:
+        for chunk in chunks:
+            correct(chunk)
+    else:  # one torch thread a worker: measured faster than two each on two cores (benchmarks/collision.py)
+        with torch_threads(1), ThreadPoolExecutor(workers) as pool:
+            list(pool.map(correct, chunks))  # list(): an exception in a chunk is raised here
+    return world, inside
+
+
+#: What ``loosefit view`` and ``report --collision`` take: a mode of :func:`handle_motion_collisions` that needs
+#: no network, or no handling (``animate`` also takes a body SDF run folder).
+POST_PROCESSES = ("exact", "pushout", "none")
+
+
+def check_post_process(handling: str) -> str:
+    """``handling`` if it is one of :data:`POST_PROCESSES`, else an :class:`InputError`."""
+    if handling not in POST_PROCESSES:
+        raise InputError(f"collision handling must be exact, pushout or none, got {handling!r}")
+    return handling
+
+
+def post_process(verts: np.ndarray, faces: np.ndarray, body, motion, handling: str) -> np.ndarray:
+    """An animation ``verts (T, V, 3)`` after ``handling`` (:data:`POST_PROCESSES`): as it is for ``"none"``,
+    else corrected by :func:`handle_motion_collisions`."""
+    if check_post_process(handling) == "none":
+        return verts
+    return handle_motion_collisions(verts, faces, body, motion, handling)
+
+
+#: Metres the exact handling moves its collision surface out along its vertex normals, beyond the posed proxy
+#: pushed to enclose the posed full-resolution body (:func:`~loosefit.sim.collider.enclosing_frames`). The
+#: 1,229-vertex proxy itself lies up to 13 mm inside the body a user sees (the lower back on a walk), so a vertex
+#: put on its surface could stay more than 5 mm inside the body: worst frame 1.45 % of the VirtualBones skirt's
+#: vertices on the CMU walk with the proxy moved out 4 mm, 0.94 % on the enclosing surface plus 2 mm
+#: (``benchmarks/penetration.py``); 2 mm keeps cloth resting on the body close to it.
+PROXY_INFLATE = 0.002
+
+
+def inflated(verts: np.ndarray, faces: np.ndarray, distance: float) -> np.ndarray:
+    """``verts (T, V, 3)`` (or ``(V, 3)``) of a closed mesh moved ``distance`` metres out along each frame's
+    vertex normals (angle-weighted), float32."""
+    import igl
+
+    v = np.asarray(verts, np.float64)
+    f = np.ascontiguousarray(faces, np.int64)
+    one = v.ndim == 2
+    frames = v[None] if one else v
+    out = np.stack([x + distance * igl.per_vertex_normals(np.ascontiguousarray(x), f,
+                                                          igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE)
+                    for x in frames]).astype(np.float32)
+    return out[0] if one else out
+
+
+def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion, mode: str = "exact",
+                             net: BodySDFNet | None = None, push_distance: float = 0.004,
+                             cull: bool = True, margin: float = 0.0, cull_cell=CULL_CELL,
+                             inflate: float = PROXY_INFLATE, surface: bool = True) -> np.ndarray:
+    """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
+    Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
+
+    ``mode``: ``"neural"`` (SwinGar Eq. 10 with ``net``, in the canonical frame, the code from the motion),
+    ``"exact"`` (SwinGar Eq. 10 with libigl's distance to the posed proxy made to enclose the body, below) or
+    ``"pushout"`` (the fixed-distance baseline). With ``cull`` (the default) SwinGar Eq. 10 evaluates its field only
+    at the vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
+    (:func:`correct_frame`); the network runs on :data:`FRAME_CHUNK` frames a pass (:func:`correct_motion`); the
+    Gaussian width is the mean edge length of the first frame. ``cull_cell``: the cull's bin side, metres (one
+    or ``(x, y, z)``).
+
+    ``margin`` (metres, ``"neural"`` only; ours, 0 in the paper): Eq. 10 on the network's surface moved that far
+    outwards, ``S - margin``: a vertex the network puts less than ``margin`` outside is corrected too, and moved
+    to ``margin + delta_i``. A network that is millimetres off near the surface misses the shallow collisions
+    on the wrong side of its zero level; the margin catches them (the cull still skips every vertex it proves
+    outside the proxy, so no vertex far from the body moves).
+
+    ``"exact"`` corrects against the posed proxy pushed out to enclose the posed full-resolution body in every
+    frame (:func:`~loosefit.sim.collider.enclosing_frames`, over the garment's box), moved ``inflate`` metres
+    further out along its vertex normals (:data:`PROXY_INFLATE`).
+
+    ``surface`` (``"neural"`` and ``"exact"``; loosefit's addition beyond SwinGar Eq. 10, on by default): after the
+    vertices, the body passing through a triangle or an edge between them is resolved too
+    (:class:`CollisionResolver`: the field at every edge midpoint and triangle centroid the cull cannot prove
+    outside, the vertices of the deep ones moved until none is inside); False: the vertices only, as the paper.
+    """
+    if mode not in ("neural", "exact", "pushout"):
+        raise InputError(f"collision mode must be 'neural', 'exact' or 'pushout', got {mode!r}")
+    if mode == "neural" and net is None:
+        raise InputError("neural collision handling needs a body SDF network")
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InputError(f"collision margin must be a non-negative number of metres, got {margin!r}")
+    if not (np.isfinite(inflate) and inflate >= 0):
+        raise InputError(f"proxy inflation must be a non-negative number of metres, got {inflate!r}")
+    proxy = body.collision_proxy()
+    out = np.array(verts, np.float32, copy=True)
+    if mode == "exact":
+        posed = enclosing_frames(body, motion, within=out)
+        if inflate > 0:
+            posed = inflated(posed, proxy.faces, inflate)
+    else:
+        posed = proxy.pose(motion).verts if cull or mode == "pushout" else None
+    culler = AxisRayCuller(posed[0], proxy.faces, cull_cell) if cull and mode != "pushout" else None
+    resolver = CollisionResolver(faces, out.shape[1], surface=surface)
+    if mode == "neural":
+        code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
+        return correct_motion(out, resolver, net.eval(), code, rot, origin, posed, culler, margin)[0]
+    meshes = posed_body_sdfs(posed, proxy.faces)
+    for t in range(len(out)):
+        mesh = next(meshes)  # each frame's tree; the edge map built once
+        if mode == "pushout":
+            out[t] = push_out(out[t], mesh, push_distance)[0]
+        else:
+            out[t] = correct_frame(out[t], resolver, ExactSDF(mesh), None,
+                                   culler.update(posed[t], out[t]) if culler else None)[0]
+    return out
+

@@ -1,0 +1,110 @@
+"""The one-frame graph of the ONNX export, in torch: stepping it with its flat state gives the vertices of
+``Animator.animate`` for configurations the trained test runs do not reach (no motion history, a vertical
+history, JointNet's summed Fourier prior and a one-layer bone MLP, VirtualBones' factorised global layer and a
+hidden head), with random weights and rig buffers on a small grid garment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from loosefit.animate import Animator
+from loosefit.errors import InputError
+from loosefit.models.jointnet import JointNet, JointNetConfig
+from loosefit.models.layers.edge_conv import neighbour_table
+from loosefit.models.motion_features import MotionHistory
+from loosefit.models.step_graph import StepGraph
+from loosefit.models.virtualbones import VirtualBones, VirtualBonesConfig
+from loosefit.motion.procedural import generate
+
+BONES = 5
+FRAMES = 45
+
+
+def grid_garment(n: int = 8):
+    """A ``n x n`` vertex sheet around the hips (metres, Z up) and its triangles."""
+    u, v = np.meshgrid(np.linspace(-0.25, 0.25, n), np.linspace(0.5, 1.0, n))
+    verts = np.stack([u.ravel(), np.full(n * n, -0.15), v.ravel()], 1).astype(np.float32)
+    quads = [(i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1)
+             for i in range(n - 1) for j in range(n - 1)]
+    faces = np.array([f for a, b, c, d in quads for f in ((a, b, c), (b, d, c))], np.int64)
+    return verts, faces
+
+
+def build(cls, config, body, history: MotionHistory | None):
+    verts, faces = grid_garment()
+    V = len(verts)
+    sizes = {"num_verts": V, "num_joints": body.num_joints, "num_faces": len(faces),
+             "root_features": history.root_features if history else 11,
+             "history_frames": list(history.frames) if history else [],
+             "history_vertical": bool(history and history.vertical), "num_bones": BONES,
+             "max_degree": int(neighbour_table(faces, V).shape[1]), "joint_names": list(body.joint_names),
+             "parents": [int(p) for p in body.parents]}
+    torch.manual_seed(0)
+    model = cls(sizes, config)
+    g = torch.Generator().manual_seed(1)
+    weights = torch.rand(V, BONES, generator=g) ** 4
+    buffers = {"faces": torch.from_numpy(faces), "template": torch.from_numpy(verts),
+               "rest_verts": torch.from_numpy(verts), "rig_rest": torch.from_numpy(verts),
+               "skin_weights": weights / weights.sum(1, keepdim=True),
+               "bone_rest": torch.from_numpy(verts[:: V // BONES][:BONES].copy()),
+               "root_std": 0.5 + torch.rand(model.root_features, generator=g),
+               "joints_mean": 0.1 * torch.randn(body.num_joints - 1, 6, generator=g),
+               "euler_std": 0.2 + torch.rand(BONES, 3, generator=g),
+               "offset_std": 0.02 + 0.01 * torch.rand(BONES, 3, generator=g)}
+    if cls is VirtualBones:
+        buffers["neighbours"] = torch.from_numpy(neighbour_table(faces, V))
+        buffers["offset_std"] = torch.full((3,), 0.01)
+        buffers["position_std"] = torch.full((3,), 0.05)
+        buffers["position_mean"] = buffers["bone_rest"]
+    with torch.no_grad():
+        for name, value in buffers.items():
+            if isinstance(getattr(model, name, None), torch.Tensor):  # each model has some of them
+                getattr(model, name).copy_(value)
+        if cls is JointNet:
+            model.psd_basis.normal_(0, 1e-3, generator=g)
+    return model.eval()
+
+
+CASES = {
+    "jointnet-add-one-layer-vertical": (JointNet, JointNetConfig(gru_hidden=12, features=8, bone_mlp=[], psd_mlp=[8],
+                                                                 psd_shapes=3, fourier="add", association="l1"),
+                                        MotionHistory((4.0, 9.0), vertical=True)),
+    "jointnet-no-history": (JointNet, JointNetConfig(gru_hidden=12, features=8, bone_mlp=[16], psd_mlp=[8],
+                                                     psd_shapes=3), None),
+    "virtualbones-rank-head": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
+                                                                global_rank=4, edge_channels=(4, 6), head_hidden=(5,)),
+                               MotionHistory((6.0, 15.0, 30.0), vertical=True)),
+    "virtualbones-no-history": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
+                                                                 edge_channels=(4,)), None),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_stepping_the_graph_is_animate(case, body):
+    cls, config, history = CASES[case]
+    model = build(cls, config, body, history)
+    motion = generate("spin", FRAMES / 30, 2, body)
+    expected = Animator.from_model(model).animate(motion)
+    graph = StepGraph(model, bones=True)
+    state = torch.from_numpy(graph.initial_state())
+    frames = []
+    with torch.no_grad():
+        for t in range(FRAMES):
+            verts, state, bones = graph(torch.from_numpy(motion.rotations[t]).float(),
+                                        torch.from_numpy(motion.translation[t]).float(), state)
+            frames.append(verts.numpy())
+    assert state.shape == (graph.state_size,) and bones.shape == (BONES, 4, 4)
+    names = [f.name for f in graph.layout()]
+    assert ("history" in names) == (history is not None)
+    assert np.abs(np.stack(frames) - expected).max() <= 1e-5
+    assert np.ptp(expected, axis=0).max() > 0.01  # the garment moves: the comparison is not of constants
+
+
+def test_methods_without_a_frame_graph_are_refused(body):
+    class Other:
+        method = "swingar"
+
+    with pytest.raises(InputError, match="no one-frame graph"):
+        StepGraph(Other())
