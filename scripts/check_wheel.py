@@ -94,6 +94,10 @@ def main() -> int:
         check("loosefit/models/layers/gat_ln_cpu.c" in names, "the native GAT-LN kernel's source is package data")
         check(any(n.startswith("loosefit/report/templates/") and n.endswith(".j2") for n in names),
               "report templates are package data")
+        live = ("live.html", "live.js", "vendor/ort.webgpu.min.mjs", "vendor/ort-wasm-simd-threaded.asyncify.mjs",
+                "vendor/ort-wasm-simd-threaded.asyncify.wasm")
+        check(all(f"loosefit/viz/static/{n}" in names for n in live),
+              "the live page and onnxruntime-web (its ES modules and WebAssembly) are package data")
 
         t = time.perf_counter()
         venv = tmp / "venv"

@@ -124,3 +124,11 @@ def motion_file_options(sp) -> None:
     """The options of every verb that reads motion files: ``--joint-map`` and ``--keep-first-frame``."""
     joint_map_option(sp)
     keep_first_frame_option(sp)
+
+
+def live_options(sp) -> None:
+    """``loosefit view --live RUN [--motion FILE ...]``: the options of the live page (:mod:`loosefit.viz.live`)."""
+    sp.add_argument("--live", action="store_true", help="RUN alone: animate the trained garment in the page itself "
+                    "(exported once to ONNX, run by onnxruntime-web), switching motions at will")
+    sp.add_argument("--motion", action="append", default=[], metavar="FILE", help="with --live: a motion file "
+                    "(.bvh / .npz) offered beside the procedural ones (repeat for more)")

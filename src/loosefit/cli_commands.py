@@ -440,6 +440,10 @@ def cmd_export_onnx(args):
 def cmd_view(args):
     from loosefit.viz.viewer import view
 
+    if args.live:
+        from loosefit.viz.live import view_live_command
+
+        return view_live_command(args)
     if args.export is not None:
         writable(args.export, folder=True)  # before the scene is built
         guard_output(args.export, None)  # no --force: an export folder is a new one or an earlier export

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least,
+from loosefit.cli_args import (JOINT_MAP_FORMAT, finite_float, force_option, int_at_least, live_options,
                                motion_file_options, nonnegative_float, piece_choice, positive_float)
 from loosefit.cli_commands import (
     cmd_animate,
@@ -300,6 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--collision", choices=["exact", "pushout", "none"], default="exact",
                     help="collision handling of the runs' animations, as loosefit animate (default exact)")
     motion_file_options(sp)
+    live_options(sp)
     sp.add_argument("--no-collisions", action="store_true", help="skip the per-frame collision ratio")
     sp.add_argument("--collision-frames", type=int_at_least(0), default=100, help="compute the collision ratio at this many "
                     "evenly spaced frames (0: every frame; ~0.5 s a frame for a 13.7k-vertex body)")

@@ -45,6 +45,8 @@ from loosefit.viz.viewer_scene import DEFAULT_COLLISION_FRAMES, ViewerScene, bui
 STATIC_DIR = Path(__file__).with_name("static")
 #: Raw bytes per ``data/chunk-NNN.js`` of an export.
 CHUNK_BYTES = 8 << 20
+#: Static files of the live page only (``loosefit view --live``, served, never exported): the page and onnxruntime-web.
+LIVE_ONLY = ("live.html", "live.js", "live.css", "vendor/ort")
 #: Marker file of an export folder (so that a re-export may replace it, and nothing else is overwritten).
 EXPORT_MARKER = ".loosefit-view"
 
@@ -133,6 +135,9 @@ class _Handler(SimpleHTTPRequestHandler):
     # The base class answers a request line it cannot parse (or of HTTP/2) as HTTP/0.9 would: a body without
     # a status line. HTTP/1.0 gives every error answer its status line.
     default_request_version = "HTTP/1.0"
+    # the live page's ES modules and onnxruntime's WebAssembly, whatever the system's MIME table says
+    extensions_map = {**SimpleHTTPRequestHandler.extensions_map, ".mjs": "text/javascript",
+                      ".wasm": "application/wasm"}
 
     def __init__(self, *args, files: dict[str, tuple[bytes, str]], hosts: frozenset[str], **kwargs):
         self._files = files
@@ -225,7 +230,9 @@ class ViewerServer:
 
     def __init__(self, scene: ViewerScene | None, port: int = 8000, host: str = "127.0.0.1",
                  allowed_hosts: tuple[str, ...] | None = None):
-        self._files: dict[str, tuple[bytes, str]] = {}
+        #: What is served from memory besides the static files: ``{path: (body, content type)}``.
+        self.files: dict[str, tuple[bytes, str]] = {}
+        self._files = self.files
         if allowed_hosts is None:
             allowed_hosts = LOOPBACK_HOSTS + (f"[{host}]" if ":" in host else host,)
         hosts = frozenset(h.lower() for h in allowed_hosts)
@@ -300,7 +307,7 @@ def export_scene(scene: ViewerScene, out_dir: str | Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     (out / EXPORT_MARKER).write_text("written by loosefit view --export\n")
     for src in sorted(STATIC_DIR.rglob("*")):
-        if src.is_file():
+        if src.is_file() and not src.relative_to(STATIC_DIR).as_posix().startswith(LIVE_ONLY):
             dst = out / src.relative_to(STATIC_DIR)
             dst.parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(dst, suffix=dst.suffix) as tmp:
