@@ -5,6 +5,9 @@ Run: .venv/bin/python scripts/ship_pretrained.py --accuracy benchmarks/results/a
          --runs RUNS --garment skirt+average --name skirt [--methods virtualbones jointnet]
 (writes src/loosefit/pretrained/<name>-<method>/)
 
+``--psd-modes K`` ships a JointNet run trained with a free PSD basis with that basis projected onto the garment's K
+smoothest modes (``loosefit.models.jointnet.project_psd``), the form JointNet now trains in.
+
 Each shipped garment is checked against its run on the test sequences of the JSON's store (when the store is here):
 the largest vertex distance between the two animations and both RMSEs against the simulation, kept in its
 ``pretrained.json`` under ``storage_check``.
@@ -14,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -21,11 +26,38 @@ import numpy as np
 from loosefit.pretrained import ROOT, ship
 
 
+def projected_run(run: Path, out: Path, modes: int) -> Path:
+    """A copy of the JointNet run folder ``run`` in ``out`` whose best checkpoint's free PSD basis is projected onto
+    ``modes`` smoothest modes; its model.json sizes and method.yaml say so."""
+    import torch
+    import yaml
+
+    from loosefit.animate import load_run
+    from loosefit.models.jointnet import project_psd
+    from loosefit.train.run import RunDir, load_checkpoint
+
+    shutil.copytree(run, out, ignore=shutil.ignore_patterns("tensorboard", "last.pt"))
+    meta, model, _ = load_run(run)
+    projected = project_psd(model, modes)
+    meta["sizes"]["psd_modes"] = modes
+    (out / "model.json").write_text(json.dumps(meta, indent=1))
+    config = yaml.safe_load((out / "method.yaml").read_text())
+    config["model"]["psd_modes"] = modes
+    (out / "method.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    checkpoint = RunDir(out).best_checkpoint
+    state = load_checkpoint(checkpoint)
+    state["model"] = projected.state_dict()
+    torch.save(state, checkpoint)
+    return out
+
+
 def storage_check(run: Path, shipped: Path, data: Path, sequences: list[str]) -> dict:
-    """How far the shipped checkpoint (float16 or int8) moves the animation of ``sequences`` from the run's
-    float32 one: the largest vertex distance (mm) and the pooled RMSE of each against the simulation (mm)."""
+    """How far the shipped checkpoint (float16 or int8, a projected PSD) moves the animation of ``sequences`` from
+    the run's float32 one: the largest vertex distance (mm), the pooled RMSE of each against the simulation (mm) and
+    their bend ratios (:func:`loosefit.metrics.surface.bend_ratio`, pooled)."""
     from loosefit.animate import Animator
     from loosefit.data import DatasetStore
+    from loosefit.metrics.surface import dihedral_pair_deg
 
     store = DatasetStore.open(data)
     motions = [store.motion(store.sequence(name).motion) for name in sequences]
@@ -34,8 +66,11 @@ def storage_check(run: Path, shipped: Path, data: Path, sequences: list[str]) ->
     rmse = [1000 * np.sqrt(np.mean(np.concatenate([np.sum((p - g) ** 2, -1).ravel() for p, g in zip(preds, gt)])))
             for preds in (run_pred, shipped_pred)]
     largest = max(float(np.abs(np.linalg.norm(a - b, axis=-1)).max()) for a, b in zip(run_pred, shipped_pred))
+    faces = np.asarray(store.garment(store.sequence(sequences[0]).garment).faces)
+    bend = [sum(float(np.abs(dihedral_pair_deg(p, g, faces)[0]).sum()) for p, g in zip(preds, gt))
+            / sum(float(np.abs(dihedral_pair_deg(g, g, faces)[0]).sum()) for g in gt) for preds in (run_pred, shipped_pred)]
     return {"sequences": len(sequences), "max_vertex_distance_mm": 1000 * largest,
-            "run_rmse_mm": rmse[0], "shipped_rmse_mm": rmse[1]}
+            "run_rmse_mm": rmse[0], "shipped_rmse_mm": rmse[1], "run_bend_ratio": bend[0], "shipped_bend_ratio": bend[1]}
 
 
 def main() -> None:
@@ -45,7 +80,10 @@ def main() -> None:
     ap.add_argument("--garment", required=True, help="the store's garment entry, e.g. skirt+average")
     ap.add_argument("--name", required=True, help="the shipped name: pretrained:<name>[/<method>]")
     ap.add_argument("--methods", nargs="+", default=["virtualbones", "jointnet"])
+    ap.add_argument("--psd-modes", type=int, default=0, help="JointNet: its free PSD basis projected onto this many "
+                    "smoothest modes (0: as trained)")
     a = ap.parse_args()
+    scratch = Path(tempfile.mkdtemp(prefix="loosefit-ship-"))
     results = json.loads(Path(a.accuracy).read_text())["results"]
     garment = results["garments"][a.garment]
     for method in a.methods:
@@ -60,7 +98,11 @@ def main() -> None:
                      "body_lbs_rmse_mm": garment["metrics"]["body-lbs"]["overall"]["rmse_mm"]},
             "results": Path(a.accuracy).name,
         }
-        out = ship(Path(a.runs) / a.garment / method, ROOT / f"{a.name}-{method}", info)
+        run = Path(a.runs) / a.garment / method
+        if method == "jointnet" and a.psd_modes:
+            run = projected_run(run, scratch / method, a.psd_modes)
+            info["trained_on"]["psd_projected_onto_modes"] = a.psd_modes
+        out = ship(run, ROOT / f"{a.name}-{method}", info)
         if Path(results["data"]).is_dir():
             meta = json.loads((out / "pretrained.json").read_text())
             meta["storage_check"] = storage_check(Path(a.runs) / a.garment / method, out, Path(results["data"]),
