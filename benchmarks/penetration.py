@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import save_results
-from loosefit.metrics.collision import surface_samples
+from loosefit.metrics.collision import penetrations
 
 DEFAULT_MOTIONS = ["walk:1234:4", "spin:1234:4"]
 DEFAULT_BVH = Path(__file__).resolve().parents[2] / "shared" / "mocap" / "cmu-cc" / "007_01.bvh"
@@ -111,9 +111,10 @@ def main() -> None:
             on_proxy, on_full = posed[label]
             before, after = _per_frame(raw, *on_proxy), _per_frame(fixed, *on_proxy)
             full = _per_frame(fixed, *on_full)
-            # between the vertices: edge midpoints and triangle centroids (a limb through a triangle)
-            surface = _per_frame(surface_samples(fixed, animator.faces), *on_full)
-            surface_none = _per_frame(surface_samples(raw, animator.faces), *on_full)
+            # between the vertices: edge midpoints and triangle centroids (a limb through a triangle), and the
+            # deepest point, vertices and samples, handled and raw (evaluate's and report's measure)
+            handled, unhandled = penetrations([(fixed, animator.faces), (raw, animator.faces)], on_full[0], on_full[1])
+            surface, surface_none = handled.surface_percent, unhandled.surface_percent
             moved = np.linalg.norm(fixed - raw, axis=-1)
             row = {
                 "run": name, "run_dir": str(run), "method": animator.method, "motion": label, "frames": T,
@@ -127,6 +128,7 @@ def main() -> None:
                 "surface_inside_5mm_percent_worst": float(surface.max()),
                 "none_surface_inside_5mm_percent_mean": float(surface_none.mean()),
                 "none_surface_inside_5mm_percent_worst": float(surface_none.max()),
+                "deepest_mm": float(1e3 * handled.deepest_m.max()), "none_deepest_mm": float(1e3 * unhandled.deepest_m.max()),
                 "moved_mm_max": float(1e3 * moved.max()), "moved_mm_mean_of_moved": float(1e3 * moved[moved > 0].mean())
                 if (moved > 0).any() else 0.0,
                 "none_inside_5mm_percent_mean": float(before.mean()),
@@ -140,7 +142,8 @@ def main() -> None:
             print(f"{name:10s} {label:22s} inside>5mm {pct('inside_5mm_percent')}, "
                   f"none {pct('none_inside_5mm_percent')}, full body {pct('full_body_inside_5mm_percent')}, "
                   f"between vertices {pct('surface_inside_5mm_percent')}, "
-                  f"none {pct('none_surface_inside_5mm_percent')}; {row['fps_exact']:.0f} fps with, "
+                  f"none {pct('none_surface_inside_5mm_percent')}; deepest {row['deepest_mm']:.1f} mm "
+                  f"(none {row['none_deepest_mm']:.1f}); {row['fps_exact']:.0f} fps with, "
                   f"{row['fps_none']:.0f} without; handling {row['collision_ms_per_frame']:.1f} ms/frame", flush=True)
     save_results(args.out, {"depth_m": 0.005, "floor_percent": 1.0, "torch_threads": 1, "rows": rows})
 
