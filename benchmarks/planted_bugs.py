@@ -15,8 +15,11 @@ ones that do not occur are skipped); a bug none of whose texts occur, or one occ
 as ``not planted`` (the source moved on): edit its entry. A bug's file may be a tuple of paths, the first
 that exists in the revision taken (a module that moved). The ``sign-`` bugs flip a sign, drop or change a
 constant of a paper's equation, or swap what a gate reads; each names the ``*_signs.py`` test file that pins
-it. At a revision without that file, the module's own older test file runs instead (:data:`EARLIER_TESTS`),
-so that ``--rev`` of a revision before the sign tests measures what the tests caught then.
+it. The ``stat-`` bugs compute a normalisation statistic or buffer from the wrong quantity, the ``grad-`` bugs cut
+or widen the gradient path of one loss term (its value unchanged), the ``metric-`` bugs average per frame what is
+pooled (or the reverse) in a reported number; each names its ``*_statistics.py`` or ``*_gradients.py`` test file.
+At a revision without a bug's test file, the module's own older test files run instead (:data:`EARLIER_TESTS`),
+so that ``--rev`` of a revision before those tests measures what the tests caught then.
 """
 
 from __future__ import annotations
@@ -53,7 +56,9 @@ PREP, REPORT, REF, STED = ("src/loosefit/rig/prepare.py", "src/loosefit/metrics/
 D_DS, D_VB, D_JN, D_FG = (f"tests/models/test_{m}_statistics.py" for m in ("dataset", "virtualbones", "jointnet", "fitgar"))
 G_VB, G_JN, G_FG, G_SG = (f"tests/models/test_{m}_gradients.py" for m in ("virtualbones", "jointnet", "fitgar", "swingar"))
 G_LOSS, D_PREP = "tests/train/test_losses_gradients.py", "tests/rig/test_prepare_statistics.py"
-D_REPORT, D_REF, D_STED = (f"tests/metrics/test_{m}_statistics.py" for m in ("report", "reference", "sted"))
+D_REPORT, D_REF, D_STED, D_COL = (f"tests/metrics/test_{m}_statistics.py"
+                                  for m in ("report", "reference", "sted", "collision"))
+COLLISION = "src/loosefit/metrics/collision.py"
 #: The test files of each module before its ``*_signs.py``, ``*_statistics.py`` or ``*_gradients.py`` file
 #: existed (a tuple: all of them run).
 EARLIER_TESTS = {S_VB: T_VB, S_JN: T_JN, S_FG: T_FG, S_SG: T_SG, S_COL: "tests/models/test_collision.py",
@@ -62,7 +67,8 @@ EARLIER_TESTS = {S_VB: T_VB, S_JN: T_JN, S_FG: T_FG, S_SG: T_SG, S_COL: "tests/m
                  D_JN: (T_JN, S_JN), G_JN: (T_JN, S_JN), D_FG: (T_FG, "tests/models/test_fitgar_train.py"),
                  G_FG: (T_FG, S_FG), G_SG: (T_SG, S_SG), G_LOSS: "tests/train/test_losses.py",
                  D_PREP: "tests/rig/test_prepare.py", D_REPORT: "tests/metrics/test_report.py",
-                 D_REF: "tests/metrics/test_reference.py", D_STED: "tests/metrics/test_sted.py"}
+                 D_REF: "tests/metrics/test_reference.py", D_STED: "tests/metrics/test_sted.py",
+                 D_COL: "tests/metrics/test_collision.py"}
 
 #: name -> (file, [(text, replacement)...], test file, what the bug breaks)
 BUGS = {
@@ -260,6 +266,9 @@ BUGS = {
                                      "the floor averages the runs' RMS spreads instead of pooling squares"),
     "metric-sted-temporal-over-prediction": (STED, [("np.mean(np.abs(lt_p - lt) / lt))", "np.mean(np.abs(lt_p - lt) / lt_p))")],
                                              D_STED, "temporal STED relative to the prediction's edge lengths"),
+    "metric-surface-share-of-queried": (COLLISION, [("100.0 * (inside > depth).sum() / (len(e) + len(f))",
+                                                     "100.0 * (inside > depth).sum() / max(len(inside), 1)")], D_COL,
+                                        "the surface share counts over the samples queried, not over all of them"),
     "metric-prepare-rmse-per-frame": (PREP, [("\"rmse_lf_mm\": float(np.sqrt(np.concatenate(err_lf).mean()) * 1e3)",
                                               "\"rmse_lf_mm\": float(np.sqrt(np.concatenate(err_lf)).mean() * 1e3)")],
                                       D_PREP, "the rig's reported RMSE is the mean of its frames' RMS values"),
