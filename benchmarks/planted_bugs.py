@@ -58,7 +58,8 @@ G_VB, G_JN, G_FG, G_SG = (f"tests/models/test_{m}_gradients.py" for m in ("virtu
 G_LOSS, D_PREP = "tests/train/test_losses_gradients.py", "tests/rig/test_prepare_statistics.py"
 D_REPORT, D_REF, D_STED, D_COL = (f"tests/metrics/test_{m}_statistics.py"
                                   for m in ("report", "reference", "sted", "collision"))
-COLLISION = "src/loosefit/metrics/collision.py"
+COLLISION, ATTACH = "src/loosefit/metrics/collision.py", "src/loosefit/sim/attach.py"
+D_LBS = "tests/models/test_body_lbs_statistics.py"
 #: The test files of each module before its ``*_signs.py``, ``*_statistics.py`` or ``*_gradients.py`` file
 #: existed (a tuple: all of them run).
 EARLIER_TESTS = {S_VB: T_VB, S_JN: T_JN, S_FG: T_FG, S_SG: T_SG, S_COL: "tests/models/test_collision.py",
@@ -68,7 +69,7 @@ EARLIER_TESTS = {S_VB: T_VB, S_JN: T_JN, S_FG: T_FG, S_SG: T_SG, S_COL: "tests/m
                  G_FG: (T_FG, S_FG), G_SG: (T_SG, S_SG), G_LOSS: "tests/train/test_losses.py",
                  D_PREP: "tests/rig/test_prepare.py", D_REPORT: "tests/metrics/test_report.py",
                  D_REF: "tests/metrics/test_reference.py", D_STED: "tests/metrics/test_sted.py",
-                 D_COL: "tests/metrics/test_collision.py"}
+                 D_COL: "tests/metrics/test_collision.py", D_LBS: (T_LBS, "tests/sim/test_attach.py")}
 
 #: name -> (file, [(text, replacement)...], test file, what the bug breaks)
 BUGS = {
@@ -220,6 +221,8 @@ BUGS = {
                                "the joint-distance statistics from the body anchors, not the coarse target"),
     "stat-prepare-hf-offset-of-full": (PREP, [("stats.add(\"hf_offset\", hf, (3,))", "stats.add(\"hf_offset\", full, (3,))")],
                                        D_PREP, "the stored high-frequency offset statistics are those of the vertices"),
+    "stat-lbs-weights-of-nearest-joint": (ATTACH, [("cKDTree(body.rest_verts(shape))", "cKDTree(body.rest_joints(shape))")],
+                                          D_LBS, "body-LBS takes the weights of the body vertex numbered as the nearest joint"),
     # ---- the gradient path of one loss term
     "grad-laplacian-pred-detached": (LOSSES, [("vertex_distance(apply_laplacian(L, pred), apply_laplacian(L, target), mask)",
                                                "vertex_distance(apply_laplacian(L, pred.detach()), apply_laplacian(L, target), mask)")],
