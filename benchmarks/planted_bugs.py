@@ -68,7 +68,8 @@ EARLIER_TESTS = {S_VB: T_VB, S_JN: T_JN, S_FG: T_FG, S_SG: T_SG, S_COL: "tests/m
                  D_JN: (T_JN, S_JN), G_JN: (T_JN, S_JN), D_FG: (T_FG, "tests/models/test_fitgar_train.py"),
                  G_FG: (T_FG, S_FG), G_SG: (T_SG, S_SG), G_LOSS: "tests/train/test_losses.py",
                  D_PREP: "tests/rig/test_prepare.py", D_REPORT: "tests/metrics/test_report.py",
-                 D_REF: "tests/metrics/test_reference.py", D_STED: "tests/metrics/test_sted.py",
+                 D_REF: ("tests/metrics/test_reference.py", "tests/data/test_run_spread.py"),
+                 D_STED: "tests/metrics/test_sted.py",
                  D_COL: "tests/metrics/test_collision.py", D_LBS: (T_LBS, "tests/sim/test_attach.py")}
 
 #: name -> (file, [(text, replacement)...], test file, what the bug breaks)
@@ -100,12 +101,19 @@ BUGS = {
                                    f"verts = self.skin(rest, R, {t}) + (0 if displacement is None else displacement)")
                                   for t in ("T", "trans")]],
                            T_JN, "the PSD displacement added after the skinning, not in the canonical rest space"),
-    "jn-no-fourier": (JN, [("association @ psi + self.fourier_features()", "association @ psi")], T_JN,
+    "jn-no-fourier": (JN, [("association @ psi + self.fourier_features()", "association @ psi"),
+                           ("prior = self.fourier_features()", "prior = 0 * self.fourier_features()")], T_JN,
                       "the garment prior (Fourier features of the bone rest positions) left out"),
     "jn-association-ignored": (JN, [("association @ psi + self.fourier_features()",
-                                     "association.mean() * 0 + psi.mean(2, keepdim=True) + self.fourier_features()")],
+                                     "association.mean() * 0 + psi.mean(2, keepdim=True) + self.fourier_features()"),
+                                    ("self.join_prior(association @ psi)",
+                                     "self.join_prior(association.mean() * 0 + psi.mean(2, keepdim=True)"
+                                     ".expand(-1, -1, association.shape[0], -1))")],
                                T_JN, "every bone reads the mean of all joint features: no joint-to-bone association"),
-    "jn-no-relu": (JN, [("return torch.relu(self.association)", "return self.association")], T_JN,
+    "jn-no-relu": (JN, [("return torch.relu(self.association)", "return self.association"),
+                        ("A = torch.relu(self.association)\n        if self.config.association == \"hoyer\":\n"
+                         "            return A / A.sum(", "A = self.association\n        if self.config.association == "
+                         "\"hoyer\":\n            return A / A.sum(")], T_JN,
                    "the association may go negative"),
     "lbs-root-height-ignored": (LBS, [("torch.zeros_like(height), height], -1)",
                                        "torch.zeros_like(height), 0 * height], -1)")], T_LBS,
@@ -128,7 +136,8 @@ BUGS = {
                                    "Mc = (M[..., :3] @ rest[..., None])[..., 0] + M[..., 3] + blend")], T_SG,
                              "the blend shapes added after the skinning, not to the unposed garment"),
     "sg-corrective-reads-rest": (SG, [('"nodes": torch.cat([Mc, dist], -1)',
-                                       '"nodes": torch.cat([g["rest"].expand_as(Mc), dist], -1)')], T_SG,
+                                       '"nodes": torch.cat([g["rest"].expand_as(Mc), dist], -1)'),
+                                      ("nodes = [Mc, dist]", 'nodes = [g["rest"].expand_as(Mc), dist]')], T_SG,
                                  "the corrective predictor reads the rest garment, not the coarse mesh M_c"),
     "sg-weights-ignore-shape": (SG, [("self.weight_out(self.weight_state(S) * shape)",
                                       "self.weight_out(self.weight_state(S))")], T_SG,
@@ -155,15 +164,23 @@ BUGS = {
     "sign-lgl-output-peeks-new-cell": (LGL, [("        o = torch.sigmoid(go + self.peephole[2] * c)\n"
                                               "        c = i * torch.tanh(gg) + f * c\n",
                                               "        c = i * torch.tanh(gg) + f * c\n"
+                                              "        o = torch.sigmoid(go + self.peephole[2] * c)\n"),
+                                             ("        o = torch.sigmoid(go + self.peephole[2] * c)\n"
+                                              "        c = i * _tanh(gg) + f * c\n",
+                                              "        c = i * _tanh(gg) + f * c\n"
                                               "        o = torch.sigmoid(go + self.peephole[2] * c)\n")], S_LGL,
                                        "the output gate's peephole reads C^t, not C^{t-1} (SwinGar Eq. 6)"),
     "sign-gat-alpha-dropped": (GAT, [("s = self.alpha * s / torch.maximum(row, feat * lip)[:, None, None]",
-                                      "s = s / torch.maximum(row, feat * lip)[:, None, None]")], S_GAT,
+                                      "s = s / torch.maximum(row, feat * lip)[:, None, None]"),
+                                     ("scale = (self.alpha / norm)[..., None]", "scale = (1.0 / norm)[..., None]")], S_GAT,
                                "the normalised scores are not scaled by alpha (SwinGar Eq. 4)"),
     "sign-gat-smaller-norm": (GAT, [("s = self.alpha * s / torch.maximum(row, feat * lip)[:, None, None]",
-                                     "s = self.alpha * s / torch.minimum(row, feat * lip)[:, None, None]")], S_GAT,
+                                     "s = self.alpha * s / torch.minimum(row, feat * lip)[:, None, None]"),
+                                    ("return torch.maximum(rows, feat[..., None] * lip)",
+                                     "return torch.minimum(rows, feat[..., None] * lip)")], S_GAT,
                               "the scores are divided by the smaller of the two norms (SwinGar Eq. 4)"),
-    "sign-gat-heads-summed": (GAT, [("/ self.heads + self.bias", "+ self.bias")], S_GAT,
+    "sign-gat-heads-summed": (GAT, [("/ self.heads + self.bias", "+ self.bias"),
+                                    ("self.out_channels) / self.heads\n", "self.out_channels)\n")], S_GAT,
                               "the heads' outputs are summed, not averaged"),
     "sign-gat-score-slope": (GAT, [("SCORE_SLOPE = 0.2", "SCORE_SLOPE = 0.02")], S_GAT,
                              "GAT's LeakyReLU slope on the scores is 0.02, not 0.2"),
@@ -242,7 +259,7 @@ BUGS = {
     "grad-sg-bend-normals-detached": (SG, [("n = face_normals_torch(pred, g[\"faces\"])",
                                             "n = face_normals_torch(pred.detach(), g[\"faces\"])")], G_SG,
                                       "SwinGar's bending term (Eq. 12) trains nothing"),
-    "grad-jn-sparsity-detached": (JN, [("        return A.sum()\n", "        return A.detach().sum()\n")], G_JN,
+    "grad-jn-sparsity-detached": (JN, [("return A.sum()", "return A.detach().sum()")], G_JN,
                                   "JointNet's sparsity term (Eq. 8) does not sparsify the association"),
     "grad-fg-parser-encoding-detached": (FG, [("h = h * self.encoding(batch)[idx]  # FitGar Eq. 7",
                                                "h = h * self.encoding(batch)[idx].detach()  # FitGar Eq. 7")], G_FG,
@@ -264,8 +281,10 @@ BUGS = {
     "metric-overall-collision-by-frames": (REPORT, [("\"collision_pct\": _weighted(rows, \"collision_pct\", tv)",
                                                      "\"collision_pct\": _weighted(rows, \"collision_pct\", lambda r: r[\"frames\"])")],
                                            D_REPORT, "the overall collision share weighs sequences by frames only"),
-    "metric-floor-mean-of-run-rms": (REF, [("float(np.sqrt(np.mean([_mean_square(run, mean) for run in runs])))",
-                                            "float(np.mean([np.sqrt(_mean_square(run, mean)) for run in runs]))")], D_REF,
+    "metric-floor-mean-of-run-rms": (("src/loosefit/data/run_spread.py", REF),
+                                     [(f"float(np.sqrt(np.mean([{ms}(run, mean) for run in runs])))",
+                                       f"float(np.mean([np.sqrt({ms}(run, mean)) for run in runs]))")
+                                      for ms in ("_mean_square", "mean_square_distance")], D_REF,
                                      "the floor averages the runs' RMS spreads instead of pooling squares"),
     "metric-sted-temporal-over-prediction": (STED, [("np.mean(np.abs(lt_p - lt) / lt))", "np.mean(np.abs(lt_p - lt) / lt_p))")],
                                              D_STED, "temporal STED relative to the prediction's edge lengths"),
