@@ -151,25 +151,9 @@ class GarmentFrames(Dataset):
         displacement ``smooth - anchor`` (``coarse_scale ()``), of ``verts - smooth`` (``detail_scale ()``)
         and of ``verts - anchor`` (``full_scale ()``)."""
         picks = np.unique(np.linspace(0, len(self) - 1, min(samples, len(self))).round().astype(int))
-        items = [self[int(k)] for k in picks]
-        rel = np.concatenate([np.concatenate([it["body_rel"], it["garment_rel"]]) for it in items]).astype(np.float64)
-        dist = np.concatenate([np.linalg.norm(it["smooth"][:, None] - it["joints"][None], axis=-1).ravel()
-                               for it in items])
-        coarse = np.concatenate([np.sum((it["smooth"] - it["anchor"]) ** 2, -1) for it in items])
-        detail = np.concatenate([np.sum((it["verts"] - it["smooth"]) ** 2, -1) for it in items])
-        full = np.concatenate([np.sum((it["verts"] - it["anchor"]) ** 2, -1) for it in items])
-        shapes = np.stack([p.shape for p in self.pairs.values()]).astype(np.float64)
-        alphas = np.stack([p.alpha for p in self.pairs.values()]).astype(np.float64)
-        f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
-        return {
-            "rel_mean": f32(rel.mean(0)), "rel_std": f32(np.maximum(rel.std(0), STD_FLOOR)),
-            "dist_mean": f32(dist.mean()), "dist_std": f32(max(dist.std(), STD_FLOOR)),
-            "shape_mean": f32(shapes.mean(0)), "shape_std": f32(np.maximum(shapes.std(0), STD_FLOOR)),
-            "alpha_mean": f32(alphas.mean(0)), "alpha_std": f32(np.maximum(alphas.std(0), STD_FLOOR)),
-            "coarse_scale": f32(max(np.sqrt(coarse.mean()), 1e-4)),
-            "detail_scale": f32(max(np.sqrt(detail.mean()), 1e-4)),
-            "full_scale": f32(max(np.sqrt(full.mean()), 1e-4)),
-        }
+        shapes = np.stack([p.shape for p in self.pairs.values()])
+        alphas = np.stack([p.alpha for p in self.pairs.values()])
+        return frame_statistics([self[int(k)] for k in picks], shapes, alphas)
 
     @property
     def sizes(self) -> dict:
@@ -177,6 +161,31 @@ class GarmentFrames(Dataset):
         pair = next(iter(self.pairs.values()))
         return {"num_joints": int(len(pair.rest_joints)), "num_shape": int(len(pair.shape)),
                 "num_fit_factors": int(len(pair.alpha)), "pose_features": int(6 * len(pair.rest_joints))}
+
+
+def frame_statistics(items: list[dict], shapes: np.ndarray, alphas: np.ndarray) -> dict[str, np.ndarray]:
+    """The statistics of :meth:`GarmentFrames.feature_stats` (keys and units there), float32, from frame
+    ``items`` (with ``body_rel (Nb, 3)``, ``garment_rel (V, 3)``, ``smooth``, ``verts``, ``anchor (V, 3)`` and
+    ``joints (J, 3)``) and the pairs' ``shapes (P, S)`` and ``alphas (P, F)``: means and stds (floored at
+    :data:`STD_FLOOR`) over every row, and the output scales as root mean square displacement lengths
+    (floored at 0.1 mm)."""
+    rel = np.concatenate([np.concatenate([it["body_rel"], it["garment_rel"]]) for it in items]).astype(np.float64)
+    dist = np.concatenate([np.linalg.norm(it["smooth"][:, None] - it["joints"][None], axis=-1).ravel()
+                           for it in items])
+    coarse = np.concatenate([np.sum((it["smooth"] - it["anchor"]) ** 2, -1) for it in items])
+    detail = np.concatenate([np.sum((it["verts"] - it["smooth"]) ** 2, -1) for it in items])
+    full = np.concatenate([np.sum((it["verts"] - it["anchor"]) ** 2, -1) for it in items])
+    shapes, alphas = np.asarray(shapes, np.float64), np.asarray(alphas, np.float64)
+    f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
+    return {
+        "rel_mean": f32(rel.mean(0)), "rel_std": f32(np.maximum(rel.std(0), STD_FLOOR)),
+        "dist_mean": f32(dist.mean()), "dist_std": f32(max(dist.std(), STD_FLOOR)),
+        "shape_mean": f32(shapes.mean(0)), "shape_std": f32(np.maximum(shapes.std(0), STD_FLOOR)),
+        "alpha_mean": f32(alphas.mean(0)), "alpha_std": f32(np.maximum(alphas.std(0), STD_FLOOR)),
+        "coarse_scale": f32(max(np.sqrt(coarse.mean()), 1e-4)),
+        "detail_scale": f32(max(np.sqrt(detail.mean()), 1e-4)),
+        "full_scale": f32(max(np.sqrt(full.mean()), 1e-4)),
+    }
 
 
 def collate_frames(items: list[dict]) -> dict:

@@ -330,6 +330,23 @@ def grouped_linear(weight: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     return torch.bmm(weight, x.transpose(1, 2)).transpose(1, 2)
 
 
+def bone_output_statistics(sequences, bone_rest: np.ndarray, euler_order: str) -> dict[str, np.ndarray]:
+    """Mean and std over every training frame of what JointNet's bone MLP outputs, float64 ``(B, 3)`` each:
+    ``euler_mean/std`` (radians, the canonical bone rotations as Euler angles in ``euler_order``) and
+    ``offset_mean/std`` (metres, where each bone's rest position ``c`` went: ``R c + T - c``), the stds floored
+    at :data:`MIN_OUTPUT_STD`. ``sequences``: :class:`~loosefit.models.dataset.SequenceData` with canonical
+    bone transforms; ``bone_rest (B, 3)``: the rig's bone rest positions."""
+    centre = bone_rest.astype(np.float64)
+    rot = np.concatenate([s.bone_rot for s in sequences]).astype(np.float64)
+    trans = np.concatenate([s.bone_trans for s in sequences]).astype(np.float64)
+    euler = matrix_to_euler(torch.from_numpy(rot), euler_order).numpy()
+    offset = np.einsum("tbij,bj->tbi", rot, centre) + trans - centre  # where each bone's rest position went
+    out = {}
+    for name, values in (("euler", euler), ("offset", offset)):
+        out[f"{name}_mean"], out[f"{name}_std"] = values.mean(0), np.maximum(values.std(0), MIN_OUTPUT_STD)
+    return out
+
+
 class JointNet(GarmentModel):
     """JointNet on one garment (see the module doc).
 
@@ -413,20 +430,15 @@ class JointNet(GarmentModel):
             raise InputError("JointNet trains on the bone transforms of a prepared store's training sequences "
                              "(load the data with bones=True)", data.store.path)
         rig = load_rig(data.store, data.garment_name)
-        centre = rig.bone_rest_positions.astype(np.float64)
-        rot = np.concatenate([s.bone_rot for s in data.sequences]).astype(np.float64)
-        trans = np.concatenate([s.bone_trans for s in data.sequences]).astype(np.float64)
-        euler = matrix_to_euler(torch.from_numpy(rot), self.config.euler_order).numpy()
-        offset = np.einsum("tbij,bj->tbi", rot, centre) + trans - centre  # where each bone's rest position went
+        stats = bone_output_statistics(data.sequences, rig.bone_rest_positions, self.config.euler_order)
         with torch.no_grad():
             self.rig_rest.copy_(torch.from_numpy(rig.rest_verts))
             if self.psd_mode_count:
                 self.psd_modes.copy_(torch.from_numpy(smoothest_modes(rig.rest_verts, data.faces, self.psd_mode_count)))
             self.skin_weights.copy_(torch.from_numpy(rig.dense_weights()))
             self.bone_rest.copy_(torch.from_numpy(rig.bone_rest_positions))
-            for name, values in (("euler", euler), ("offset", offset)):
-                getattr(self, f"{name}_mean").copy_(torch.from_numpy(values.mean(0)))
-                getattr(self, f"{name}_std").copy_(torch.from_numpy(np.maximum(values.std(0), MIN_OUTPUT_STD)))
+            for name, value in stats.items():
+                getattr(self, name).copy_(torch.from_numpy(value))
             if self.config.association_radius > 0:
                 self.association.copy_(torch.from_numpy(nearby_association(
                     rig.bone_rest_positions, training_body(data).rest_joints()[self.selected],

@@ -177,6 +177,33 @@ class Config:
     ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
 
 
+def output_statistics(sequences, rig) -> dict[str, np.ndarray]:
+    """The statistics VirtualBones scales its inputs and outputs by, from training ``sequences``
+    (:class:`~loosefit.models.dataset.SequenceData` with canonical bone transforms) and their ``rig``
+    (:class:`~loosefit.rig.virtual_bones.VirtualBoneRig`), float32, metres:
+
+    ``position_mean (B, 3)``: each bone's mean canonical position (where its rest centroid went, ``R c + T``);
+    ``position_std (3,)``: per axis, the root mean square over bones of each bone's std about its own mean
+    (floored at :data:`MIN_POSITION_STD`); ``offset_std (3,)``: per axis, the std of the high-frequency
+    offsets ``verts - lf`` over every vertex and frame (floored at :data:`MIN_OFFSET_STD`); ``lf_mean (3,)``:
+    the mean low-frequency vertex; ``lf_std ()``: the std of every low-frequency coordinate together.
+    """
+    B = rig.num_bones
+    # one pass over the sequences (no concatenated copy of every frame)
+    positions, offsets = RunningStats.empty((B, 3)), RunningStats.empty((3,))
+    lf_axes, lf_all = RunningStats.empty((3,)), RunningStats.empty(())
+    for s in sequences:
+        positions.update((s.bone_rot @ rig.bone_rest_positions[:, :, None])[..., 0] + s.bone_trans)
+        offsets.update(s.verts - s.lf)
+        lf_axes.update(s.lf)
+        lf_all.update(s.lf.reshape(-1))
+    pooled = np.sqrt((positions.std**2).mean(0))  # per axis, over bones (each bone about its own mean)
+    f32 = lambda x: np.asarray(x, np.float32)  # noqa: E731
+    return {"position_mean": f32(positions.mean), "position_std": f32(np.maximum(pooled, MIN_POSITION_STD)),
+            "offset_std": f32(np.maximum(offsets.std, MIN_OFFSET_STD)), "lf_mean": f32(lf_axes.mean),
+            "lf_std": f32(lf_all.std)}
+
+
 class VirtualBones(GarmentModel):
     """The VirtualBones motion network of one garment (see the module docstring).
 
@@ -235,24 +262,13 @@ class VirtualBones(GarmentModel):
         if any(s.bone_rot is None for s in data.sequences):
             raise InputError("VirtualBones trains on sequences with bone transforms: load the training split "
                              "with bones=True", data.store.path)
-        # one pass over the sequences (no concatenated copy of every frame)
-        positions, offsets = RunningStats.empty((B, 3)), RunningStats.empty((3,))
-        lf_axes, lf_all = RunningStats.empty((3,)), RunningStats.empty(())
-        for s in data.sequences:
-            positions.update((s.bone_rot @ rig.bone_rest_positions[:, :, None])[..., 0] + s.bone_trans)
-            offsets.update(s.verts - s.lf)
-            lf_axes.update(s.lf)
-            lf_all.update(s.lf.reshape(-1))
-        pooled = np.sqrt((positions.std**2).mean(0))  # per axis, over bones (each bone about its own mean)
+        stats = output_statistics(data.sequences, rig)
         with torch.no_grad():
             self.rest_verts.copy_(torch.from_numpy(rig.rest_verts))
             self.skin_weights.copy_(torch.from_numpy(rig.dense_weights()))
             self.bone_rest.copy_(torch.from_numpy(rig.bone_rest_positions))
-            self.position_mean.copy_(torch.from_numpy(positions.mean))
-            self.position_std.copy_(torch.from_numpy(np.maximum(pooled, MIN_POSITION_STD)))
-            self.offset_std.copy_(torch.from_numpy(np.maximum(offsets.std, MIN_OFFSET_STD)))
-            self.lf_mean.copy_(torch.from_numpy(lf_axes.mean))
-            self.lf_std.fill_(float(lf_all.std))
+            for name in ("position_mean", "position_std", "offset_std", "lf_mean", "lf_std"):
+                getattr(self, name).copy_(torch.from_numpy(stats[name]))
             self.neighbours.copy_(torch.from_numpy(neighbour_table(data.faces, V)))
         self._laplacian = None
 
@@ -324,8 +340,10 @@ class VirtualBones(GarmentModel):
 
     def laplacian(self) -> torch.Tensor:
         """The garment's uniform Laplacian (sparse ``(V, V)``), built once from the faces."""
-        if self._laplacian is None or self._laplacian.device != self.faces.device:
-            self._laplacian = laplacian_operator(self.faces.cpu().numpy(), self._sizes["num_verts"]).to(self.faces.device)
+        dtype = self.rest_verts.dtype  # a model in float64 (finite-difference checks) needs a float64 operator
+        if self._laplacian is None or self._laplacian.device != self.faces.device or self._laplacian.dtype != dtype:
+            L = laplacian_operator(self.faces.cpu().numpy(), self._sizes["num_verts"])
+            self._laplacian = L.to(device=self.faces.device, dtype=dtype)
         return self._laplacian
 
     @staticmethod
