@@ -86,6 +86,8 @@ def paper_model(method: str, garment, body, bones: int, overrides=(), seed: int 
              "max_degree": int(neighbour_table(faces, V).shape[1]), "joint_names": list(body.joint_names),
              "parents": [int(p) for p in body.parents]}
     cfg = load_config(run_config_class(method), CONFIGS / "models" / f"{method}.yaml", overrides)
+    if method == "jointnet":  # its PSD in the garment's smoothest modes, as JointNet.from_data sizes it
+        sizes["psd_modes"] = min(cfg.model.psd_modes, V - 1)
     torch.manual_seed(seed)
     model = model_class(method)(sizes, cfg.model)
     chosen = [int(rng.integers(V))]  # farthest-point bone centres
