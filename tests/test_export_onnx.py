@@ -97,8 +97,8 @@ def test_onnx_steps_reproduce_animate(runs, motion, method, tmp_path):
 
 @pytest.mark.parametrize("run", ["pretrained:skirt", "pretrained:skirt/jointnet"])
 def test_shipped_garments_export_and_step_as_they_animate(run, motion, tmp_path):
-    """The garments loosefit ships, trained for real (3,427 vertices, 80 bones, JointNet's stored int8 rows
-    dequantised on loading): the exported model steps to the vertices of ``Animator.animate`` (100 frames: the
+    """The garments loosefit ships, trained for real (3,427 vertices, 80 bones, JointNet's PSD in 256 modes): the
+    exported model steps to the vertices of ``Animator.animate`` (100 frames: the
     300-frame comparison is the trained runs' above)."""
     motion = motion.slice(0, 100)
     path = tmp_path / "skirt.onnx"
