@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from loosefit.report.build import METRIC_COLUMNS, claim_rows, metric_tables, render_pages, speed_rows
+from loosefit.report.build import METRIC_COLUMNS, claim_rows, metric_tables, own_speed_cells, render_pages, speed_rows
 from loosefit.report.claims import claims_table, speed_table
 
 REPO = Path(__file__).resolve().parents[2]
@@ -22,7 +22,7 @@ WIDE = {"frames": "1800", "rmse_mm": "1234.56", "rmse_vs_mean_mm": "1234.56", "r
         "floor_mm": "123.45", "mean_vertex_error_mm": "1234.56", "hausdorff_mm": "1234.56", "sted_spatial": "12.3456",
         "sted_temporal": "12.3456", "sted": "12.3456", "e_dist_cm": "123.456", "e_norm_deg": "123.45",
         "collision_pct": "100.000", "surface_inside_pct": "100.000", "deepest_mm": "1234.5",
-        "laplacian_consistency": "12.3456", "collapsed_pct": "100.000", "roughness_deg": "180.00"}
+        "laplacian_consistency": "12.3456", "collapsed_pct": "100.000", "roughness_deg": "180.00", "bend_ratio": "123.45"}
 
 
 def context() -> dict:
@@ -40,6 +40,12 @@ def context() -> dict:
                            "references": 4} for r in rows],
             "plots": [], "view_command": "loosefit view demo.zarr:skirt-spin_test",
             "speed": speed_rows(speed_table(REPO / "benchmarks" / "results")),
+            # the runs' own speed at its widest (--measure-speed): a long label and source, five-digit rates
+            "own_speed": own_speed_cells([{"garment": "skirt+average", "vertices": 12024, "method": m["label"],
+                                           "parameters": 123456789, "stream_fps": 12345.6, "batch_fps": 12345.6,
+                                           "source": "measured now: skirt-terrain-003_01, 120 frames, 1 thread"}
+                                          for m in methods]),
+            "measured_speed": True,
             "claims": claim_rows(claims_table(REPO / "benchmarks" / "results"))}
 
 

@@ -12,7 +12,8 @@ import torch
 from loosefit.data.store import DatasetStore
 from loosefit.geometry.rotations import matrix_to_axis_angle
 from loosefit.geometry.smoothing import frequency_split
-from loosefit.rig.prepare import load_bone_transforms, load_rig, prepare, prepared_split, read_stats
+from loosefit.rig.prepare import prepare
+from loosefit.rig.prepared import load_bone_transforms, load_rig, prepared_split, read_stats
 
 GARMENT = "skirt+average"
 
