@@ -129,3 +129,24 @@ def tiny_test(tiny_store):
     from loosefit.models.dataset import GarmentSequences
 
     return GarmentSequences(tiny_store, "skirt+average", "test", bones=False)
+
+
+#: Debian's Chromium, which ``make test`` installs, and the flags it runs headless with on these machines (no
+#: background networking: the closed network refuses its connections; WebGL in software, SwiftShader).
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run", "--use-gl=swiftshader",
+                 "--enable-unsafe-swiftshader"]
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """A headless Chromium through Playwright (no browser download); absent: the test fails, naming the fix."""
+    if not Path(CHROMIUM).is_file():
+        pytest.fail(f"{CHROMIUM} is missing: `make test` installs it (apt-get install chromium)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        launched = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield launched
+        launched.close()

@@ -14,9 +14,6 @@ from loosefit.report.claims import claims_table, speed_table
 
 REPO = Path(__file__).resolve().parents[2]
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
 #: Widest plausible cells per metric key: four digits before the point where the metric can reach them.
 WIDE = {"frames": "1800", "rmse_mm": "1234.56", "rmse_vs_mean_mm": "1234.56", "rmse_vs_mean_corrected_mm": "1234.56",
         "floor_mm": "123.45", "mean_vertex_error_mm": "1234.56", "hausdorff_mm": "1234.56", "sted_spatial": "12.3456",
@@ -50,19 +47,14 @@ def context() -> dict:
 
 
 @pytest.fixture(scope="module")
-def page(tmp_path_factory):
-    if not Path(CHROMIUM).is_file():
-        pytest.fail(f"{CHROMIUM} is missing: `make test` installs it (apt-get install chromium)")
-    from playwright import sync_api
+def page(browser, tmp_path_factory):
     html, _ = render_pages(context())
     index = tmp_path_factory.mktemp("layout") / "index.html"
     index.write_text(html)
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
-        page.goto(index.as_uri())
-        yield page
-        browser.close()
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.goto(index.as_uri())
+    yield page
+    page.close()
 
 
 def test_the_metrics_tables_fit_a_1280_pixel_page(page):

@@ -20,7 +20,6 @@ from loosefit.motion.motion import Motion
 from loosefit.viz.live import (build_live_scene, export_step_model, file_motion, pack_live_scene, read_step_model,
                                serve_live_scene, sparse_weights)
 from loosefit.viz.viewer import ViewerServer
-from tests.viz.test_viewer import CHROMIUM, CHROMIUM_ARGS
 
 SECONDS = 3.0  # per procedural clip: 90 frames at 30 fps
 BLEND = 10  # the page's blend length (live.js BLEND_FRAMES), checked against the page below
@@ -46,19 +45,6 @@ def server(scene):
     with s:
         yield s
 
-
-@pytest.fixture(scope="module")
-def browser():
-    from pathlib import Path
-
-    if not Path(CHROMIUM).is_file():
-        pytest.fail(f"{CHROMIUM} is missing: `make test` installs it (apt-get install chromium)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 def open_live(browser, url: str):

@@ -27,11 +27,6 @@ from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.viz.viewer import ViewerServer, export_scene, pack_scene
 from loosefit.viz.viewer_scene import COLORMAP, ViewerScene, build_scene, collision_frame_indices
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run", "--use-gl=swiftshader",
-                 "--enable-unsafe-swiftshader"]
-
 T = 6
 CENTER = np.array([0.0, 0.0, 1.0])
 RADIUS = 0.2
@@ -93,17 +88,6 @@ def known(tmp_path_factory):
 def scene(known):
     return build_scene(known.inputs)
 
-
-@pytest.fixture(scope="module")
-def browser():
-    if not Path(CHROMIUM).is_file():
-        pytest.fail(f"{CHROMIUM} is missing: `make test` installs it (apt-get install chromium)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")
