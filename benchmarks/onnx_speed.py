@@ -66,6 +66,7 @@ VARIANTS = {
     "jointnet": ("jointnet", []),
     "virtualbones-rank64": ("virtualbones", CPU_MODEL["virtualbones"]),
     "jointnet-reduced": ("jointnet", CPU_MODEL["jointnet"]),
+    "jointnet-psd-modes": ("jointnet", ["model.psd_modes=256"]),  # its PSD in the garment's 256 smoothest modes
 }
 #: Skinning weights per vertex of the stand-in rig (the rig's own setting, ``prepare``'s default).
 INFLUENCES = 8

@@ -6,7 +6,8 @@ Run: .venv/bin/python scripts/ship_pretrained.py --accuracy benchmarks/results/a
 (writes src/loosefit/pretrained/<name>-<method>/)
 
 ``--psd-modes K`` ships a JointNet run trained with a free PSD basis with that basis projected onto the garment's K
-smoothest modes (``loosefit.models.jointnet.project_psd``), the form JointNet now trains in.
+smoothest modes (``loosefit.models.jointnet.project_psd``): its smooth part, without the lumps the free basis adds
+on new motions.
 
 Each shipped garment is checked against its run on the test sequences of the JSON's store (when the store is here):
 the largest vertex distance between the two animations and both RMSEs against the simulation, kept in its

@@ -100,10 +100,13 @@ class JointNetConfig:
             ``D_j = Phi C_j`` with learnt coefficients ``C_j (|X|, k, 3)``. A free basis memorises the training subjects' wrinkles, which a
             deterministic network cannot place on new motions: on held-out real capture it added a lumpy surface
             (dihedral angles 3x those without it) and crumpled triangles for no accuracy (RMSE within 0.3 mm of
-            the same network without the PSD). Shipped: 256, chosen on the real-capture skirt's validation subject
-            with the trained free basis projected onto k modes (:func:`project_psd`): RMSE 61.86 / 61.80 / 61.73 /
-            61.72 mm at k = 16 / 64 / 256 / 512 against 61.76 free and 61.96 without the PSD, the dihedral angles
-            0.42x the simulation's at 256 against 0.96x free, the roughness 12.5 against 17.2 degrees.
+            the same network without the PSD). Projecting a trained free basis onto k modes (:func:`project_psd`)
+            removes the lumps: on the real-capture skirt's validation subject RMSE 61.86 / 61.80 / 61.73 / 61.72 mm
+            at k = 16 / 64 / 256 / 512 against 61.76 free and 61.96 without the PSD, the dihedral angles 0.42x the
+            simulation's at 256 against 0.96x free (the shipped JointNet skirt is projected onto 256). Training in
+            256 modes from the start did worse on the demo (held-out spin 76 against 66 mm, capture walk 123 against
+            99, dihedral angles 1.97x the simulation's: on its 1,171-vertex skirt 256 modes are a fifth of all), so
+            the default stays the paper's free basis.
         fourier_scale: standard deviation of the Fourier frequencies ``c_m``, cycles per metre (not in
             the paper; 2 separates bones about 10 cm apart on a garment about 1 m across).
         fourier: how the Fourier features join the bone features: ``"concat"`` (the paper's Fig. 2 and
@@ -145,7 +148,7 @@ class JointNetConfig:
     bone_mlp: list[int] = field(default_factory=lambda: [1024, 2048, 1024])
     psd_mlp: list[int] = field(default_factory=lambda: [480, 128])
     psd_shapes: int = 64
-    psd_modes: int = 256
+    psd_modes: int = 0
     fourier_scale: float = 2.0
     fourier: str = "concat"
     bone_init: str = "torch"
