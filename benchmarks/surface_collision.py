@@ -25,7 +25,7 @@ Measures, against the posed full-resolution body (what a viewer sees), per frame
   sample of its triangles less than the pass's tolerance inside): how far they moved (the shape change where nothing
   penetrates; a vertex next to a moved one can still be moved by a later pass, and counts here).
 
-Targets (the issue that asked for the pass): at most 10 ms a frame added at 4k vertices on one CPU thread; surface
+Targets: at most 10 ms a frame added at 4k vertices on one CPU thread; surface
 points more than 5 mm inside at most 0.5 % on average and 1.5 % in any frame; the deepest at most 15 mm.
 
     PYTHONPATH=src .venv/bin/python benchmarks/surface_collision.py [--edge 0.0165] [--motion kick:1:3 ...]

@@ -1,4 +1,4 @@
-"""Cases of the issue "interrupts, hostile files and two processes at once": outputs over a run folder's or a
+"""Cases of interrupts, hostile files and two processes at once: outputs over a run folder's or a
 store's own files (``overwrite``), Ctrl-C and SIGTERM while a verb works (``interrupt``), refusals that must
 change nothing (``keep``), locks (``lock``: a symbolic link as the lock file, two ``train`` into one run
 folder), hostile files (``hostile``: YAML bombs and deep nesting, a 10,000-joint BVH chain, a zip-bomb

@@ -35,7 +35,7 @@ def _refused_quickly(call, *match: str) -> InputError:
 
 def test_billion_laughs_is_refused_in_under_a_second_and_little_memory(tmp_path):
     text = yaml_bomb()
-    assert len(text) < 800  # the 0.7 KB plan of the issue
+    assert len(text) < 800  # a plan of 0.7 KB
     path = tmp_path / "bomb.yaml"
     path.write_text(text)
     _refused_quickly(lambda: load_yaml(text, path), str(path), f"{MAX_YAML_VALUES:,} values", "MAX_YAML_VALUES")
