@@ -11,6 +11,15 @@ import pytest
 from loosefit.interrupts import held_signals
 
 
+@pytest.fixture(autouse=True)
+def python_sigint_handler():
+    """Each test starts from Python's own Ctrl-C handler, as a ``loosefit`` process does: in one long test process
+    an earlier test (a simulator run) can leave another in place. Whatever was there is put back."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def test_sigint_is_raised_after_the_block_not_inside_it():
     before = signal.getsignal(signal.SIGINT)
     reached_end = False
