@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
-from typing import NoReturn
 
 import pytest
 
@@ -22,32 +20,11 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.slow)
 
 
-#: The data kept beside the repository and never in it (``../shared``: the CMU clips of ``mocap/cmu-cc``).
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-#: The real motion capture the tests read: 49 CMU clips on a Character Creator skeleton (BVH, 60 fps).
-SHARED_MOCAP = SHARED / "mocap" / "cmu-cc"
-
-
-def missing_shared(path: Path) -> NoReturn:
-    """Skip the test for want of ``path`` (shared data beside the repository) with a one-line reason, or fail
-    it when the environment says ``CI=true``: continuous integration must have the data, a skip would hide it."""
-    reason = f"needs {path} (../shared beside the repository), which is absent"
-    if os.environ.get("CI", "").strip().lower() == "true":
-        pytest.fail(f"{reason}; CI=true: continuous integration must provide it", pytrace=False)
-    pytest.skip(reason)
-
-
-def shared_path(*parts: str) -> Path:
-    """``../shared/<parts>`` for a test that reads it; absent: :func:`missing_shared` (skip, or fail under CI)."""
-    path = SHARED.joinpath(*parts)
-    if not path.exists():
-        missing_shared(path)
-    return path
-
-
-def shared_mocap() -> Path:
-    """The folder of the real CMU clips, :data:`SHARED_MOCAP`; absent: skip, or fail under ``CI=true``."""
-    return shared_path("mocap", "cmu-cc")
+#: Real motion capture the tests read, in the repository: the first 62 frames (1 s at 60 fps, after the T-pose some
+#: files put first) of seven CMU clips on a Character Creator skeleton, one per subject and one marked "Imported",
+#: with the collection's ``clips.csv`` (tests/data/cmu-cc/README.md). The whole collection lies beside the repository
+#: in ``../shared/mocap/cmu-cc``, where the dataset plans point.
+TEST_MOCAP = Path(__file__).resolve().parent / "data" / "cmu-cc"
 
 
 @pytest.fixture(scope="session")

@@ -12,7 +12,7 @@ from loosefit.errors import InputError
 from loosefit.motion.bvh import import_bvh, write_bvh
 from loosefit.motion.joint_map import builtin_joint_maps, load_joint_map
 from loosefit.motion.map_writer import write_joint_map
-from tests.conftest import shared_mocap
+from tests.conftest import TEST_MOCAP
 from tests.motion.test_retarget import MIXAMO, joints, smooth_motion, to_bvh
 
 
@@ -85,7 +85,7 @@ def _parents_first(order: list[int], parents) -> list[int]:
 def test_real_character_creator_clip_gives_the_cc_pairs(body, tmp_path):
     """On a real CMU clip on the 99-joint Character Creator skeleton (twist, share, finger, toe and
     face bones), the written map pairs the 23 joints of the built-in cc map as it does."""
-    written, notes = write_joint_map(shared_mocap() / "007_01.bvh", body, tmp_path / "cc.yaml")
+    written, notes = write_joint_map(TEST_MOCAP / "007_01.bvh", body, tmp_path / "cc.yaml")
     builtin = builtin_joint_maps()["cc"].joints
     assert {t: written.joints.get(t) for t in builtin} == builtin
     assert not [n for n in notes if "not fit" in n]

@@ -20,9 +20,8 @@ from loosefit.motion.axes import detect_axes
 from loosefit.motion.joint_map import load_joint_map, resolve_joint_map
 from loosefit.motion.resample import resample, slow_down
 from loosefit.motion.rig import TargetRig
-from tests.conftest import SHARED_MOCAP, shared_mocap
+from tests.conftest import TEST_MOCAP
 
-NO_CLIPS = "no-clips"
 # Joints some skeletons lack (Mixamo: hip sockets, second neck bone; fingers are ignored): the test
 # motion keeps them at rest so every convention describes the same pose.
 AT_REST = ("LHipJoint", "RHipJoint", "Neck1", "LThumb", "LeftFingerBase", "LeftHandFinger1",
@@ -272,22 +271,19 @@ def _imported_clips(mocap: Path) -> set[str]:
         return {f"{int(r['Subject']):03d}_{int(r['Trial #']):02d}.bvh" for r in csv.DictReader(f) if r["Status"] == "Imported"}
 
 
-# Without the shared folder: one case that skips with the reason (fails under CI=true), never no test at all.
-@pytest.mark.parametrize("clip", sorted(p.name for p in SHARED_MOCAP.glob("*.bvh")) or [NO_CLIPS])
+@pytest.mark.parametrize("clip", sorted(p.name for p in TEST_MOCAP.glob("*.bvh")))
 def test_real_character_creator_clips(body, clip, caplog):
-    """Real CMU clips on the 99-joint CC skeleton (first 4 s each). Chain bones (thigh, shin, foot,
+    """Real CMU clips on the 99-joint CC skeleton (their first second, as the tests keep them). Chain bones (thigh, shin, foot,
     spine, neck, clavicle, upper arm, forearm) point exactly where the source's do (< 0.5 deg).
     Bones from the pelvis and the branch bones to the clavicles join points the two skeletons place
     differently (CC's clavicles start 21 cm above its upper spine joint, Anny's 10 cm): those keep
     the constant offset of the skeletons' shapes, so their angle to the source's varies < 1 deg.
     The T-pose put before the motion in the "Imported" clips is dropped, and no frame of the others."""
-    mocap = shared_mocap()
-    assert clip != NO_CLIPS, f"no .bvh clips in {mocap}"
-    bvh = read_bvh(mocap / clip).select(slice(0, 241))
+    bvh = read_bvh(TEST_MOCAP / clip)
     with caplog.at_level(logging.WARNING, logger="loosefit.motion"):
         motion = retarget_bvh(bvh, body)
     dropped = [r.getMessage() for r in caplog.records if "frame 0 is" in r.getMessage()]
-    assert bool(dropped) == (clip in _imported_clips(mocap)), dropped
+    assert bool(dropped) == (clip in _imported_clips(TEST_MOCAP)), dropped
     if dropped:
         bvh = bvh.select(slice(1, None))
     assert bvh.fps == 60.0 and motion.fps == 30.0

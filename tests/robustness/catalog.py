@@ -4,7 +4,6 @@ family, whether the pytest suite runs it)."""
 from __future__ import annotations
 
 import fnmatch
-from pathlib import Path
 from dataclasses import dataclass
 
 from tests.robustness.cases_files import body_cases, garment_cases, motion_cases
@@ -74,12 +73,7 @@ def defect_names(brief: str) -> list[str]:
 
 def assert_handled(result: Result, good: tuple[str, ...]) -> None:
     """The documented behaviour: an acceptable outcome; a refusal is exit 2 with exactly one error line,
-    naming the file or argument (no traceback, nothing written, nothing changed: those are outcomes). A case
-    whose setup needs the shared data beside the repository, absent here, skips (fails under ``CI=true``)."""
-    if result.outcome == "setup_failed" and result.problem.startswith("setup: SharedMissing: "):
-        from tests.conftest import missing_shared
-
-        missing_shared(Path(result.problem.removeprefix("setup: SharedMissing: ")))
+    naming the file or argument (no traceback, nothing written, nothing changed: those are outcomes)."""
     assert result.outcome in good, result.describe()
     if result.outcome == "clear_errors" and result.returncode == 2:
         assert not result.problem, result.describe()

@@ -22,26 +22,16 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.conftest import SHARED_MOCAP
+from tests.conftest import TEST_MOCAP
 from tests.robustness.harness import MARKER, Shared
 
-#: The real motion capture beside the repository (README there); a short clip of it.
-MOCAP = SHARED_MOCAP
+#: A real CMU clip the tests keep (tests/data/cmu-cc).
 BVH_CLIP = "002_03.bvh"
 
 
-class SharedMissing(FileNotFoundError):
-    """A case's setup needs the shared data beside the repository and it is absent: the test that reads the
-    case's result skips (fails under ``CI=true``) instead of reporting a broken setup
-    (:func:`tests.robustness.catalog.assert_handled`)."""
-
-
 def mocap_clip() -> Path:
-    """The real clip :data:`BVH_CLIP`; :class:`SharedMissing` naming it when it is absent."""
-    path = MOCAP / BVH_CLIP
-    if not path.is_file():
-        raise SharedMissing(str(path))
-    return path
+    """The real clip :data:`BVH_CLIP`."""
+    return TEST_MOCAP / BVH_CLIP
 
 
 def write(path: Path, data: bytes | str) -> Path:
