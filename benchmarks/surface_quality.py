@@ -41,13 +41,17 @@ def areas(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=-1)
 
 
+def crumpled_pct(verts: np.ndarray, faces: np.ndarray, rest: np.ndarray) -> float:
+    """Percent of the ``(frame, triangle)`` pairs of ``verts (T, V, 3)`` under :data:`CRUMPLED_AREA` of their rest area."""
+    return float(100 * (areas(verts, faces) < CRUMPLED_AREA * areas(rest, faces)).mean())
+
+
 def quality(pred: np.ndarray, gt: np.ndarray, faces: np.ndarray, rest: np.ndarray) -> dict:
     """The four numbers of the module doc for one prediction ``(T, V, 3)`` against ``gt``."""
     theta_pred, theta_gt = dihedral_pair_deg(pred, gt, faces)
     return {"bend_ratio": float(np.abs(theta_pred).sum() / np.abs(theta_gt).sum()),
             "roughness_deg": float(roughness_from_dihedrals(theta_pred, theta_gt).mean()),
-            "collapsed_pct": collapsed_pct(pred, gt, faces),
-            "crumpled_pct": float(100 * (areas(pred, faces) < CRUMPLED_AREA * areas(rest, faces)).mean())}
+            "collapsed_pct": collapsed_pct(pred, gt, faces), "crumpled_pct": crumpled_pct(pred, faces, rest)}
 
 
 def main() -> None:
@@ -70,7 +74,7 @@ def main() -> None:
         gt = np.asarray(seq.verts[:], np.float64)
         refs = store.references(name)
         row = {"sequence": name, "frames": len(gt),
-               "simulation": {"crumpled_pct": quality(gt, gt, faces, rest)["crumpled_pct"]},
+               "simulation": {"crumpled_pct": crumpled_pct(gt, faces, rest)},
                "references": None if refs is None or not len(refs) else
                {k: float(np.mean([quality(np.asarray(r, np.float64), gt, faces, rest)[k] for r in refs]))
                 for k in ("bend_ratio", "roughness_deg", "collapsed_pct", "crumpled_pct")}}

@@ -12,6 +12,7 @@ import torch
 
 from loosefit.models.layers.edge_conv import neighbour_table
 from loosefit.models.virtualbones import VirtualBones, VirtualBonesConfig
+from tests.models.conftest import central_difference
 
 TINY = VirtualBonesConfig(lf_hidden=6, hf_hidden=6, global_channels=2, edge_channels=(4,), bone_weight=0.5,
                           collision_weight=3.0, collision_margin=0.01)
@@ -81,19 +82,10 @@ def test_stage_loss_gradient_matches_central_differences(stage, weights):
     params = list(m.stage_parameters(stage))
     grads = gradients(m, stage, b)
     by_id = {id(p): grads[n] for n, p in m.named_parameters()}
-    h = 1e-6
     checked = 0
     for p in params[:: max(1, len(params) // 4)]:
         for k in (0, p.numel() // 2, p.numel() - 1):
-            flat = p.data.view(-1)
-            keep = float(flat[k])
-            with torch.no_grad():
-                flat[k] = keep + h
-                up = float(m.training_loss(b, stage)[0])
-                flat[k] = keep - h
-                down = float(m.training_loss(b, stage)[0])
-                flat[k] = keep
-            numeric = (up - down) / (2 * h)
+            numeric = central_difference(lambda: float(m.training_loss(b, stage)[0]), p, k)
             assert float(by_id[id(p)].view(-1)[k]) == pytest.approx(numeric, rel=1e-4, abs=1e-8)
             checked += 1
     assert checked >= 6

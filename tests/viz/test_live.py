@@ -20,6 +20,7 @@ from loosefit.motion.motion import Motion
 from loosefit.viz.live import (build_live_scene, export_step_model, file_motion, pack_live_scene, read_step_model,
                                serve_live_scene, sparse_weights)
 from loosefit.viz.viewer import ViewerServer
+from tests.viz.test_viewer import page_when
 
 SECONDS = 3.0  # per procedural clip: 90 frames at 30 fps
 BLEND = 10  # the page's blend length (live.js BLEND_FRAMES), checked against the page below
@@ -49,13 +50,9 @@ def server(scene):
 
 def open_live(browser, url: str):
     """The live page at ``url`` (paused: only the tests step it) once ready, and its console errors."""
-    page = browser.new_page(viewport={"width": 900, "height": 640})
-    errors = []
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(url + "live.html?play=0")
-    page.wait_for_function("window.loosefitLive && (window.loosefitLive.ready || window.loosefitLive.error)",
-                           timeout=120000)
+    page, errors = page_when(browser, url + "live.html?play=0",
+                             "window.loosefitLive && (window.loosefitLive.ready || window.loosefitLive.error)",
+                             size=(900, 640), timeout=120000)
     assert page.evaluate("loosefitLive.error") is None, errors
     assert page.evaluate("loosefitLive.blendFrames") == BLEND
     return page, errors

@@ -106,15 +106,20 @@ def server(scene):
         yield s
 
 
-def open_page(browser, url: str):
-    """A page at ``url`` once the viewer is ready, and the list collecting its console errors."""
-    page = browser.new_page(viewport={"width": 1100, "height": 620})
+def page_when(browser, url: str, ready: str, size=(1100, 620), timeout: float = 20000):
+    """A page at ``url`` once the JavaScript condition ``ready`` holds, and the list collecting its console errors."""
+    page = browser.new_page(viewport={"width": size[0], "height": size[1]})
     errors = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.goto(url)
-    page.wait_for_function("window.loosefitViewer && window.loosefitViewer.ready", timeout=20000)
+    page.wait_for_function(ready, timeout=timeout)
     return page, errors
+
+
+def open_page(browser, url: str):
+    """A page at ``url`` once the viewer is ready, and the list collecting its console errors."""
+    return page_when(browser, url, "window.loosefitViewer && window.loosefitViewer.ready")
 
 
 def positions(page, panel: int, track: int) -> np.ndarray:
