@@ -104,9 +104,8 @@ class JointNetConfig:
             removes the lumps: on the real-capture skirt's validation subject RMSE 61.86 / 61.80 / 61.73 / 61.72 mm
             at k = 16 / 64 / 256 / 512 against 61.76 free and 61.96 without the PSD, the dihedral angles 0.42x the
             simulation's at 256 against 0.96x free (the shipped JointNet skirt is projected onto 256). Training in
-            256 modes from the start did worse on the demo (held-out spin 76 against 66 mm, capture walk 123 against
-            99, dihedral angles 1.97x the simulation's: on its 1,171-vertex skirt 256 modes are a fifth of all), so
-            the default stays the paper's free basis.
+            256 modes from the start did worse on the demo's validation motions (best 58.6 against 55.6 mm; on its
+            1,171-vertex skirt 256 modes are a fifth of all), so the default stays the paper's free basis.
         fourier_scale: standard deviation of the Fourier frequencies ``c_m``, cycles per metre (not in
             the paper; 2 separates bones about 10 cm apart on a garment about 1 m across).
         fourier: how the Fourier features join the bone features: ``"concat"`` (the paper's Fig. 2 and
