@@ -108,6 +108,24 @@ def test_shipped_garments_export_and_step_as_they_animate(run, motion, tmp_path)
     assert np.abs(verts - Animator(run).animate(motion)).max() <= TOLERANCE
 
 
+@pytest.mark.parametrize("run", ["pretrained:skirt", "pretrained:skirt/jointnet"])
+def test_int8_weights_stay_within_millimetres_of_the_float_model(run, motion, tmp_path):
+    """``--int8``: the shipped garments' large matrices in int8 blocks (under half the file), every vertex
+    of 100 frames within 5 mm of the float model (about 1-3 mm at most on real capture, benchmarks/README.md),
+    and the weights really rounded (the vertices move)."""
+    motion = motion.slice(0, 100)
+    exact, small = tmp_path / "float.onnx", tmp_path / "int8.onnx"
+    export_onnx(run, exact)
+    summary = export_onnx(run, small, int8=True)
+    assert summary["weights"]["storage"] == "int8" and read_metadata(small)["weights"] == summary["weights"]
+    assert summary["weights"]["weights_int8"] > 3 * summary["weights"]["weights_float"]
+    assert small.stat().st_size < 0.5 * exact.stat().st_size
+    assert "MatMulNBits" in {n.op_type for n in onnx.load(str(small)).graph.node}
+    gap = np.linalg.norm(stream(small, motion)[0] - stream(exact, motion)[0], axis=-1)
+    print(f"{run}: int8 against float32, mean {gap.mean() * 1e3:.3f} mm, max {gap.max() * 1e3:.3f} mm")
+    assert 1e-5 < gap.max() <= 5e-3
+
+
 def test_metadata_round_trips_and_describes_the_state(runs, motion, body, tmp_path):
     path = tmp_path / "jn.onnx"
     assert main(["export-onnx", str(runs / "jointnet"), "--out", str(path)]) == 0  # the command line, no --bones

@@ -431,7 +431,7 @@ def cmd_export_onnx(args):
 
     writable(args.out, folder=False)
     guard_output(args.out, args.force)
-    s = export_onnx(args.run, args.out, checkpoint=args.checkpoint, bones=args.bones)
+    s = export_onnx(args.run, args.out, checkpoint=args.checkpoint, bones=args.bones, int8=args.int8)
     bones = f", {s['bones']} bone transforms" if s["bones"] else ""
     print(f"wrote {s['path']}: {s['bytes']} bytes, {s['method']}, {s['joints']} joints in, {s['vertices']} vertices "
           f"out, state of {s['state_size']} floats{bones}")

@@ -49,7 +49,8 @@ NOT_EXPORTED = {
 }
 
 
-def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", bones: bool = False) -> dict:
+def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", bones: bool = False,
+                int8: bool = False) -> dict:
     """Write the run's garment model as one ONNX step model (module doc) to ``out``.
 
     Args:
@@ -57,9 +58,13 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
         out: the ``.onnx`` file written.
         checkpoint: ``"best"``, ``"last"`` or a checkpoint path (:func:`loosefit.animate.load_run`).
         bones: also output the bones' world transforms (``bone_transforms``).
+        int8: store the large weight matrices as int8 blocks (:mod:`loosefit.io.onnx_int8`): about a quarter of
+            the file and up to twice the frames per second on one CPU thread, a fraction of a millimetre from the
+            float model on the shipped garments (``benchmarks/README.md``); needs onnxruntime's ``MatMulNBits``.
 
     Returns:
-        ``{"path", "bytes", "method", "vertices", "joints", "state_size", "bones"}``.
+        ``{"path", "bytes", "method", "vertices", "joints", "state_size", "bones", "weights"}`` (``weights``:
+        ``"float32"``, or ``"int8"`` with the counts of :func:`~loosefit.io.onnx_int8.quantize_model`).
 
     Raises:
         InputError: not a run folder, a missing or corrupt ``model.json`` or checkpoint (naming the file), or a
@@ -92,13 +97,20 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
             torch.onnx.export(graph, example, str(tmp), input_names=list(INPUTS), output_names=outputs,
                               opset_version=OPSET, dynamo=False, do_constant_folding=True)
         proto = onnx.load(str(tmp))
+        weights: dict = {"storage": "float32"}
+        if int8:
+            from loosefit.io.onnx_int8 import BLOCK_SIZE, quantize_model
+
+            proto, counts = quantize_model(proto)
+            weights = {"storage": "int8", "block_size": BLOCK_SIZE, **counts}
         entry = proto.metadata_props.add()
-        entry.key, entry.value = METADATA_KEY, json.dumps(describe(graph, meta, model))
+        entry.key, entry.value = METADATA_KEY, json.dumps({**describe(graph, meta, model), "weights": weights})
         proto.producer_name = "loosefit"
         onnx.checker.check_model(proto)
         onnx.save(proto, str(tmp))
     return {"path": str(out), "bytes": out.stat().st_size, "method": graph.method, "vertices": V, "joints": J,
-            "state_size": graph.state_size, "bones": int(graph.bone_rest_positions().shape[0]) if bones else 0}
+            "state_size": graph.state_size, "bones": int(graph.bone_rest_positions().shape[0]) if bones else 0,
+            "weights": weights}
 
 
 def describe(graph, meta: dict, model) -> dict:
@@ -181,3 +193,5 @@ def add_arguments(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
                     "nothing), last or a checkpoint path")
     sp.add_argument("--bones", action="store_true", help="also output the bones' world transforms (GPU skinning)")
+    sp.add_argument("--int8", action="store_true", help="large weight matrices in int8 blocks: a quarter of the "
+                    "file, faster on a CPU, slightly less exact (onnxruntime's MatMulNBits)")

@@ -174,6 +174,10 @@ def _worker(local_rank: int, nproc: int, port: int, outbox: str, fn: Callable, a
         result = fn(*args, **kwargs)
         if local_rank == 0:
             Path(outbox, "result.pkl").write_bytes(pickle.dumps(result))
+        if dist.is_initialized():
+            # every rank done before any tears its connections down: a rank whose peer closed first could abort
+            # in gloo's shutdown (SIGABRT, seen on a loaded 2-core machine) after a run that succeeded
+            dist.barrier()
     except LoosefitError as e:
         # a clear message for the parent instead of a traceback per process
         kind = "input" if isinstance(e, InputError) else "loosefit"

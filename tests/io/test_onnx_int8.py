@@ -1,0 +1,107 @@
+"""Weight-only int8 blocks (``loosefit.io.onnx_int8``): every weight within half a quantization step of the
+value it stands for, and onnxruntime's ``MatMulNBits`` multiplying exactly those values (float path) or within
+the bound that rounding its input blocks to int8 allows (integer path), for a plain, a per-group (batched) and a
+``Gemm`` product."""
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import pytest
+from onnx import TensorProto, helper, numpy_helper
+
+from loosefit.io.onnx_int8 import BLOCK_SIZE, dequantize_blocks, quantize_blocks, quantize_model
+
+K, N, G = 70, 24, 3  # K not a multiple of the block: the last block is padded
+
+
+def test_blocks_round_trip_within_half_a_step():
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(K, N)).astype(np.float32) * np.logspace(-3, 1, N, dtype=np.float32)
+    w[:, 5] = 0.0  # an all-zero column: scale 0, dequantized exactly
+    stored, scales = quantize_blocks(w)
+    blocks = -(-K // BLOCK_SIZE)
+    assert stored.shape == (N, blocks, BLOCK_SIZE) and stored.dtype == np.uint8 and scales.shape == (N, blocks)
+    back = dequantize_blocks(stored, scales, K)
+    step = np.repeat(scales.T, BLOCK_SIZE, axis=0)[:K]  # (K, N): each weight's block scale
+    assert np.all(np.abs(back - w) <= step / 2 * (1 + 1e-6))
+    assert np.abs(back - w).max() > 0  # not a float copy
+    np.testing.assert_array_equal(back[:, 5], 0.0)
+    # each block's largest weight is +-127 steps: stored exactly
+    for n in (0, N - 1):
+        for b in range(blocks):
+            block = w[b * BLOCK_SIZE:(b + 1) * BLOCK_SIZE, n]
+            k = b * BLOCK_SIZE + int(np.abs(block).argmax())
+            assert back[k, n] == pytest.approx(w[k, n], rel=1e-6)
+            assert abs(int(stored[n, b, k - b * BLOCK_SIZE]) - 128) == 127
+    assert np.all(stored[:, -1, K - (blocks - 1) * BLOCK_SIZE:] == 128)  # the padding is zero weights
+
+
+def _graph(rng):
+    """``y1 = a @ W1``, ``y2 = Gemm(a, W2^T (stored (N, K)), c)``, ``y3 = b @ W3`` (per group), ``y4 = a @ small``."""
+    w1 = rng.normal(size=(K, N)).astype(np.float32)
+    w2 = rng.normal(size=(N, K)).astype(np.float32)
+    c = rng.normal(size=(N,)).astype(np.float32)
+    w3 = rng.normal(size=(G, K, N)).astype(np.float32)
+    small = rng.normal(size=(K, 2)).astype(np.float32)
+    nodes = [helper.make_node("MatMul", ["a", "w1"], ["y1"]),
+             helper.make_node("Gemm", ["a", "w2", "c"], ["y2"], transB=1),
+             helper.make_node("MatMul", ["b", "w3"], ["y3"]),
+             helper.make_node("MatMul", ["a", "small"], ["y4"])]
+    inputs = [helper.make_tensor_value_info("a", TensorProto.FLOAT, [1, K]),
+              helper.make_tensor_value_info("b", TensorProto.FLOAT, [G, 1, K])]
+    outputs = [helper.make_tensor_value_info(y, TensorProto.FLOAT, None) for y in ("y1", "y2", "y3", "y4")]
+    inits = [numpy_helper.from_array(v, n) for n, v in (("w1", w1), ("w2", w2), ("c", c), ("w3", w3),
+                                                           ("small", small))]
+    model = helper.make_model(helper.make_graph(nodes, "g", inputs, outputs, inits),
+                              opset_imports=[helper.make_opsetid("", 17)])
+    return model, {"w1": w1, "w2": w2.T, "c": c, "w3": w3, "small": small}
+
+
+def _run(model, feeds):
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    sess = ort.InferenceSession(model.SerializeToString(), options, providers=["CPUExecutionProvider"])
+    return dict(zip(("y1", "y2", "y3", "y4"), sess.run(None, feeds)))
+
+
+def _deq(w):
+    return dequantize_blocks(*quantize_blocks(w), w.shape[0])
+
+
+def _input_rounding_bound(a, w):
+    """``sum_k |W_kn| * s_k / 2``: the most that rounding ``a``'s blocks of BLOCK_SIZE to int8 (scale ``s`` =
+    block max / 127) can move ``a @ W``."""
+    a = np.asarray(a, np.float64).reshape(-1)
+    s = np.concatenate([np.full(min(BLOCK_SIZE, len(a) - i), np.abs(a[i:i + BLOCK_SIZE]).max() / 127)
+                        for i in range(0, len(a), BLOCK_SIZE)])
+    return (np.abs(w) * s[:, None] / 2).sum(0)
+
+
+@pytest.mark.parametrize("accuracy_level", [0, 4])
+def test_onnxruntime_multiplies_the_stored_weights(accuracy_level):
+    rng = np.random.default_rng(1)
+    model, w = _graph(rng)
+    feeds = {"a": rng.normal(size=(1, K)).astype(np.float32), "b": rng.normal(size=(G, 1, K)).astype(np.float32)}
+    quantized, summary = quantize_model(model, min_elements=K * N, accuracy_level=accuracy_level)
+    onnx.checker.check_model(quantized)
+    ops = [n.op_type for n in quantized.graph.node]
+    assert ops.count("MatMulNBits") == 2 + G and ops.count("MatMul") == 1  # the small product stays float
+    assert summary["matrices"] == 2 + G and summary["weights_int8"] == (2 + G) * K * N
+    assert {t.name for t in quantized.graph.initializer} & {"w1", "w2", "w3"} == set()
+
+    got, exact = _run(quantized, feeds), _run(model, feeds)
+    a, b = feeds["a"].astype(np.float64), feeds["b"].astype(np.float64)
+    expected = {"y1": a @ _deq(w["w1"]), "y2": a @ _deq(w["w2"]) + w["c"],
+                "y3": np.stack([b[g] @ _deq(w["w3"][g]) for g in range(G)]), "y4": exact["y4"]}
+    np.testing.assert_array_equal(got["y4"], exact["y4"])
+    for y in ("y1", "y2", "y3"):
+        assert got[y].shape == exact[y].shape
+        assert np.abs(got[y] - exact[y]).max() > 1e-4  # the weights really are rounded
+        if accuracy_level == 0:  # float arithmetic on the dequantized weights
+            np.testing.assert_allclose(got[y], expected[y], atol=1e-4, rtol=1e-5)
+    if accuracy_level == 4:  # int8 inputs too: within the rounding of each input block
+        for y, x, weights in (("y1", a, [w["w1"]]), ("y2", a, [w["w2"]]), ("y3", b, list(w["w3"]))):
+            for g, weight in enumerate(weights):
+                bound = _input_rounding_bound(x[g] if y == "y3" else x, _deq(weight))
+                err = np.abs(got[y][g] - expected[y][g]).reshape(-1) if y == "y3" else np.abs(got[y] - expected[y])[0]
+                assert np.all(err <= bound * 1.01 + 1e-5), (y, g, (err / bound).max())
