@@ -8,8 +8,9 @@ with ``--bones`` stand-in virtual bones): the time per frame does not depend on 
 global layer maps the 600 GRU units to 10 channels at every vertex through one dense matrix (600 x 42,090 for this
 dress, 101 MB of the model's 115 MB), which every frame reads whole; the same network with that layer factorised
 through 64 channels (``model.global_rank=64``, the CPU size of ``benchmarks/_common.py`` and of the shipped skirt)
-is measured beside it. The run folder is exported by the live server itself
-(:func:`loosefit.viz.live.build_live_scene`).
+is measured beside it, and the paper's width with its large matrices in int8 blocks (``export-onnx --int8``,
+onnxruntime-web's ``MatMulNBits``). Each run folder is exported as ``loosefit export-onnx`` does and served by the
+live server (:func:`loosefit.viz.live.build_live_scene` with the ``.onnx``).
 
 Measured, after ``--warmup`` untimed frames:
 
@@ -30,8 +31,6 @@ Run: .venv/bin/python benchmarks/live_page_speed.py [--frames 150] [--warmup 20]
 from __future__ import annotations
 
 import argparse
-import contextlib
-import functools
 import os
 import sys
 import tempfile
@@ -39,12 +38,12 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import onnx_speed  # noqa: E402
 from _common import CPU_MODEL, save_results  # noqa: E402
 from onnx_speed import paper_model, write_run  # noqa: E402
 from speed import bench_dress  # noqa: E402
 
 from loosefit.body import AnnyBody  # noqa: E402
+from loosefit.export_onnx import export_onnx  # noqa: E402
 from loosefit.viz.live import build_live_scene, serve_live_scene  # noqa: E402
 from loosefit.viz.viewer import ViewerServer  # noqa: E402
 
@@ -76,17 +75,6 @@ def play_for(page, seconds: float, speed: float) -> dict:
     elapsed = (end[1] - start[1]) / 1000
     return {"speed": speed, "seconds": elapsed, "garment_fps": (end[0] - start[0]) / elapsed,
             "asked_fps": 30.0 * speed, "page_shown": end[2]}
-
-
-@contextlib.contextmanager
-def config_overrides(overrides: list[str]):
-    """``paper_model`` with ``overrides`` applied to the method's YAML config (it reads the file itself)."""
-    plain = onnx_speed.load_config
-    onnx_speed.load_config = functools.partial(plain, overrides=overrides)
-    try:
-        yield
-    finally:
-        onnx_speed.load_config = plain
 
 
 def measure(browser, scene, args) -> dict:
@@ -123,6 +111,8 @@ def main() -> None:
     parser.add_argument("--viewport", default=f"{VIEWPORT['width']}x{VIEWPORT['height']}",
                         help="window size WxH (software WebGL rasterises every pixel on the CPU)")
     parser.add_argument("--name", default="live-page-speed", help="results file name")
+    parser.add_argument("--only", default="", help="comma-separated variant labels (default: all: "
+                        "'paper width', 'paper width in int8', 'global layer through 64 channels')")
     args = parser.parse_args()
     width, height = (int(x) for x in args.viewport.split("x"))
     args.viewport = {"width": width, "height": height}
@@ -131,7 +121,10 @@ def main() -> None:
     load_before = os.getloadavg()
     body = AnnyBody()
     garment, _ = bench_dress(body)
-    variants = {"paper width": [], "global layer through 64 channels": CPU_MODEL["virtualbones"]}
+    # label -> (config overrides, int8 weights: ``export-onnx --int8``, onnxruntime-web's MatMulNBits)
+    variants = {"paper width": ([], False), "paper width in int8": ([], True),
+                "global layer through 64 channels": (CPU_MODEL["virtualbones"], False)}
+    variants = {k: v for k, v in variants.items() if not args.only or k in args.only.split(",")}
     results = {
         "garment": {"name": "bench dress", "vertices": int(len(garment.verts)), "faces": int(len(garment.faces))},
         "method": "virtualbones, untrained", "bones": args.bones, "body_vertices": None, "viewport": args.viewport,
@@ -140,14 +133,16 @@ def main() -> None:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         results["chromium"] = browser.version
-        for label, overrides in variants.items():
-            with tempfile.TemporaryDirectory(prefix="live-speed-") as tmp, config_overrides(overrides):
-                model, cfg = paper_model("virtualbones", garment, body, args.bones)
+        for label, (overrides, int8) in variants.items():
+            with tempfile.TemporaryDirectory(prefix="live-speed-") as tmp:
+                model, cfg = paper_model("virtualbones", garment, body, args.bones, overrides)
                 run = write_run(model, cfg, Path(tmp) / "virtualbones")
                 start = time.perf_counter()
-                scene = build_live_scene(run, body=body, kinds=("walk", "spin"), seconds=8.0, checkpoint="last")
+                exported = Path(tmp) / "garment.onnx"
+                export_onnx(run, exported, checkpoint="last", int8=int8)
+                scene = build_live_scene(model_path=exported, body=body, kinds=("walk", "spin"), seconds=8.0)
                 export_s = time.perf_counter() - start
-            entry = {"overrides": overrides, "export_s": export_s, **measure(browser, scene, args)}
+            entry = {"overrides": overrides, "int8": int8, "export_s": export_s, **measure(browser, scene, args)}
             results["networks"][label] = entry
             results["body_vertices"] = int(scene.body.rest_verts.shape[0])
             st, pl = entry["stepped"], entry["playing"]

@@ -17,7 +17,9 @@ untimed ones, feeding ``next_state`` back, for onnxruntime (``intra_op_num_threa
 and for PyTorch eager, and the largest vertex difference between the two. The machine is shared: the load average
 is recorded, and the CPU time (which leaves out the time spent waiting for a core) is the steadier figure.
 
-With ``--runs``, trained run folders (``pretrained:skirt``, the garments loosefit ships) are timed the same way.
+Every variant can also be timed exported with ``--int8`` (``<variant>-int8``: the large matrices in int8 blocks,
+:mod:`loosefit.io.onnx_int8`). With ``--runs``, trained run folders (``pretrained:skirt``, the garments loosefit
+ships; ``RUN-int8`` exported with ``--int8``) are timed the same way.
 
 Run: .venv/bin/python benchmarks/onnx_speed.py [--vertices 12000] [--frames 200] [--warmup 20] [--bones 80]
          [--variants body-lbs,virtualbones,...] [--runs RUN,...] [--profile] [--name onnx-speed]
@@ -68,6 +70,8 @@ VARIANTS = {
     "jointnet-reduced": ("jointnet", CPU_MODEL["jointnet"]),
     "jointnet-psd-modes": ("jointnet", ["model.psd_modes=256"]),  # its PSD in the garment's 256 smoothest modes
 }
+#: ``<variant>-int8``: the same model exported with ``--int8`` (large matrices in int8 blocks).
+INT8 = "-int8"
 #: Skinning weights per vertex of the stand-in rig (the rig's own setting, ``prepare``'s default).
 INFLUENCES = 8
 TARGET_FPS = 100.0
@@ -186,10 +190,11 @@ def profile_summary(path: Path, top: int = 10) -> list[dict]:
     return [{"op": op, "share": us / total, "us_total": us} for op, us in ranked]
 
 
-def time_run(run, path: Path, motion, args, checkpoint: str = "best") -> dict:
-    """Export ``run`` to ``path`` and time it in onnxruntime and in torch eager along ``motion``."""
+def time_run(run, path: Path, motion, args, checkpoint: str = "best", int8: bool = False) -> dict:
+    """Export ``run`` to ``path`` (``int8``: ``--int8``) and time it in onnxruntime and in torch eager along
+    ``motion``; ``max_vertex_difference_mm`` is the exported model's largest difference from torch."""
     start = time.perf_counter()
-    export_onnx(run, path, checkpoint=checkpoint)
+    export_onnx(run, path, checkpoint=checkpoint, int8=int8)
     export_s = time.perf_counter() - start
     meta = read_metadata(path)
     with torch.no_grad():
@@ -216,11 +221,12 @@ def summary_line(e: dict) -> str:
 def bench_garment(body, garment, motion, args, folder: Path) -> dict:
     out = {"vertices": len(garment.verts), "faces": len(garment.faces), "methods": {}}
     for variant in [v for v in args.variants.split(",") if v]:
-        method, overrides = VARIANTS[variant]
+        int8 = variant.endswith(INT8)
+        method, overrides = VARIANTS[variant.removesuffix(INT8)]
         model, cfg = paper_model(method, garment, body, args.bones, overrides)
         run = write_run(model, cfg, folder / f"{variant}-{len(garment.verts)}")
-        entry = {"method": method, "overrides": overrides, "parameters": parameter_count(model),
-                 **time_run(run, folder / f"{variant}-{len(garment.verts)}.onnx", motion, args, "last")}
+        entry = {"method": method, "overrides": overrides, "int8": int8, "parameters": parameter_count(model),
+                 **time_run(run, folder / f"{variant}-{len(garment.verts)}.onnx", motion, args, "last", int8)}
         out["methods"][variant] = entry
         print(f"{len(garment.verts)} vertices, {variant}: {summary_line(entry)}", flush=True)
     return out
@@ -234,8 +240,10 @@ def main() -> None:
     parser.add_argument("--bones", type=int, default=80, help="virtual bones (the rig's default)")
     parser.add_argument("--profile", action="store_true", help="onnxruntime's per-operator profile")
     parser.add_argument("--name", default="onnx-speed", help="results file name")
-    parser.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated variants (VARIANTS; '' none)")
-    parser.add_argument("--runs", default="", help="comma-separated trained runs timed too (pretrained:skirt ...)")
+    parser.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated variants (VARIANTS, each "
+                        "also as <variant>-int8; '' none)")
+    parser.add_argument("--runs", default="", help="comma-separated trained runs timed too (pretrained:skirt ...; "
+                        "RUN-int8 exported with --int8)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     body = AnnyBody()
@@ -252,12 +260,14 @@ def main() -> None:
             results["garments"].append(bench_garment(body, garment, motion, args, Path(tmp)))
         results["runs"] = {}
         for i, run in enumerate(r for r in args.runs.split(",") if r):
-            results["runs"][run] = time_run(run, Path(tmp) / f"run-{i}.onnx", motion, args)
+            int8 = run.endswith(INT8)
+            results["runs"][run] = time_run(run.removesuffix(INT8), Path(tmp) / f"run-{i}.onnx", motion, args,
+                                            int8=int8)
             print(f"{run}: {summary_line(results['runs'][run])}", flush=True)
     first = results["garments"][0]["methods"] if results["garments"] else {}
     results["targets"] = {m: {"fps": first[m]["onnxruntime"]["fps"], "fps_by_cpu_time": first[m]["onnxruntime"][
-        "fps_by_cpu_time"], "pass": first[m]["onnxruntime"]["fps"] >= TARGET_FPS} for m in ("virtualbones", "jointnet")
-        if m in first}
+        "fps_by_cpu_time"], "pass": first[m]["onnxruntime"]["fps"] >= TARGET_FPS}
+        for m in ("virtualbones", "jointnet", "virtualbones" + INT8, "jointnet" + INT8) if m in first}
     results["load_average_at_end"] = os.getloadavg()
     save_results(args.name, results)
 
