@@ -1,7 +1,7 @@
-"""Weight-only int8 blocks (``loosefit.io.onnx_int8``): every weight within half a quantization step of the
-value it stands for, and onnxruntime's ``MatMulNBits`` multiplying exactly those values (float path) or within
-the bound that rounding its input blocks to int8 allows (integer path), for a plain, a per-group (batched) and a
-``Gemm`` product."""
+"""Int8 weights (``loosefit.io.onnx_int8``): every weight within half a quantization step of the value it stands
+for, and onnxruntime multiplying exactly those values (``MatMulNBits``' float path) or within the bound that
+rounding its input to int8 allows (its integer path, per block; ``DynamicQuantizeMatMul``, per tensor), for a
+plain, a per-group (batched), a ``Gemm`` and a many-row product."""
 
 import numpy as np
 import onnx
@@ -9,9 +9,11 @@ import onnxruntime as ort
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from loosefit.io.onnx_int8 import BLOCK_SIZE, dequantize_blocks, quantize_blocks, quantize_model
+from loosefit.io.onnx_int8 import (BLOCK_SIZE, DYNAMIC_MIN_ROWS, dequantize_blocks, quantize_blocks, quantize_columns,
+                                   quantize_model)
 
 K, N, G = 70, 24, 3  # K not a multiple of the block: the last block is padded
+R = DYNAMIC_MIN_ROWS + 4  # rows of the many-row product
 
 
 def test_blocks_round_trip_within_half_a_step():
@@ -36,36 +38,67 @@ def test_blocks_round_trip_within_half_a_step():
     assert np.all(stored[:, -1, K - (blocks - 1) * BLOCK_SIZE:] == 128)  # the padding is zero weights
 
 
+def test_columns_round_trip_within_half_a_step():
+    rng = np.random.default_rng(2)
+    w = rng.normal(size=(K, N)).astype(np.float32) * np.logspace(-3, 1, N, dtype=np.float32)
+    w[:, 3] = 0.0
+    q, scales = quantize_columns(w)
+    assert q.dtype == np.int8 and scales.shape == (N,)
+    back = q.astype(np.float32) * scales
+    assert np.all(np.abs(back - w) <= scales / 2 * (1 + 1e-6)) and np.abs(back - w).max() > 0
+    np.testing.assert_array_equal(back[:, 3], 0.0)
+    assert np.all(np.abs(q).max(0)[scales > 0] == 127)  # each column's largest weight is +-127 steps
+
+
 def _graph(rng):
-    """``y1 = a @ W1``, ``y2 = Gemm(a, W2^T (stored (N, K)), c)``, ``y3 = b @ W3`` (per group), ``y4 = a @ small``."""
+    """``y1 = a @ W1``, ``y2 = Gemm(a, W2^T (stored (N, K)), c)``, ``y3 = b @ W3`` (per group), ``y4 = a @ small``,
+    ``y5 = m @ W5`` over ``R`` rows."""
     w1 = rng.normal(size=(K, N)).astype(np.float32)
     w2 = rng.normal(size=(N, K)).astype(np.float32)
     c = rng.normal(size=(N,)).astype(np.float32)
     w3 = rng.normal(size=(G, K, N)).astype(np.float32)
     small = rng.normal(size=(K, 2)).astype(np.float32)
+    w5 = rng.normal(size=(K, N)).astype(np.float32)
     nodes = [helper.make_node("MatMul", ["a", "w1"], ["y1"]),
              helper.make_node("Gemm", ["a", "w2", "c"], ["y2"], transB=1),
              helper.make_node("MatMul", ["b", "w3"], ["y3"]),
-             helper.make_node("MatMul", ["a", "small"], ["y4"])]
+             helper.make_node("MatMul", ["a", "small"], ["y4"]),
+             helper.make_node("MatMul", ["m", "w5"], ["y5"])]
     inputs = [helper.make_tensor_value_info("a", TensorProto.FLOAT, [1, K]),
-              helper.make_tensor_value_info("b", TensorProto.FLOAT, [G, 1, K])]
-    outputs = [helper.make_tensor_value_info(y, TensorProto.FLOAT, None) for y in ("y1", "y2", "y3", "y4")]
+              helper.make_tensor_value_info("b", TensorProto.FLOAT, [G, 1, K]),
+              helper.make_tensor_value_info("m", TensorProto.FLOAT, [R, K])]
+    outputs = [helper.make_tensor_value_info(y, TensorProto.FLOAT, None) for y in OUTPUTS]
     inits = [numpy_helper.from_array(v, n) for n, v in (("w1", w1), ("w2", w2), ("c", c), ("w3", w3),
-                                                           ("small", small))]
+                                                           ("small", small), ("w5", w5))]
     model = helper.make_model(helper.make_graph(nodes, "g", inputs, outputs, inits),
                               opset_imports=[helper.make_opsetid("", 17)])
-    return model, {"w1": w1, "w2": w2.T, "c": c, "w3": w3, "small": small}
+    return model, {"w1": w1, "w2": w2.T, "c": c, "w3": w3, "small": small, "w5": w5}
+
+
+OUTPUTS = ("y1", "y2", "y3", "y4", "y5")
 
 
 def _run(model, feeds):
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     sess = ort.InferenceSession(model.SerializeToString(), options, providers=["CPUExecutionProvider"])
-    return dict(zip(("y1", "y2", "y3", "y4"), sess.run(None, feeds)))
+    return dict(zip(OUTPUTS, sess.run(None, feeds)))
 
 
 def _deq(w):
     return dequantize_blocks(*quantize_blocks(w), w.shape[0])
+
+
+def _dynamic_reference(m, w):
+    """``m @ W`` as ``DynamicQuantizeMatMul`` computes it: ``m`` rounded to uint8 as ONNX's DynamicQuantizeLinear
+    specifies (scale: the range, zero included, over 255; zero point ``round(-min / scale)``; ties to even), an
+    exact integer product with the int8 columns, then both scales."""
+    m = m.astype(np.float32)
+    s = np.float32((max(m.max(), 0.0) - min(m.min(), 0.0)) / 255)
+    zp = np.clip(np.rint(-min(m.min(), 0.0) / s), 0, 255)
+    mq = np.clip(np.rint(m / s) + zp, 0, 255)
+    q, scales = quantize_columns(w)
+    return ((mq - zp).astype(np.int64) @ q.astype(np.int64)) * (np.float64(s) * scales.astype(np.float64))
 
 
 def _input_rounding_bound(a, w):
@@ -81,23 +114,26 @@ def _input_rounding_bound(a, w):
 def test_onnxruntime_multiplies_the_stored_weights(accuracy_level):
     rng = np.random.default_rng(1)
     model, w = _graph(rng)
-    feeds = {"a": rng.normal(size=(1, K)).astype(np.float32), "b": rng.normal(size=(G, 1, K)).astype(np.float32)}
+    feeds = {"a": rng.normal(size=(1, K)).astype(np.float32), "b": rng.normal(size=(G, 1, K)).astype(np.float32),
+             "m": rng.normal(size=(R, K)).astype(np.float32)}
     quantized, summary = quantize_model(model, min_elements=K * N, accuracy_level=accuracy_level)
     onnx.checker.check_model(quantized)
     ops = [n.op_type for n in quantized.graph.node]
     assert ops.count("MatMulNBits") == 2 + G and ops.count("MatMul") == 1  # the small product stays float
-    assert summary["matrices"] == 2 + G and summary["weights_int8"] == (2 + G) * K * N
-    assert {t.name for t in quantized.graph.initializer} & {"w1", "w2", "w3"} == set()
+    assert ops.count("DynamicQuantizeMatMul") == 1  # the many-row product
+    assert summary["matrices"] == 3 + G and summary["dynamic"] == 1 and summary["weights_int8"] == (3 + G) * K * N
+    assert {t.name for t in quantized.graph.initializer} & {"w1", "w2", "w3", "w5"} == set()
 
     got, exact = _run(quantized, feeds), _run(model, feeds)
     a, b = feeds["a"].astype(np.float64), feeds["b"].astype(np.float64)
     expected = {"y1": a @ _deq(w["w1"]), "y2": a @ _deq(w["w2"]) + w["c"],
                 "y3": np.stack([b[g] @ _deq(w["w3"][g]) for g in range(G)]), "y4": exact["y4"]}
     np.testing.assert_array_equal(got["y4"], exact["y4"])
-    for y in ("y1", "y2", "y3"):
+    np.testing.assert_allclose(got["y5"], _dynamic_reference(feeds["m"], w["w5"]), rtol=1e-5, atol=1e-4)
+    for y in ("y1", "y2", "y3", "y5"):
         assert got[y].shape == exact[y].shape
         assert np.abs(got[y] - exact[y]).max() > 1e-4  # the weights really are rounded
-        if accuracy_level == 0:  # float arithmetic on the dequantized weights
+        if accuracy_level == 0 and y != "y5":  # MatMulNBits' float arithmetic on the dequantized weights
             np.testing.assert_allclose(got[y], expected[y], atol=1e-4, rtol=1e-5)
     if accuracy_level == 4:  # int8 inputs too: within the rounding of each input block
         for y, x, weights in (("y1", a, [w["w1"]]), ("y2", a, [w["w2"]]), ("y3", b, list(w["w3"]))):
