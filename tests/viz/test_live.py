@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from loosefit.cli import main
 from loosefit.errors import InputError
+from loosefit.export_onnx import export_onnx
 from loosefit.motion.motion import Motion
 from loosefit.viz.live import (build_live_scene, export_step_model, file_motion, pack_live_scene, read_step_model,
                                serve_live_scene, sparse_weights)
@@ -135,6 +136,17 @@ def test_bad_model_and_motion_files_name_the_file(tmp_path, model_file, body):
     assert err.value.path == tmp_path / "missing.bvh"
     assert main(["view", "--live", str(tmp_path / "no-run")]) == 2
     assert main(["view", "--live", str(model_file), str(model_file)]) == 2
+
+
+def test_an_int8_model_is_served_with_a_warning(tmp_path, model_file, caplog):
+    """onnxruntime-web runs ``--int8`` models several times slower: the page still takes one, and says so once."""
+    assert read_step_model(model_file)[0] == model_file.read_bytes() and not caplog.records
+    small = tmp_path / "int8.onnx"
+    export_onnx("pretrained:skirt", small, int8=True)
+    data, meta = read_step_model(small)
+    assert data == small.read_bytes() and meta["weights"]["storage"] == "int8"
+    warned = [r for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warned) == 1 and str(small) in warned[0].getMessage() and "without --int8" in warned[0].getMessage()
 
 
 def test_a_motion_file_is_offered_as_it_is(tmp_path, body, scene):

@@ -26,6 +26,7 @@ What the server answers besides the static files:
 from __future__ import annotations
 
 import json
+import logging
 import sys
 import tempfile
 from dataclasses import dataclass, field
@@ -34,6 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from loosefit.errors import InputError
+
+log = logging.getLogger(__name__)
 
 #: Procedural motions the page offers by default (one clip each, by :func:`loosefit.motion.procedural.generate`).
 DEFAULT_KINDS = ("walk", "run", "turn", "spin", "jump", "kick", "squat", "bow", "arm_raise", "wave", "sway")
@@ -117,6 +120,10 @@ def read_step_model(path: str | Path) -> tuple[bytes, dict]:
     for key in ("joint_names", "faces", "initial_state"):
         if key not in metadata:
             raise InputError(f"the model's metadata lacks {key!r}", path)
+    if metadata.get("weights", {}).get("storage") == "int8":
+        # onnxruntime-web has no fast 8-bit kernels: the page would be several times slower (benchmarks/README.md)
+        log.warning("%s: int8 weights (export-onnx --int8) run several times slower in the page than float32; "
+                    "export the run without --int8 for the live page", path)
     return path.read_bytes(), metadata
 
 
