@@ -60,6 +60,7 @@ D_REPORT, D_REF, D_STED, D_COL = (f"tests/metrics/test_{m}_statistics.py"
                                   for m in ("report", "reference", "sted", "collision"))
 COLLISION, ATTACH = "src/loosefit/metrics/collision.py", "src/loosefit/sim/attach.py"
 D_LBS = "tests/models/test_body_lbs_statistics.py"
+INT8, T_INT8 = "src/loosefit/io/onnx_int8.py", "tests/io/test_onnx_int8.py"
 #: The test files of each module before its ``*_signs.py``, ``*_statistics.py`` or ``*_gradients.py`` file
 #: existed (a tuple: all of them run).
 EARLIER_TESTS = {S_VB: T_VB, S_JN: T_JN, S_FG: T_FG, S_SG: T_SG, S_COL: "tests/models/test_collision.py",
@@ -294,6 +295,18 @@ BUGS = {
     "metric-prepare-rmse-per-frame": (PREP, [("\"rmse_lf_mm\": float(np.sqrt(np.concatenate(err_lf).mean()) * 1e3)",
                                               "\"rmse_lf_mm\": float(np.sqrt(np.concatenate(err_lf)).mean() * 1e3)")],
                                       D_PREP, "the rig's reported RMSE is the mean of its frames' RMS values"),
+    # ---- int8 weights of the exported model
+    "int8-zero-point-127": (INT8, [("return (q + 128).astype(np.uint8)", "return (q + 127).astype(np.uint8)")], T_INT8,
+                            "the stored blocks are off by one step from MatMulNBits' zero point"),
+    "int8-blocks-scrambled": (INT8, [("w = padded.T.reshape(N, blocks, block_size)",
+                                      "w = padded.reshape(N, blocks, block_size)")], T_INT8,
+                              "the blocks run along the wrong axis of the weights"),
+    "int8-columns-one-scale": (INT8, [("scales = (np.abs(weight).max(0) / 127.0).astype(np.float32)",
+                                       "scales = np.full(weight.shape[1], np.abs(weight).max() / 127.0, np.float32)")],
+                               T_INT8, "one scale for the whole matrix where each column has its own"),
+    "int8-split-first-group": (INT8, [("matmul_int8(parts[g], w[g], f\"{tag}_out{g}\")",
+                                       "matmul_int8(parts[g], w[0], f\"{tag}_out{g}\")")], T_INT8,
+                               "every group of a batched product multiplies the first group's weights"),
 }
 
 
