@@ -331,3 +331,32 @@ def test_an_exported_viewer_page_leaves_the_live_page_out(tmp_path):
     assert {"index.html", "viewer.js", "vendor/three.min.js"} <= copied
     assert not {n for n in copied if n.startswith(("live.", "vendor/ort"))}
     assert (STATIC_DIR / "live.html").is_file() and list((STATIC_DIR / "vendor").glob("ort*.wasm"))
+
+
+def test_playing_draws_fewer_pixels_while_the_garment_falls_behind(browser, server):
+    """Each second of playing, a garment rate under 90 % of the motion's lowers the drawing resolution by a fifth
+    (never under 35 %); three seconds of keeping up raise it by a tenth, up to every pixel; a paused page draws
+    every pixel; the drawn canvas follows the scale."""
+    page, errors = open_live(browser, server.url)
+    L = "loosefitLive"
+    scales = [page.evaluate(f"{L}.adaptRenderScale(12, 30)") for _ in range(8)]
+    expected = [max(0.35, 0.8 ** (i + 1)) for i in range(8)]
+    np.testing.assert_allclose(scales, expected, rtol=1e-12)
+    climbing = [page.evaluate(f"{L}.adaptRenderScale(30, 30)") for _ in range(9)]
+    np.testing.assert_allclose(climbing, [0.35, 0.35, 0.385, 0.385, 0.385, 0.4235, 0.4235, 0.4235, 0.46585], rtol=1e-12)
+    assert page.evaluate(f"{L}.adaptRenderScale(27.5, 30)") == pytest.approx(0.46585)  # within 90 %: held
+    ratio = page.evaluate("window.devicePixelRatio || 1")
+
+    def drawn_share():  # drawn pixels per CSS pixel of the last draw, across and down
+        width, height, client_width, client_height = page.evaluate(f"{L}.drawingBuffer()")
+        return width / (client_width * ratio), height / (client_height * ratio), client_width
+
+    assert drawn_share()[:2] == (1, 1)
+    page.evaluate(f"{L}.setRenderScale(0.5); {L}.play()")
+    page.wait_for_function(f"{L}.drawingBuffer()[0] < {L}.drawingBuffer()[2]", timeout=20000)
+    across, down, client_width = drawn_share()
+    assert abs(across - 0.5) <= 1 / client_width and abs(down - 0.5) <= 0.01
+    page.evaluate(f"{L}.pause(); {L}.step(1, true)")
+    assert drawn_share()[:2] == (1, 1)
+    assert not errors
+    page.close()

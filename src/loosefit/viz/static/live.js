@@ -313,10 +313,19 @@ function follow(root) {
 }
 
 let stale = false, shownFrame = 0;
+let drawing = false;
 function draw() {
+  // follow() moves the camera, whose change event calls draw() again: that inner call would render the frame a
+  // second time (twice the rasterising), so it returns and this one renders once with the camera moved
+  if (drawing) return;
+  drawing = true;
+  try { render(); } finally { drawing = false; }
+}
+
+function render() {
   const t0 = performance.now();
   if (stale && lastPose) {
-    stale = false;  // before follow(): the camera's change event draws again
+    stale = false;
     skinBody(lastPose);
     setPositions(bodyMesh, body.out);
     garmentMesh.geometry.attributes.position.needsUpdate = true;
@@ -325,6 +334,8 @@ function draw() {
     live.stats.skinMs = 0.9 * live.stats.skinMs + 0.1 * (performance.now() - t0);
     $('frame-label').textContent = 'frame ' + shownFrame + ' \u00b7 ' + motions[current.m].name + (blend ? ' (blending)' : '');
   }
+  const ratio = (window.devicePixelRatio || 1) * (playing ? renderScale : 1);  // paused: every pixel
+  if (renderer.getPixelRatio() !== ratio) renderer.setPixelRatio(ratio);
   const canvas = renderer.domElement;
   const w = canvas.clientWidth, h = canvas.clientHeight;
   const size = renderer.getSize(new THREE.Vector2());
@@ -391,14 +402,36 @@ function onAnimationFrame(now) {
   if (playing) requestAnimationFrame(onAnimationFrame);
 }
 
+// ---- resolution while playing ------------------------------------------------------------------------------
+// Where WebGL is software (SwiftShader) every drawn pixel costs CPU time beside the network's: at 960x640 the page
+// played the paper's VirtualBones at 13 garment frames a second, at 480x320 at 27. While the garment falls behind
+// the motion's rate the page draws fewer pixels (down to MIN_RENDER_SCALE of the device's, stretched to the
+// window) rather than play the motion slowly, and climbs back after KEEP_UP_SECONDS of keeping up.
+const MIN_RENDER_SCALE = 0.35, KEEP_UP_SECONDS = 3;
+let renderScale = 1, adaptive = true, keptUp = 0;
+function adaptRenderScale(stepsPerSecond, asked) {
+  if (!adaptive) return renderScale;
+  if (stepsPerSecond < 0.9 * asked) {
+    renderScale = Math.max(MIN_RENDER_SCALE, renderScale * 0.8);
+    keptUp = 0;
+  } else if (++keptUp >= KEEP_UP_SECONDS && renderScale < 1) {
+    renderScale = Math.min(1, renderScale * 1.1);
+    keptUp = 0;
+  }
+  return renderScale;
+}
+
 function updateCounts(now) {
   const dt = now - counts.since;
   if (dt < 1000) return;
   live.stats.stepsPerSecond = counts.steps * 1000 / dt;
   live.stats.drawsPerSecond = counts.draws * 1000 / dt;
   counts.steps = 0; counts.draws = 0; counts.since = now;
+  if (playing) adaptRenderScale(live.stats.stepsPerSecond, M.fps * speed);
+  live.stats.renderScale = renderScale;
   $('fps').textContent = live.stats.stepsPerSecond.toFixed(1) + ' garment fps (' + live.backend + ', '
-    + live.stats.inferMs.toFixed(1) + ' ms/frame) \u00b7 ' + live.stats.drawsPerSecond.toFixed(1) + ' drawn/s';
+    + live.stats.inferMs.toFixed(1) + ' ms/frame) \u00b7 ' + live.stats.drawsPerSecond.toFixed(1) + ' drawn/s'
+    + (renderScale < 1 ? ' at ' + Math.round(100 * renderScale) + ' %' : '');
 }
 
 function play() {
@@ -473,6 +506,16 @@ Object.assign(live, {
   garment: () => Array.from(garmentMesh.geometry.attributes.position.array),
   body: () => Array.from(bodyMesh.geometry.attributes.position.array),
   state: () => Array.from(state),
+  // The resolution while playing: adaptRenderScale(garment fps, asked fps) as the page applies it each second;
+  // setRenderScale(s) fixes it (null: adaptive again); drawingBuffer(): the canvas' drawn [width, height] and the
+  // [width, height] in CSS pixels it was last drawn for.
+  adaptRenderScale,
+  setRenderScale: (s) => { adaptive = s === null; if (s !== null) renderScale = s; },
+  renderScale: () => renderScale,
+  drawingBuffer: () => {
+    const c = renderer.domElement, size = renderer.getSize(new THREE.Vector2());
+    return [c.width, c.height, size.x, size.y];
+  },
   current: () => ({ motion: motions[current.m].name, frame: current.f, blending: blend !== null }),
 });
 window.loosefitStep = (n) => live.step(n);
