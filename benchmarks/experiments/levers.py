@@ -12,9 +12,10 @@ counted). A lever whose overrides differ from an earlier lever's only in the lea
 (``train.lr``, ``train.schedule``, ``train.min_lr``, ...) reuses that lever's probe.
 
 The run validates on the store's ``val`` split and is animated from its best checkpoint by that validation; the
-test split decides nothing. Each run then animates every training, validation and test sequence from frame 0, as
+test split decides nothing: it is scored only with ``--score-test``, meant for once the levers are chosen (the same
+command again: finished runs are found, the earlier rows kept and only the test sequences animated). Each run then animates every training, validation and test sequence from frame 0, as
 at inference: RMSE (mm, pooled over frames and vertices) per motion kind and split
-(:func:`accuracy.errors_by_kind`'s kinds), pooled per split and, for training, over capture pieces and over
+(the kinds of :func:`accuracy.errors_by_kind`), pooled per split and, for training, over capture pieces and over
 procedural motions; on the test sequences also body-LBS's RMSE and, against the mean of the reference runs, the
 model's RMSE beside the runs' floor (pooled, and per test motion).
 
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import sys
 import time
 from pathlib import Path
@@ -38,8 +40,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
-from _common import save_results  # noqa: E402
-from accuracy import CONFIGS, errors_by_kind, garments_with_test, held_out_sequences, parse_sets, train_run  # noqa: E402
+from _common import RESULTS, save_results  # noqa: E402
+from accuracy import CONFIGS, garments_with_test, held_out_sequences, parse_sets, train_run  # noqa: E402
 
 from loosefit.animate import Animator  # noqa: E402
 from loosefit.config import load_config  # noqa: E402
@@ -48,6 +50,7 @@ from loosefit.metrics.reference import References, rmse_m  # noqa: E402
 from loosefit.models.registry import run_config_class  # noqa: E402
 from loosefit.rig.prepare import prepare  # noqa: E402
 from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
+from loosefit.train.validation import motion_kind  # noqa: E402
 
 STAGES = ("low", "high")
 #: Override keys that change no step's cost: a lever differing from another only in these reuses its probe.
@@ -105,47 +108,51 @@ def pooled_mm(squares: list[tuple[float, int]]) -> float | None:
     return 1000.0 * float(np.sqrt(sum(ms * n for ms, n in squares) / total)) if total else None
 
 
-def split_rmse(store: DatasetStore, animator, names: list[str]) -> dict:
-    """Pooled RMSE (mm) of ``names``, and over its capture pieces and its procedural motions apart."""
-    groups: dict[str, list] = {"all": [], "capture": [], "procedural": []}
-    for name in names:
-        seq = store.sequence(name)
-        motion = store.motion(seq.motion)
-        gt = np.asarray(seq.verts[:])
-        sq = (rmse_m(animator.animate(motion), gt) ** 2, gt.shape[0])
-        groups["all"].append(sq)
-        groups["procedural" if ":seed=" in motion.name else "capture"].append(sq)
-    return {k: pooled_mm(v) for k, v in groups.items()}
-
-
-def score_test(store: DatasetStore, animator, lbs_mm: dict, names: list[str]) -> dict:
-    """Pooled and per-motion test scores: RMSE against the simulation, body-LBS's, against the reference runs' mean
-    and their floor. ``lbs_mm``: body-LBS's RMSE (mm) per sequence name."""
+def score_splits(store: DatasetStore, animator, splits: dict[str, list[str]], lbs_mm: dict) -> dict:
+    """Each sequence of ``splits`` (``{"train" | "val" | "test": names}``) animated once from frame 0: RMSE (mm)
+    per motion kind and split (the keys of :func:`accuracy.errors_by_kind`), pooled per split, over the training
+    capture pieces and procedural motions apart, and the test scores (body-LBS's RMSE per sequence in
+    ``lbs_mm``; against the reference runs' mean beside their floor when the store has them)."""
+    kinds: dict = {}
+    pooled: dict[str, list] = {}
     base, lbs, mean, floor, motions = [], [], [], [], {}
-    for name in names:
-        seq = store.sequence(name)
-        motion = store.motion(seq.motion)
-        gt = np.asarray(seq.verts[:])
-        pred = animator.animate(motion)
-        n = gt.shape[0]
-        row = {"frames": n, "rmse_mm": 1000.0 * rmse_m(pred, gt), "lbs_rmse_mm": lbs_mm[name]}
-        row["over_lbs"] = row["rmse_mm"] / row["lbs_rmse_mm"]
-        base.append(((row["rmse_mm"] / 1000.0) ** 2, n))
-        lbs.append(((row["lbs_rmse_mm"] / 1000.0) ** 2, n))
-        refs = store.references(name)
-        if len(refs):
-            score = References(gt, refs).score(pred)
-            row.update(rmse_vs_mean_mm=score.rmse_vs_mean_mm, floor_mm=score.floor_mm,
-                       vs_floor=score.rmse_vs_mean_mm / score.floor_mm)
-            mean.append(((score.rmse_vs_mean_mm / 1000.0) ** 2, n))
-            floor.append(((score.floor_mm / 1000.0) ** 2, n))
-        motions[seq.motion] = row
-    out = {"rmse_mm": pooled_mm(base), "lbs_rmse_mm": pooled_mm(lbs), "motions": motions}
-    out["over_lbs"] = out["rmse_mm"] / out["lbs_rmse_mm"]
-    if len(mean) == len(names):
-        out.update(rmse_vs_mean_mm=pooled_mm(mean), floor_mm=pooled_mm(floor))
-        out["vs_floor"] = out["rmse_vs_mean_mm"] / out["floor_mm"]
-    return out
+    for split, names in splits.items():
+        for name in names:
+            seq = store.sequence(name)
+            motion = store.motion(seq.motion)
+            gt = np.asarray(seq.verts[:])
+            pred = animator.animate(motion)
+            n = gt.shape[0]
+            sq = (rmse_m(pred, gt) ** 2, n)
+            kinds.setdefault(motion_kind(motion.name, seq.motion), {}).setdefault(split, []).append(sq)
+            pooled.setdefault(split, []).append(sq)
+            if split == "train":
+                pooled.setdefault("train_procedural" if ":seed=" in motion.name else "train_capture", []).append(sq)
+            if split != "test":
+                continue
+            row = {"frames": n, "rmse_mm": 1000.0 * float(np.sqrt(sq[0])), "lbs_rmse_mm": lbs_mm[name]}
+            row["over_lbs"] = row["rmse_mm"] / row["lbs_rmse_mm"]
+            base.append(sq)
+            lbs.append(((row["lbs_rmse_mm"] / 1000.0) ** 2, n))
+            refs = store.references(name)
+            if len(refs):
+                score = References(gt, refs).score(pred)
+                row.update(rmse_vs_mean_mm=score.rmse_vs_mean_mm, floor_mm=score.floor_mm,
+                           vs_floor=score.rmse_vs_mean_mm / score.floor_mm)
+                mean.append(((score.rmse_vs_mean_mm / 1000.0) ** 2, n))
+                floor.append(((score.floor_mm / 1000.0) ** 2, n))
+            motions[seq.motion] = row
+    test = {"rmse_mm": pooled_mm(base), "lbs_rmse_mm": pooled_mm(lbs), "motions": motions}
+    if base:
+        test["over_lbs"] = test["rmse_mm"] / test["lbs_rmse_mm"]
+    if mean and len(mean) == len(base):
+        test.update(rmse_vs_mean_mm=pooled_mm(mean), floor_mm=pooled_mm(floor))
+        test["vs_floor"] = test["rmse_vs_mean_mm"] / test["floor_mm"]
+    by_kind = {kind: {key: value for split, sqs in sorted(by_split.items())
+                      for key, value in ((f"{split}_rmse_mm", pooled_mm(sqs)), (f"{split}_sequences", len(sqs)))}
+               for kind, by_split in sorted(kinds.items())}
+    return {"errors_by_kind": by_kind, **{f"{k}_rmse_mm": pooled_mm(v) for k, v in sorted(pooled.items())},
+            "test": test}
 
 
 def main() -> None:
@@ -157,6 +164,8 @@ def main() -> None:
     parser.add_argument("--budget-s", type=float, required=True, help="training seconds per lever (both stages)")
     parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones per garment when preparing")
     parser.add_argument("--name", default="levers", help="results name: benchmarks/results/<name>.json")
+    parser.add_argument("--score-test", action="store_true", help="score the test sequences too (once every lever "
+                        "is chosen on validation; the rows of an earlier run of the same name are kept, not rescored)")
     args = parser.parse_args()
     try:
         levers = dict(parse_lever(v) for v in args.lever)
@@ -164,13 +173,16 @@ def main() -> None:
         parser.error(str(e))
     data, runs = Path(args.data), Path(args.runs)
     preset = parse_sets([], "cpu")["virtualbones"]
+    earlier = {}
+    if args.score_test and (RESULTS / f"{args.name}.json").is_file():
+        earlier = json.loads((RESULTS / f"{args.name}.json").read_text())["results"]["levers"]
     results: dict = {"data": str(data.resolve()), "runs": str(runs.resolve()), "preset": preset,
                      "budget_s": args.budget_s,
                      "prepare": prepare(data, bones=args.bones), "levers": {}}
     store = DatasetStore.open(data)
     garment = args.garment or garments_with_test(store)[0]
     results["garment"] = garment
-    test = held_out_sequences(store, garment)
+    test = held_out_sequences(store, garment) if args.score_test else []
     lbs_run = runs / "body-lbs" / garment / "body-lbs"
     train_run("body-lbs", data, garment, lbs_run, [])
     lbs = Animator(lbs_run)
@@ -204,19 +216,22 @@ def main() -> None:
             row["steps_per_s"] = row["global_step"] / row["train_wall_s"]
         animator = Animator(run)
         splits = {"train": animator.meta["train_sequences"], "val": animator.meta["val_sequences"], "test": test}
-        row["errors_by_kind"] = errors_by_kind(store, animator, splits)
-        train_groups = split_rmse(store, animator, splits["train"])
-        row.update(train_rmse_mm=train_groups["all"], train_capture_rmse_mm=train_groups["capture"],
-                   train_procedural_rmse_mm=train_groups["procedural"],
-                   val_rmse_mm=split_rmse(store, animator, splits["val"])["all"],
-                   test=score_test(store, animator, lbs_mm, test))
+        before = earlier.get(lever, {})
+        if before.get("overrides") == overrides and before.get("epochs") == epochs and "val_rmse_mm" in before:
+            scored = score_splits(store, animator, {"test": test}, lbs_mm)
+            row = {**before, "test": scored["test"], "test_rmse_mm": scored.get("test_rmse_mm")}
+            for kind, e in scored["errors_by_kind"].items():
+                row["errors_by_kind"].setdefault(kind, {}).update(e)
+        else:
+            row.update(score_splits(store, animator, splits, lbs_mm))
         results["levers"][lever] = row
         t = row["test"]
         print(f"   {lever}: {row.get('steps_per_s', float('nan')):.2f} steps/s, train {row['train_rmse_mm']:.1f} mm "
-              f"(capture {row['train_capture_rmse_mm']:.1f}, procedural {row['train_procedural_rmse_mm']:.1f}), "
-              f"val {row['val_rmse_mm']:.1f}, test {t['rmse_mm']:.1f} ({t['over_lbs']:.2f}x body-LBS"
-              + (f", vs mean {t['rmse_vs_mean_mm']:.1f} = {t['vs_floor']:.2f}x floor)" if "vs_floor" in t else ")"),
-              flush=True)
+              f"(capture {row.get('train_capture_rmse_mm') or float('nan'):.1f}, "
+              f"procedural {row.get('train_procedural_rmse_mm') or float('nan'):.1f}), val {row['val_rmse_mm']:.1f}"
+              + (f", test {t['rmse_mm']:.1f} ({t['over_lbs']:.2f}x body-LBS" if t.get("rmse_mm") else "")
+              + (f", vs mean {t['rmse_vs_mean_mm']:.1f} = {t['vs_floor']:.2f}x floor)" if "vs_floor" in t else
+                 ")" if t.get("rmse_mm") else ""), flush=True)
         save_results(args.name, results)
 
 
