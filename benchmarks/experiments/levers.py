@@ -25,7 +25,8 @@ errors_by_kind, test}`` with ``test/{rmse_mm, lbs_rmse_mm, over_lbs, rmse_vs_mea
 motions}``.
 
 Run: .venv/bin/python benchmarks/experiments/levers.py --data DATA.zarr --runs RUNS --budget-s 300
-         --lever baseline= --lever 'lr2e-3=train.lr=2e-3' [--garment skirt+average] [--name levers]
+         --lever baseline= --lever 'lr2e-3=train.lr=2e-3' [--garment skirt+average] [--name levers] [--score-test]
+     (or --epochs LOW,HIGH instead of --budget-s: fixed epochs, no probe)
 """
 
 from __future__ import annotations
@@ -161,12 +162,17 @@ def main() -> None:
     parser.add_argument("--runs", required=True, help="folder of the levers' run folders (resumed when present)")
     parser.add_argument("--garment", default=None, help="the garment (default: the store's one with test sequences)")
     parser.add_argument("--lever", action="append", required=True, help="NAME=OVERRIDE [OVERRIDE ...] (repeatable)")
-    parser.add_argument("--budget-s", type=float, required=True, help="training seconds per lever (both stages)")
+    parser.add_argument("--budget-s", type=float, default=None, help="training seconds per lever (both stages)")
+    parser.add_argument("--epochs", default=None, help="LOW,HIGH: these epochs for every lever instead of a budget "
+                        "(a seed repeat of a lever at the epochs its budget gave)")
     parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones per garment when preparing")
     parser.add_argument("--name", default="levers", help="results name: benchmarks/results/<name>.json")
     parser.add_argument("--score-test", action="store_true", help="score the test sequences too (once every lever "
                         "is chosen on validation; the rows of an earlier run of the same name are kept, not rescored)")
     args = parser.parse_args()
+    if (args.budget_s is None) == (args.epochs is None):
+        parser.error("give --budget-s or --epochs")
+    fixed = None if args.epochs is None else dict(zip(STAGES, (int(e) for e in args.epochs.split(","))))
     try:
         levers = dict(parse_lever(v) for v in args.lever)
     except ValueError as e:
@@ -195,21 +201,24 @@ def main() -> None:
     for lever, overrides in levers.items():
         sets = [*preset, *overrides]
         key = cost_key(overrides)
-        if key not in probes:
+        if fixed is None and key not in probes:
             probe = runs / lever / "probe"
             print(f"== {lever}: probe one epoch per stage -> {probe}", flush=True)
             train_run("virtualbones", data, garment, probe,
                       [*sets, *(f"train.stages.{s}.epochs=1" for s in STAGES)], validation=validation)
             probes[key] = {"run": str(probe), "stages": stage_rows(probe)}
-        seconds = {s: probes[key]["stages"][s]["seconds_per_epoch"] for s in STAGES}
-        train = load_config(run_config_class("virtualbones"), CONFIGS / "virtualbones.yaml", sets).train
-        epochs = scaled_epochs({s: train.stage(s).epochs for s in STAGES}, seconds, args.budget_s)
+        if fixed is None:
+            seconds = {s: probes[key]["stages"][s]["seconds_per_epoch"] for s in STAGES}
+            train = load_config(run_config_class("virtualbones"), CONFIGS / "virtualbones.yaml", sets).train
+            epochs = scaled_epochs({s: train.stage(s).epochs for s in STAGES}, seconds, args.budget_s)
+        else:
+            epochs = fixed
         run = runs / lever / garment / "virtualbones"
         print(f"== {lever}: {overrides} with epochs {epochs} -> {run}", flush=True)
         cpu = time.process_time()
         summary = train_run("virtualbones", data, garment, run,
                             [*sets, *(f"train.stages.{s}.epochs={e}" for s, e in epochs.items())], validation=validation)
-        row = {"overrides": overrides, "epochs": epochs, "probe": probes[key], "cpu_s": time.process_time() - cpu,
+        row = {"overrides": overrides, "epochs": epochs, "probe": probes.get(key), "cpu_s": time.process_time() - cpu,
                "train_wall_s": summary.get("train_wall_s"), "global_step": summary.get("global_step"),
                "checkpoint": summary["checkpoint"], "stages": stage_rows(run)}
         if row["train_wall_s"] and row["global_step"]:
