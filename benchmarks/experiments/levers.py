@@ -13,11 +13,11 @@ counted). A lever whose overrides differ from an earlier lever's only in the lea
 
 The run validates on the store's ``val`` split and is animated from its best checkpoint by that validation; the
 test split decides nothing: it is scored only with ``--score-test``, meant for once the levers are chosen (the same
-command again: finished runs are found, the earlier rows kept and only the test sequences animated). Each run then animates every training, validation and test sequence from frame 0, as
-at inference: RMSE (mm, pooled over frames and vertices) per motion kind and split
-(the kinds of :func:`accuracy.errors_by_kind`), pooled per split and, for training, over capture pieces and over
-procedural motions; on the test sequences also body-LBS's RMSE and, against the mean of the reference runs, the
-model's RMSE beside the runs' floor (pooled, and per test motion).
+command again: finished runs are found, the earlier rows kept and only the test sequences animated). Each run then
+animates every training, validation and test sequence from frame 0, as at inference: RMSE (mm, pooled over frames
+and vertices) per motion kind and split (the kinds of :func:`accuracy.errors_by_kind`), pooled per split and, for
+training, over capture pieces and over procedural motions; on the test sequences also body-LBS's RMSE and, against
+the mean of the reference runs, the model's RMSE beside the runs' floor (pooled, and per test motion).
 
 JSON (``benchmarks/results/<name>.json``): ``levers/<NAME>/{overrides, epochs, probe, train_wall_s, cpu_s,
 global_step, steps_per_s, stages, val_rmse_mm, train_rmse_mm, train_capture_rmse_mm, train_procedural_rmse_mm,
