@@ -334,11 +334,15 @@ def test_an_exported_viewer_page_leaves_the_live_page_out(tmp_path):
 
 
 def test_playing_draws_fewer_pixels_while_the_garment_falls_behind(browser, server):
-    """Each second of playing, a garment rate under 90 % of the motion's lowers the drawing resolution by a fifth
-    (never under 35 %); three seconds of keeping up raise it by a tenth, up to every pixel; a paused page draws
-    every pixel; the drawn canvas follows the scale."""
+    """Stepping renders each frame once. Each second of playing, a garment rate under 90 % of the motion's lowers the
+    drawing resolution by a fifth (never under 35 %); three seconds of keeping up raise it by a tenth, up to every
+    pixel; a paused page draws every pixel; the drawn canvas follows the scale."""
     page, errors = open_live(browser, server.url)
     L = "loosefitLive"
+    # one render a frame: the camera following the walking body must not render the frame again
+    before = page.evaluate(f"{L}.renders")
+    page.evaluate(f"{L}.step(5, true)")
+    assert page.evaluate(f"{L}.renders") - before == 5
     scales = [page.evaluate(f"{L}.adaptRenderScale(12, 30)") for _ in range(8)]
     expected = [max(0.35, 0.8 ** (i + 1)) for i in range(8)]
     np.testing.assert_allclose(scales, expected, rtol=1e-12)

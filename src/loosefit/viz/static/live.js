@@ -12,7 +12,7 @@ const BLEND_FRAMES = 10;
 const BODY_COLOR = 0xc8b4a0, GARMENT_COLOR = 0x4f8fd8;
 
 // The public handle used by the tests and the benchmark.
-const live = { ready: false, frame: 0, backend: null, error: null, blendFrames: BLEND_FRAMES, record: false,
+const live = { ready: false, frame: 0, renders: 0, backend: null, error: null, blendFrames: BLEND_FRAMES, record: false,
   log: [], stats: { stepsPerSecond: 0, drawsPerSecond: 0, inferMs: 0, skinMs: 0, drawMs: 0 } };
 window.loosefitLive = live;
 
@@ -345,6 +345,7 @@ function render() {
   renderer.render(scene, camera);
   live.stats.drawMs = 0.9 * live.stats.drawMs + 0.1 * (performance.now() - t0);
   counts.draws++;
+  live.renders++;
 }
 
 // ---- one frame --------------------------------------------------------------------------------------------
