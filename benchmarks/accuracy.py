@@ -174,19 +174,29 @@ def garment_validation(store: DatasetStore, garment: str, fraction: float) -> di
 def errors_by_kind(store: DatasetStore, animator, splits: dict[str, list[str]], output: str = "verts") -> dict:
     """RMSE (mm, pooled over frames and vertices) per motion kind and split: ``{kind: {"<split>_rmse_mm": ...,
     "<split>_sequences": n}}`` for ``splits`` ``{"train" | "val" | "test": sequence names}``."""
-    sums: dict = {}
+    squares: dict = {}
     for split, names in splits.items():
         for name in names:
             seq = store.sequence(name)
             motion = store.motion(seq.motion)
             err = rmse_mm(animator.animate(motion, output=output), np.asarray(seq.verts[:]))
-            entry = sums.setdefault(motion_kind(motion.name, seq.motion), {}).setdefault(split, [0.0, 0, 0])
-            entry[0] += err**2 * motion.num_frames
-            entry[1] += motion.num_frames
-            entry[2] += 1
-    return {kind: {key: value for split, (sq, frames, n) in sorted(by_split.items())
-                   for key, value in ((f"{split}_rmse_mm", float(np.sqrt(sq / frames))), (f"{split}_sequences", n))}
-            for kind, by_split in sorted(sums.items())}
+            squares.setdefault(motion_kind(motion.name, seq.motion), {}).setdefault(split, []).append(
+                (err**2, motion.num_frames))
+    return kind_table(squares)
+
+
+def pooled_rmse(squares: list[tuple[float, int]]) -> float | None:
+    """The RMSE over several sequences from each one's ``(mean square, frames)``, in their unit; None for none."""
+    frames = sum(n for _, n in squares)
+    return float(np.sqrt(sum(ms * n for ms, n in squares) / frames)) if frames else None
+
+
+def kind_table(squares: dict) -> dict:
+    """``{kind: {split: [(mean square mm^2, frames), ...]}}`` -> ``{kind: {"<split>_rmse_mm": pooled,
+    "<split>_sequences": n}}`` (:func:`errors_by_kind`'s table)."""
+    return {kind: {key: value for split, sqs in sorted(by_split.items())
+                   for key, value in ((f"{split}_rmse_mm", pooled_rmse(sqs)), (f"{split}_sequences", len(sqs)))}
+            for kind, by_split in sorted(squares.items())}
 
 
 # ---------------------------------------------------------------- the robustness test

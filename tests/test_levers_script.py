@@ -43,3 +43,18 @@ def test_the_preset_epochs_are_scaled_to_the_budget(levers):
     assert levers.scaled_epochs({"low": 60, "high": 40}, {"low": 100.0, "high": 100.0}, 10.0) == {"low": 1, "high": 1}
     with pytest.raises(ValueError):
         levers.scaled_epochs({"low": 1}, {"low": 0.0}, 10.0)
+
+
+def test_kind_table_pools_squares_over_frames(levers):
+    """The per-kind table (shared with accuracy.py's errors_by_kind) pools mean squares weighted by frames, which
+    equals the RMSE over every frame of the sequences together (brute force)."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    frames = {"walk": [rng.normal(size=(n, 5)) for n in (3, 7)], "spin": [rng.normal(size=(4, 5))]}
+    squares = {kind: {"train": [(float((e**2).mean()), len(e)) for e in errs]} for kind, errs in frames.items()}
+    table = levers.kind_table(squares)
+    for kind, errs in frames.items():
+        brute = float(np.sqrt((np.concatenate(errs) ** 2).mean()))
+        assert table[kind] == {"train_rmse_mm": pytest.approx(brute, rel=1e-12), "train_sequences": len(errs)}
+    assert levers.pooled_rmse([]) is None

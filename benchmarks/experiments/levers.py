@@ -42,7 +42,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common and the standing scripts
 from _common import RESULTS, save_results  # noqa: E402
-from accuracy import CONFIGS, garments_with_test, held_out_sequences, parse_sets, train_run  # noqa: E402
+from accuracy import (CONFIGS, garments_with_test, held_out_sequences, kind_table, parse_sets,  # noqa: E402
+                      pooled_rmse, train_run)
 
 from loosefit.animate import Animator  # noqa: E402
 from loosefit.config import load_config  # noqa: E402
@@ -103,12 +104,6 @@ def stage_rows(run: Path) -> dict[str, dict]:
     return out
 
 
-def pooled_mm(squares: list[tuple[float, int]]) -> float | None:
-    """RMSE (mm) over several sequences from their ``(mean square m^2, count)``."""
-    total = sum(n for _, n in squares)
-    return 1000.0 * float(np.sqrt(sum(ms * n for ms, n in squares) / total)) if total else None
-
-
 def score_splits(store: DatasetStore, animator, splits: dict[str, list[str]], lbs_mm: dict) -> dict:
     """Each sequence of ``splits`` (``{"train" | "val" | "test": names}``) animated once from frame 0: RMSE (mm)
     per motion kind and split (the keys of :func:`accuracy.errors_by_kind`), pooled per split, over the training
@@ -124,35 +119,32 @@ def score_splits(store: DatasetStore, animator, splits: dict[str, list[str]], lb
             gt = np.asarray(seq.verts[:])
             pred = animator.animate(motion)
             n = gt.shape[0]
-            sq = (rmse_m(pred, gt) ** 2, n)
+            sq = ((1000.0 * rmse_m(pred, gt)) ** 2, n)
             kinds.setdefault(motion_kind(motion.name, seq.motion), {}).setdefault(split, []).append(sq)
             pooled.setdefault(split, []).append(sq)
             if split == "train":
                 pooled.setdefault("train_procedural" if ":seed=" in motion.name else "train_capture", []).append(sq)
             if split != "test":
                 continue
-            row = {"frames": n, "rmse_mm": 1000.0 * float(np.sqrt(sq[0])), "lbs_rmse_mm": lbs_mm[name]}
+            row = {"frames": n, "rmse_mm": float(np.sqrt(sq[0])), "lbs_rmse_mm": lbs_mm[name]}
             row["over_lbs"] = row["rmse_mm"] / row["lbs_rmse_mm"]
             base.append(sq)
-            lbs.append(((row["lbs_rmse_mm"] / 1000.0) ** 2, n))
+            lbs.append((row["lbs_rmse_mm"] ** 2, n))
             refs = store.references(name)
             if len(refs):
                 score = References(gt, refs).score(pred)
                 row.update(rmse_vs_mean_mm=score.rmse_vs_mean_mm, floor_mm=score.floor_mm,
                            vs_floor=score.rmse_vs_mean_mm / score.floor_mm)
-                mean.append(((score.rmse_vs_mean_mm / 1000.0) ** 2, n))
-                floor.append(((score.floor_mm / 1000.0) ** 2, n))
+                mean.append((score.rmse_vs_mean_mm ** 2, n))
+                floor.append((score.floor_mm ** 2, n))
             motions[seq.motion] = row
-    test = {"rmse_mm": pooled_mm(base), "lbs_rmse_mm": pooled_mm(lbs), "motions": motions}
+    test = {"rmse_mm": pooled_rmse(base), "lbs_rmse_mm": pooled_rmse(lbs), "motions": motions}
     if base:
         test["over_lbs"] = test["rmse_mm"] / test["lbs_rmse_mm"]
     if mean and len(mean) == len(base):
-        test.update(rmse_vs_mean_mm=pooled_mm(mean), floor_mm=pooled_mm(floor))
+        test.update(rmse_vs_mean_mm=pooled_rmse(mean), floor_mm=pooled_rmse(floor))
         test["vs_floor"] = test["rmse_vs_mean_mm"] / test["floor_mm"]
-    by_kind = {kind: {key: value for split, sqs in sorted(by_split.items())
-                      for key, value in ((f"{split}_rmse_mm", pooled_mm(sqs)), (f"{split}_sequences", len(sqs)))}
-               for kind, by_split in sorted(kinds.items())}
-    return {"errors_by_kind": by_kind, **{f"{k}_rmse_mm": pooled_mm(v) for k, v in sorted(pooled.items())},
+    return {"errors_by_kind": kind_table(kinds), **{f"{k}_rmse_mm": pooled_rmse(v) for k, v in sorted(pooled.items())},
             "test": test}
 
 

@@ -58,9 +58,9 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
         out: the ``.onnx`` file written.
         checkpoint: ``"best"``, ``"last"`` or a checkpoint path (:func:`loosefit.animate.load_run`).
         bones: also output the bones' world transforms (``bone_transforms``).
-        int8: store the large weight matrices as int8 blocks (:mod:`loosefit.io.onnx_int8`): about a quarter of
-            the file and up to twice the frames per second on one CPU thread, a fraction of a millimetre from the
-            float model on the shipped garments (``benchmarks/README.md``); needs onnxruntime's ``MatMulNBits``.
+        int8: store the large weight matrices as int8 (:mod:`loosefit.io.onnx_int8`): about 30 % of the file and
+            twice to three times the frames per second on one CPU thread, within about 3 mm of the float model
+            (``benchmarks/README.md``); needs onnxruntime's ``MatMulNBits`` and ``DynamicQuantizeMatMul``.
 
     Returns:
         ``{"path", "bytes", "method", "vertices", "joints", "state_size", "bones", "weights"}`` (``weights``:
@@ -193,5 +193,5 @@ def add_arguments(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--checkpoint", default="best", help="best (by validation; last when the run validated on "
                     "nothing), last or a checkpoint path")
     sp.add_argument("--bones", action="store_true", help="also output the bones' world transforms (GPU skinning)")
-    sp.add_argument("--int8", action="store_true", help="large weight matrices in int8 blocks: a quarter of the "
-                    "file, faster on a CPU, slightly less exact (onnxruntime's MatMulNBits)")
+    sp.add_argument("--int8", action="store_true", help="large weight matrices in int8: about 30 %% of the file, "
+                    "2-3x faster on a CPU, within about 3 mm (not for the live page)")

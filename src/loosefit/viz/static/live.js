@@ -344,13 +344,12 @@ function render() {
   camera.updateProjectionMatrix();
   renderer.render(scene, camera);
   live.stats.drawMs = 0.9 * live.stats.drawMs + 0.1 * (performance.now() - t0);
-  counts.draws++;
   live.renders++;
 }
 
 // ---- one frame --------------------------------------------------------------------------------------------
 
-const counts = { steps: 0, draws: 0, since: performance.now() };
+const counts = { steps: 0, renders: 0, since: performance.now() };  // renders: live.renders when the window began
 let shown = null;
 
 async function stepOnce(render) {
@@ -426,8 +425,8 @@ function updateCounts(now) {
   const dt = now - counts.since;
   if (dt < 1000) return;
   live.stats.stepsPerSecond = counts.steps * 1000 / dt;
-  live.stats.drawsPerSecond = counts.draws * 1000 / dt;
-  counts.steps = 0; counts.draws = 0; counts.since = now;
+  live.stats.drawsPerSecond = (live.renders - counts.renders) * 1000 / dt;
+  counts.steps = 0; counts.renders = live.renders; counts.since = now;
   if (playing) adaptRenderScale(live.stats.stepsPerSecond, M.fps * speed);
   live.stats.renderScale = renderScale;
   $('fps').textContent = live.stats.stepsPerSecond.toFixed(1) + ' garment fps (' + live.backend + ', '
@@ -438,7 +437,7 @@ function updateCounts(now) {
 function play() {
   if (playing) return;
   playing = true; last = null; acc = 0; $('play').textContent = 'pause';
-  counts.steps = 0; counts.draws = 0; counts.since = performance.now();
+  counts.steps = 0; counts.renders = live.renders; counts.since = performance.now();
   advance();
   requestAnimationFrame(onAnimationFrame);
 }
