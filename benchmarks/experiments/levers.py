@@ -26,6 +26,7 @@ motions}``.
 
 Run: .venv/bin/python benchmarks/experiments/levers.py --data DATA.zarr --runs RUNS --budget-s 300
          --lever baseline= --lever 'lr2e-3=train.lr=2e-3' [--garment skirt+average] [--name levers] [--score-test]
+         [--mirror]
      (or --epochs LOW,HIGH instead of --budget-s: fixed epochs, no probe)
 """
 
@@ -158,6 +159,8 @@ def main() -> None:
     parser.add_argument("--epochs", default=None, help="LOW,HIGH: these epochs for every lever instead of a budget "
                         "(a seed repeat of a lever at the epochs its budget gave)")
     parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones per garment when preparing")
+    parser.add_argument("--mirror", action="store_true", help="prepare the left-right mirror of every training "
+                        "sequence too (its frames join the rig's solve), so that a lever may set data.mirror=true")
     parser.add_argument("--name", default="levers", help="results name: benchmarks/results/<name>.json")
     parser.add_argument("--score-test", action="store_true", help="score the test sequences too (once every lever "
                         "is chosen on validation; the rows of an earlier run of the same name are kept, not rescored)")
@@ -176,7 +179,7 @@ def main() -> None:
         earlier = json.loads((RESULTS / f"{args.name}.json").read_text())["results"]["levers"]
     results: dict = {"data": str(data.resolve()), "runs": str(runs.resolve()), "preset": preset,
                      "budget_s": args.budget_s,
-                     "prepare": prepare(data, bones=args.bones), "levers": {}}
+                     "prepare": prepare(data, bones=args.bones, mirror=args.mirror), "levers": {}}
     store = DatasetStore.open(data)
     garment = args.garment or garments_with_test(store)[0]
     results["garment"] = garment

@@ -1,7 +1,8 @@
 """The one-frame graph of the ONNX export, in torch: stepping it with its flat state gives the vertices of
 ``Animator.animate`` for configurations the trained test runs do not reach (no motion history, a vertical
 history, JointNet's summed Fourier prior and a one-layer bone MLP, VirtualBones' factorised global layer and a
-hidden head), with random weights and rig buffers on a small grid garment."""
+hidden head, the low-frequency module's own outputs fed back), with random weights and rig buffers on a small grid
+garment."""
 
 from __future__ import annotations
 
@@ -78,6 +79,9 @@ CASES = {
                                MotionHistory((6.0, 15.0, 30.0), vertical=True)),
     "virtualbones-no-history": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
                                                                  edge_channels=(4,)), None),
+    "virtualbones-fed-back": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
+                                                               edge_channels=(4,), feedback_frames=2),
+                              MotionHistory((6.0, 15.0))),
 }
 
 

@@ -322,3 +322,55 @@ def test_every_motion_feature_moves_the_bones_and_only_later_frames(tiny_train):
             bones = (out["bones"][0] - base["bones"][0]).abs().flatten(2).amax(-1)[0]
             assert bones[:5].max() == 0 and bones[5] > 1e-6, name
             assert torch.equal(out["verts"][:, :5], base["verts"][:, :5]), name
+
+
+# ---------------------------------------------------------------------- the garment's own state fed back (ours)
+
+FED = VirtualBonesConfig(**{**TINY.__dict__, "feedback_frames": 2, "feedback_noise": 0.3})
+
+
+def test_fed_back_outputs_are_the_two_previous_frames_and_stream_like_a_whole_pass(tiny_train):
+    """Holden et al. 2019's departure: frame t reads the low-frequency module's outputs of t-1 and t-2 (zeros
+    before the first frame); the carried state is exactly those outputs, so streaming equals one pass."""
+    model = _perturbed(_model(tiny_train, config=FED))
+    seq = tiny_train.sequences[0]
+    root, joints = torch.from_numpy(seq.root)[None, :12], torch.from_numpy(seq.joints)[None, :12]
+    with torch.no_grad():
+        x = model._inputs(root, joints)
+        raw, _, _, _, (h, fed) = model.low_frequency(x)
+        assert torch.equal(fed, torch.cat([raw[:, -1].flatten(1), raw[:, -2].flatten(1)], -1))
+        whole = model(root, joints)
+        state, frames = None, []
+        for t in range(12):
+            out = model(root[:, t:t + 1], joints[:, t:t + 1], state)
+            state, frames = out["state"], frames + [out["verts"]]
+        assert (torch.cat(frames, 1) - whole["verts"]).abs().max() < 1e-5
+        # the weights reading the fed-back outputs act from frame 1 on, never on frame 0 (which sees zeros)
+        fed_columns = slice(x.shape[-1], None)
+        model.low.gru.weight_ih_l0[:, fed_columns] = 0
+        cut = model(root, joints)
+    assert torch.equal(cut["lf"][:, 0], whole["lf"][:, 0])
+    assert (cut["lf"][:, 1:] - whole["lf"][:, 1:]).abs().amax((0, 2, 3)).min() > 1e-6
+
+
+def test_noise_on_the_fed_back_outputs_is_drawn_in_training_only(tiny_train):
+    model = _perturbed(_model(tiny_train, config=FED))
+    batch = _batch(WindowDataset(tiny_train, window=16, stride=16, burn_in=4))
+    losses = []
+    for seed in (0, 0, 1):
+        torch.manual_seed(seed)
+        losses.append(model.training_loss(batch, "low")[0])
+    assert losses[0].item() == losses[1].item() != losses[2].item()  # the noise is drawn, from torch's generator
+    losses[2].backward()
+    fed_grad = model.low.gru.weight_ih_l0.grad[:, model.low.gru.input_size - 2 * 9 * model.bone_rest.shape[0]:]
+    assert fed_grad.abs().sum() > 0  # the rollout carries gradients into the fed-back weights
+    with torch.no_grad():  # prediction and validation feed back without noise
+        a = model(batch["root"], batch["joints"])["verts"]
+        torch.manual_seed(5)
+        b = model(batch["root"], batch["joints"])["verts"]
+        assert torch.equal(a, b)
+        quiet = []
+        for seed in (0, 1):
+            torch.manual_seed(seed)
+            quiet.append(_with(model, feedback_noise=0.0).training_loss(batch, "low")[0].item())
+    assert quiet[0] == quiet[1] != losses[0].item()

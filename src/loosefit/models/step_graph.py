@@ -126,7 +126,10 @@ class StepGraph(nn.Module):
         if self.method == "virtualbones":
             return [("gru_low", (m.low.gru.num_layers, m.low.gru.hidden_size), "1", "layer, unit: low-frequency GRU"),
                     ("gru_high", (m.high_gru.gru.num_layers, m.high_gru.gru.hidden_size), "1",
-                     "layer, unit: high-frequency GRU")]
+                     "layer, unit: high-frequency GRU")] + ([
+                    ("fed_back", (m.config.feedback_frames, m.bone_rest.shape[0], 9), "1",
+                     "frame (newest first), bone, normalised output: the low-frequency module's own outputs")]
+                    if m.config.feedback_frames else [])
         if self.method == "jointnet":
             return [("gru_joints", (len(m.selected), m.gru.hidden), "1", "selected joint, unit: per-joint GRUs")]
         return []
@@ -216,6 +219,9 @@ class StepGraph(nn.Module):
         root_n = (root[: m.root_features] - m.root_mean) / m.root_std
         joints_n = (joints - m.joints_mean) / m.joints_std
         x = torch.cat([root_n, joints_n.reshape(-1)])
+        fed = self._recurrent(state, "fed_back", started).reshape(-1) if m.config.feedback_frames else None
+        if fed is not None:
+            x = torch.cat([x, fed])
         h_low = self._gru_stack(m.low.gru, x, self._recurrent(state, "gru_low", started))
         raw = m.low.out(h_low[-1]).reshape(-1, 9)
         rot, trans = m.decode_bones(raw)
@@ -232,7 +238,8 @@ class StepGraph(nn.Module):
             nearest = other.index_select(0, order).reshape(m.neighbours.shape[0], -1, other.shape[-1]).amax(1)
             local = nn.functional.leaky_relu(local @ (w_centre - w_edge).T + conv.linear.bias + nearest, NEGATIVE_SLOPE)
         offsets = m.head(torch.cat([local, glob], -1)) * m.offset_std
-        return lf + offsets, rot, trans, [h_low, h_high]
+        fed_next = [] if fed is None else [torch.cat([raw.reshape(-1), fed[: fed.shape[0] - raw.numel()]])]
+        return lf + offsets, rot, trans, [h_low, h_high, *fed_next]
 
     @staticmethod
     def _gru_stack(gru: nn.GRU, x: torch.Tensor, h: torch.Tensor) -> torch.Tensor:

@@ -41,6 +41,12 @@ over windows of 64, 112.8 / 47.2 mm (220 steps); windows of 176 every 88 with 48
 (110 steps). The training spins are fitted to 37-59 mm in every case: the held-out spin's error is
 generalisation from two training spins, not memory. Those were test motions, so the comparison decides nothing;
 the zero-state windows stay the default until validation motions choose.
+
+The garment's own state fed back (``feedback_frames > 0``; our departure from the paper, after subspace neural
+physics, Holden et al. 2019): the low-frequency module also reads its own normalised bone outputs of the previous
+``feedback_frames`` frames (zeros, the mean bone motion, before the first frame), so it runs frame by frame. It
+trains on its own rollouts through each window, with Gaussian noise of ``feedback_noise`` (normalised units) on
+the fed-back outputs so that it learns to recover from its own errors; inference feeds back without noise.
 """
 
 from __future__ import annotations
@@ -126,6 +132,9 @@ class VirtualBonesConfig:
             validation spin: the comparison is a validation one only from that change on.
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
+        feedback_frames: previous frames of the low-frequency module's own bone outputs among its inputs (0: none,
+            as in the paper; see the module docstring).
+        feedback_noise: std of the noise on the fed-back outputs while training, normalised units.
     """
 
     lf_hidden: int = 600
@@ -143,13 +152,16 @@ class VirtualBonesConfig:
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
     history_vertical: bool = False
+    feedback_frames: int = 0
+    feedback_noise: float = 0.0
 
     def __post_init__(self):
         check_history(self.history_frames)
         sizes = (self.lf_hidden, self.hf_hidden, self.global_channels, *self.edge_channels, *self.head_hidden)
         if min(sizes) < 1 or not self.edge_channels or self.global_rank < 0:
             raise InputError(f"layer sizes must be >= 1 (global_rank >= 0) and edge_channels non-empty, got {self}")
-        for name in ("laplacian_weight", "collision_weight", "collision_margin", "bone_weight", "hf_loss_frames"):
+        for name in ("laplacian_weight", "collision_weight", "collision_margin", "bone_weight", "hf_loss_frames",
+                     "feedback_frames", "feedback_noise"):
             if not getattr(self, name) >= 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.hf_target not in HF_TARGETS:
@@ -230,7 +242,8 @@ class VirtualBones(GarmentModel):
         self.register_buffer("neighbours", torch.zeros(V, sizes["max_degree"], dtype=torch.long))
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D))
         c = config
-        self.low = GRUHead(self.root_features + 6 * (J - 1), c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
+        fed = c.feedback_frames * BONE_OUTPUTS * B
+        self.low = GRUHead(self.root_features + 6 * (J - 1) + fed, c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
         self.high_gru = GRUHead(BONE_OUTPUTS * B, c.hf_hidden, c.global_rank or V * c.global_channels)
         self.global_out = nn.Linear(c.global_rank, V * c.global_channels) if c.global_rank else nn.Identity()
         widths = (3, *c.edge_channels)
@@ -279,17 +292,31 @@ class VirtualBones(GarmentModel):
         root, joints = self.normalise(root, joints)
         return torch.cat([root, joints.flatten(-2)], -1)
 
-    def low_frequency(self, x: torch.Tensor, h: torch.Tensor | None = None, frames: torch.Tensor | None = None):
+    def low_frequency(self, x: torch.Tensor, h=None, frames: torch.Tensor | None = None, noise: float = 0.0):
         """Low-frequency module: features ``x (N,T,F)`` -> ``(raw (N,T,B,9), rotations, translations, lf, h)``.
 
         ``raw`` holds the normalised outputs (6D residual, position offset), the bone motion that the
         high-frequency module reads. With ``frames`` (``(T',)`` indices) the bone transforms and the
-        mesh are those of these frames only; ``raw`` keeps all ``T``.
+        mesh are those of these frames only; ``raw`` keeps all ``T``. With fed-back outputs the state ``h``
+        is ``(GRU state, fed (N, feedback_frames * B * 9))`` and ``noise`` the std added to what is fed back.
         """
-        out, h = self.low(x, h)
+        out, h = self.low(x, h) if not self.config.feedback_frames else self._low_rollout(x, h, noise)
         raw = out.unflatten(-1, (-1, BONE_OUTPUTS))
         rot, trans = self.decode_bones(raw if frames is None else raw[:, frames])
         return raw, rot, trans, self.skin(self.rest_verts, rot, trans), h
+
+    def _low_rollout(self, x: torch.Tensor, state, noise: float):
+        """The low-frequency GRU frame by frame, each frame reading the outputs of the ones before it."""
+        h, fed = (None, None) if state is None else state
+        if fed is None:  # before the first frame: zeros, the mean bone motion
+            fed = x.new_zeros(x.shape[0], self.low.gru.input_size - x.shape[-1])
+        out = []
+        for t in range(x.shape[1]):
+            seen = fed + noise * torch.randn_like(fed) if noise > 0 else fed
+            y, h = self.low(torch.cat([x[:, t], seen], -1)[:, None], h)
+            out.append(y)
+            fed = torch.cat([y[:, 0], fed[:, : fed.shape[1] - y.shape[-1]]], -1)  # newest first
+        return torch.cat(out, 1), (h, fed)
 
     def decode_bones(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised outputs ``(..., B, 9)`` -> bone rotations ``(..., B, 3, 3)`` and translations ``(..., B, 3)``."""
@@ -357,7 +384,7 @@ class VirtualBones(GarmentModel):
         c = self.config
         h_low, h_high = self.carry.initial(batch) or (None, None)
         if stage == "low":
-            raw, _, _, lf, h_low = self.low_frequency(x, h_low)
+            raw, _, _, lf, h_low = self.low_frequency(x, h_low, noise=c.feedback_noise)
             self.carry.keep(batch, (h_low, None))
             vertex = vertex_distance(lf, batch["lf"], mask)
             lap = laplacian_difference(lf, batch["lf"], self.laplacian(), mask)
