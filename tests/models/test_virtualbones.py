@@ -374,3 +374,21 @@ def test_noise_on_the_fed_back_outputs_is_drawn_in_training_only(tiny_train):
             torch.manual_seed(seed)
             quiet.append(_with(model, feedback_noise=0.0).training_loss(batch, "low")[0].item())
     assert quiet[0] == quiet[1] != losses[0].item()
+
+
+def test_the_rollout_is_torchs_gru_when_nothing_is_fed_back(tiny_train):
+    """The frame-by-frame low-frequency GRU of the fed-back model follows torch's GRU equations: with the weights
+    that read the fed-back outputs at zero it equals ``nn.GRU`` over the motion features alone."""
+    model = _perturbed(_model(tiny_train, config=FED))
+    seq = tiny_train.sequences[0]
+    root, joints = torch.from_numpy(seq.root)[None, :10], torch.from_numpy(seq.joints)[None, :10]
+    with torch.no_grad():
+        x = model._inputs(root, joints)
+        plain = _model(tiny_train)
+        plain.low.load_state_dict({**model.low.state_dict(),
+                                   "gru.weight_ih_l0": model.low.gru.weight_ih_l0[:, :x.shape[-1]]})
+        model.low.gru.weight_ih_l0[:, x.shape[-1]:] = 0
+        rolled, _, _, _, (h, _) = model.low_frequency(x)
+        fused, _, _, _, h_fused = plain.low_frequency(x)
+    assert (rolled - fused).abs().max() < 1e-5 and (h - h_fused).abs().max() < 1e-5
+    assert rolled.abs().max() > 1e-3

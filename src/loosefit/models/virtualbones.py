@@ -306,17 +306,24 @@ class VirtualBones(GarmentModel):
         return raw, rot, trans, self.skin(self.rest_verts, rot, trans), h
 
     def _low_rollout(self, x: torch.Tensor, state, noise: float):
-        """The low-frequency GRU frame by frame, each frame reading the outputs of the ones before it."""
+        """The low-frequency GRU (one layer, torch's equations) frame by frame, each frame reading the outputs of
+        the frames before it; the motion's share of the input gates is computed for all frames at once."""
         h, fed = (None, None) if state is None else state
+        gru, F = self.low.gru, x.shape[-1]
+        h = x.new_zeros(x.shape[0], gru.hidden_size) if h is None else h[0]
         if fed is None:  # before the first frame: zeros, the mean bone motion
-            fed = x.new_zeros(x.shape[0], self.low.gru.input_size - x.shape[-1])
+            fed = x.new_zeros(x.shape[0], gru.input_size - F)
+        drive = x @ gru.weight_ih_l0[:, :F].T + gru.bias_ih_l0  # (N, T, 3H)
         out = []
         for t in range(x.shape[1]):
             seen = fed + noise * torch.randn_like(fed) if noise > 0 else fed
-            y, h = self.low(torch.cat([x[:, t], seen], -1)[:, None], h)
-            out.append(y)
-            fed = torch.cat([y[:, 0], fed[:, : fed.shape[1] - y.shape[-1]]], -1)  # newest first
-        return torch.cat(out, 1), (h, fed)
+            i_r, i_z, i_n = (drive[:, t] + seen @ gru.weight_ih_l0[:, F:].T).chunk(3, -1)
+            h_r, h_z, h_n = (h @ gru.weight_hh_l0.T + gru.bias_hh_l0).chunk(3, -1)
+            r, z = torch.sigmoid(i_r + h_r), torch.sigmoid(i_z + h_z)
+            h = (1 - z) * torch.tanh(i_n + r * h_n) + z * h
+            out.append(self.low.out(h))
+            fed = torch.cat([out[-1], fed[:, : fed.shape[1] - out[-1].shape[-1]]], -1)  # newest first
+        return torch.stack(out, 1), (h[None], fed)
 
     def decode_bones(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised outputs ``(..., B, 9)`` -> bone rotations ``(..., B, 3, 3)`` and translations ``(..., B, 3)``."""
