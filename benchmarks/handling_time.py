@@ -111,6 +111,9 @@ def main() -> None:
     ap.add_argument("--save", default=None, help="save the handled vertices to this .npz")
     ap.add_argument("--reference", default=None, help="compare the handled vertices with this .npz")
     ap.add_argument("--no-quality", action="store_true")
+    ap.add_argument("--backend", default="auto", help="exact_backend of handle_motion_collisions: auto, warp, igl")
+    ap.add_argument("--clips", default=",".join(CLIPS))
+    ap.add_argument("--runs", default=",".join(RUNS))
     args = ap.parse_args()
     import torch
 
@@ -125,10 +128,12 @@ def main() -> None:
     cache.mkdir(parents=True, exist_ok=True)
     reference = dict(np.load(args.reference)) if args.reference else {}
     saved, rows = {}, []
-    for clip in CLIPS:
+    handle = dict(mode="exact", exact_backend=args.backend)
+    for clip in args.clips.split(","):
         motion = load_motion(str(MOCAP / f"{clip}.bvh"), body, joint_map="cc")
         posed_full = None
-        for name, run in RUNS.items():
+        for name in args.runs.split(","):
+            run = RUNS[name]
             key = f"{name}-{clip}"
             path = cache / f"{key}.npz"
             if not path.exists():
@@ -136,18 +141,18 @@ def main() -> None:
                 np.savez(path, raw=animator.animate_batch([motion])[0], faces=animator.faces)
             data = np.load(path)
             raw, faces = data["raw"], data["faces"]
-            handle_motion_collisions(raw, faces, body, motion, mode="exact")  # warm-up (kernels, caches)
+            handle_motion_collisions(raw, faces, body, motion, **handle)  # warm-up (kernels, caches)
             spent, totals = defaultdict(float), []
             for _ in range(args.repeats):
                 timer = PartTimer()
                 t = time.process_time()
-                fixed = handle_motion_collisions(raw, faces, body, motion, mode="exact")
+                fixed = handle_motion_collisions(raw, faces, body, motion, **handle)
                 totals.append(time.process_time() - t)
                 timer.restore()
                 for part, s in timer.spent.items():
                     spent[part] += s / args.repeats
             T = len(raw)
-            row = {"run": run, "clip": clip, "frames": T, "vertices": int(raw.shape[1]), "load": loadavg(),
+            row = {"run": run, "clip": clip, "backend": args.backend, "frames": T, "vertices": int(raw.shape[1]), "load": loadavg(),
                    "ms_per_frame": 1e3 * min(totals) / T, "ms_per_frame_each": [1e3 * s / T for s in totals],
                    "parts_ms_per_frame": {p: 1e3 * s / T for p, s in sorted(spent.items())}}
             row["parts_ms_per_frame"]["rest"] = 1e3 * np.mean(totals) / T - sum(row["parts_ms_per_frame"].values())
