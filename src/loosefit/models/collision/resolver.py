@@ -311,18 +311,23 @@ class CollisionResolver:
         for _ in range(self.passes):
             x = out.cpu().numpy().reshape(T * V, 3)
             sample, frame = cand % S, cand // S
-            corner = (frame * V)[:, None] + self.sample_index[sample]  # (N, 3) flat vertices
-            weight = self.sample_weight[sample]
+            corner = weight = None
             if last is None:  # every sample: one sparse product a frame
                 xt = x.reshape(T, V, 3).transpose(1, 0, 2).reshape(V, T * 3)
                 points = (self.sample_matrix @ xt).reshape(-1, T, 3).transpose(1, 0, 2)[:, :self.num_surface]
                 points = points.reshape(-1, 3).astype(dtype)
             else:
+                corner = (frame * V)[:, None] + self.sample_index[sample]  # (N, 3) flat vertices
+                weight = self.sample_weight[sample]
                 points = np.einsum("nk,nkd->nd", weight, x[corner]).astype(dtype)
             if outside is not None:
-                free = self._culled(points, frame, T, outside, every=last is None)
-                cand, sample, frame, corner, weight, points = (a[~free] for a in (cand, sample, frame, corner,
-                                                                                   weight, points))
+                kept = ~self._culled(points, frame, T, outside, every=last is None)
+                cand, sample, frame, points = cand[kept], sample[kept], frame[kept], points[kept]
+                if corner is not None:
+                    corner, weight = corner[kept], weight[kept]
+            if corner is None:  # the first pass: the corners of the samples the cull left only
+                corner = (frame * V)[:, None] + self.sample_index[sample]
+                weight = self.sample_weight[sample]
             # a field that is a distance changes by at most |p - x_j| from a vertex to a sample: a vertex known to
             # be that far out proves the sample is not deep, and is not asked about it (exact for the exact field;
             # the network is a distance as far as its Eikonal term made it one)
