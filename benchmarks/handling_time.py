@@ -152,7 +152,8 @@ def main() -> None:
                 for part, s in timer.spent.items():
                     spent[part] += s / args.repeats
             T = len(raw)
-            row = {"run": run, "clip": clip, "backend": args.backend, "frames": T, "vertices": int(raw.shape[1]), "load": loadavg(),
+            row = {"run": run, "clip": clip, "backend": args.backend, "frames": T, "vertices": int(raw.shape[1]),
+                   "load": loadavg(),
                    "ms_per_frame": 1e3 * min(totals) / T, "ms_per_frame_each": [1e3 * s / T for s in totals],
                    "parts_ms_per_frame": {p: 1e3 * s / T for p, s in sorted(spent.items())}}
             row["parts_ms_per_frame"]["rest"] = 1e3 * np.mean(totals) / T - sum(row["parts_ms_per_frame"].values())

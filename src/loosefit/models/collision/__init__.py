@@ -28,8 +28,8 @@ from loosefit.models.collision.handling import (CULL_CELL, FRAME_CHUNK, POST_PRO
                                                 check_post_process, correct_exact_motion, correct_frame,
                                                 correct_motion, handle_motion_collisions, inflated, post_process)
 from loosefit.models.collision.resolver import (SURFACE_PASSES, SURFACE_TOLERANCE, CollisionResolver,
-                                                ExactMotionSDF, ExactSDF, push_out, resolve_collisions, surface_sample_weights,
-                                                vertex_neighbours)
+                                                ExactMotionSDF, ExactSDF, push_out, resolve_collisions,
+                                                surface_sample_weights, vertex_neighbours)
 from loosefit.models.collision.training import (CALIBRATION_QUANTILE, EIKONAL_WEIGHT, SDF_FILE, SDF_META,
                                                 SDFRunConfig, SDFTrainConfig, body_sdf_samples, calibrate_margin,
                                                 calibrate_sdf_run, calibration_set, collision_margin,
@@ -43,8 +43,8 @@ __all__ = [
     # fast_eval
     "BoundBodySDF", "MotionBodySDF", "FramedSDF", "flushed_denormals", "sdf_and_gradient", "value_and_gradient_fn",
     # resolver
-    "ExactSDF", "ExactMotionSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out", "SURFACE_PASSES",
-    "SURFACE_TOLERANCE", "surface_sample_weights",
+    "ExactSDF", "ExactMotionSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out",
+    "SURFACE_PASSES", "SURFACE_TOLERANCE", "surface_sample_weights",
     # handling
     "CULL_CELL", "correct_frame", "FRAME_CHUNK", "correct_motion", "correct_exact_motion",
     "handle_motion_collisions", "PROXY_INFLATE",

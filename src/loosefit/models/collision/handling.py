@@ -243,7 +243,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
 
     ``exact_backend`` (``"exact"`` only): ``"auto"`` (Warp when it loads: :func:`correct_exact_motion`, many frames
     a pass; else libigl), ``"warp"`` or ``"igl"`` (libigl's tree rebuilt each frame, :func:`correct_frame` frame by
-    frame: the reference, about three times slower).
+    frame: the reference; 1.4-1.9 times the CPU time on the shipped skirts, benchmarks/experiments/LOG.md).
     """
     if exact_backend not in ("auto", "warp", "igl"):
         raise InputError(f"exact collision backend must be 'auto', 'warp' or 'igl', got {exact_backend!r}")
