@@ -219,7 +219,8 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
 
     ``mode``: ``"neural"`` (SwinGar Eq. 10 with ``net``, in the canonical frame, the code from the motion),
-    ``"exact"`` (SwinGar Eq. 10 with libigl's distance to the posed proxy made to enclose the body, below) or
+    ``"exact"`` (SwinGar Eq. 10 with the exact distance, Warp's or libigl's (``exact_backend``), to the posed proxy
+    made to enclose the body, below) or
     ``"pushout"`` (the fixed-distance baseline). With ``cull`` (the default) SwinGar Eq. 10 evaluates its field only
     at the vertices that the posed proxy's :class:`~loosefit.geometry.ray_cull.AxisRayCuller` cannot prove outside
     (:func:`correct_frame`); the network runs on :data:`FRAME_CHUNK` frames a pass (:func:`correct_motion`); the
