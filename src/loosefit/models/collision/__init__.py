@@ -25,11 +25,11 @@ from loosefit.models.collision.network import (SOFTPLUS_BETA, BodySDFConfig, Bod
                                                bone_frame_code, bone_local_points, fold_bone_frames, load_body_sdf,
                                                motion_sdf_inputs, posed_joints, save_body_sdf)
 from loosefit.models.collision.handling import (CULL_CELL, FRAME_CHUNK, POST_PROCESSES, PROXY_INFLATE,
-                                                check_post_process, correct_frame, correct_motion,
-                                                handle_motion_collisions, inflated, post_process)
-from loosefit.models.collision.resolver import (SURFACE_PASSES, SURFACE_TOLERANCE, CollisionResolver, ExactSDF,
-                                                push_out, resolve_collisions, surface_sample_weights,
-                                                vertex_neighbours)
+                                                check_post_process, correct_exact_motion, correct_frame,
+                                                correct_motion, handle_motion_collisions, inflated, post_process)
+from loosefit.models.collision.resolver import (SURFACE_PASSES, SURFACE_TOLERANCE, CollisionResolver,
+                                                ExactMotionSDF, ExactSDF, push_out, resolve_collisions,
+                                                surface_sample_weights, vertex_neighbours)
 from loosefit.models.collision.training import (CALIBRATION_QUANTILE, EIKONAL_WEIGHT, SDF_FILE, SDF_META,
                                                 SDFRunConfig, SDFTrainConfig, body_sdf_samples, calibrate_margin,
                                                 calibrate_sdf_run, calibration_set, collision_margin,
@@ -43,10 +43,11 @@ __all__ = [
     # fast_eval
     "BoundBodySDF", "MotionBodySDF", "FramedSDF", "flushed_denormals", "sdf_and_gradient", "value_and_gradient_fn",
     # resolver
-    "ExactSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out", "SURFACE_PASSES",
-    "SURFACE_TOLERANCE", "surface_sample_weights",
+    "ExactSDF", "ExactMotionSDF", "vertex_neighbours", "CollisionResolver", "resolve_collisions", "push_out",
+    "SURFACE_PASSES", "SURFACE_TOLERANCE", "surface_sample_weights",
     # handling
-    "CULL_CELL", "correct_frame", "FRAME_CHUNK", "correct_motion", "handle_motion_collisions", "PROXY_INFLATE",
+    "CULL_CELL", "correct_frame", "FRAME_CHUNK", "correct_motion", "correct_exact_motion",
+    "handle_motion_collisions", "PROXY_INFLATE",
     "inflated", "POST_PROCESSES", "check_post_process", "post_process",
     # training
     "EIKONAL_WEIGHT", "sdf_loss", "sdf_samples", "SDFTrainConfig", "random_anny_shapes", "random_procedural_motions",

@@ -76,12 +76,7 @@ class ExactSDF:
         out = np.nonzero(far)[0]
         if len(out):
             dist[out[self.mesh.inside(p[out])]] *= -1.0
-        away = p - closest
-        norm = np.linalg.norm(away, axis=1, keepdims=True)
-        direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None],
-                             self.mesh.face_normals[face])  # on the surface: the face normal
-        as_points = dict(dtype=points.dtype, device=points.device)
-        return torch.as_tensor(dist, **as_points), torch.as_tensor(direction, **as_points)
+        return _as_field(points, p, dist, closest, self.mesh.face_normals[face])
 
     def __call__(self, points: torch.Tensor) -> torch.Tensor:
         value, direction = self._query(points)
@@ -92,6 +87,55 @@ class ExactSDF:
         """Values ``(N,)`` and ``rows -> gradients (M, 3)`` from one query (see :func:`value_and_gradient_fn`;
         ``outside_beyond``: see :meth:`_query`)."""
         value, direction = self._query(points, outside_beyond)
+        return value, lambda rows: direction[rows]
+
+
+def _as_field(points: torch.Tensor, p: np.ndarray, dist: np.ndarray, closest: np.ndarray, face_normal: np.ndarray):
+    """Signed distances ``dist (N,)`` and unit outward gradients ``(N, 3)`` (from the closest points ``(N, 3)``,
+    the face normal ``(N, 3)`` on the surface) at ``p (N, 3)``, as tensors like ``points``."""
+    away = p - closest
+    norm = np.linalg.norm(away, axis=1, keepdims=True)
+    direction = np.where(norm > 1e-9, away / np.maximum(norm, 1e-12) * np.sign(dist)[:, None], face_normal)
+    as_points = dict(dtype=points.dtype, device=points.device)
+    return torch.as_tensor(dist, **as_points), torch.as_tensor(direction, **as_points)
+
+
+class ExactMotionSDF(ExactSDF):
+    """:class:`ExactSDF` of the frames of a motion at once, for :meth:`CollisionResolver.frames`: each point is
+    given with its frame's index and the field is a
+    :class:`~loosefit.geometry.warp_sdf.MotionMeshSDF` (Warp; libigl's distances to about 1e-7 m, the same sign
+    rule).
+
+    Args:
+        field: a :class:`~loosefit.geometry.warp_sdf.MotionMeshSDF` refitted to the frames.
+    """
+
+    def __init__(self, field):
+        self.field = field
+
+    @property
+    def num_frames(self) -> int:
+        return self.field.num_frames
+
+    def _query(self, points: torch.Tensor, frame: torch.Tensor,
+               outside_beyond: np.ndarray | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`ExactSDF._query` for ``points (N, 3)`` of frames ``frame (N,)``."""
+        p = points.detach().cpu().double().numpy()
+        fr = frame.cpu().numpy()
+        dist, closest, face = self.field.query(p, fr, WINDING_FROM, outside_beyond)
+        # rounded as BodySDF.closest rounds libigl's: the same moves as ExactSDF's, not just float noise apart
+        dist, closest = dist.astype(np.float32), closest.astype(np.float32)
+        normals = self.field.face_normals
+        return _as_field(points, p, dist, closest, normals.reshape(-1, 3)[fr * normals.shape[1] + face])
+
+    def __call__(self, points: torch.Tensor, frame: torch.Tensor) -> torch.Tensor:
+        value, direction = self._query(points, frame)
+        return value + (direction * (points - points.detach())).sum(-1)
+
+    def value_and_gradient_fn(self, points: torch.Tensor, frame: torch.Tensor,
+                              outside_beyond: np.ndarray | None = None):
+        """Values ``(N,)`` and ``rows -> gradients (M, 3)`` at ``points (N, 3)`` of frames ``frame (N,)``."""
+        value, direction = self._query(points, frame, outside_beyond)
         return value, lambda rows: direction[rows]
 
 
@@ -267,18 +311,23 @@ class CollisionResolver:
         for _ in range(self.passes):
             x = out.cpu().numpy().reshape(T * V, 3)
             sample, frame = cand % S, cand // S
-            corner = (frame * V)[:, None] + self.sample_index[sample]  # (N, 3) flat vertices
-            weight = self.sample_weight[sample]
+            corner = weight = None
             if last is None:  # every sample: one sparse product a frame
                 xt = x.reshape(T, V, 3).transpose(1, 0, 2).reshape(V, T * 3)
                 points = (self.sample_matrix @ xt).reshape(-1, T, 3).transpose(1, 0, 2)[:, :self.num_surface]
                 points = points.reshape(-1, 3).astype(dtype)
             else:
+                corner = (frame * V)[:, None] + self.sample_index[sample]  # (N, 3) flat vertices
+                weight = self.sample_weight[sample]
                 points = np.einsum("nk,nkd->nd", weight, x[corner]).astype(dtype)
             if outside is not None:
-                free = self._culled(points, frame, T, outside, every=last is None)
-                cand, sample, frame, corner, weight, points = (a[~free] for a in (cand, sample, frame, corner,
-                                                                                   weight, points))
+                kept = ~self._culled(points, frame, T, outside, every=last is None)
+                cand, sample, frame, points = cand[kept], sample[kept], frame[kept], points[kept]
+                if corner is not None:
+                    corner, weight = corner[kept], weight[kept]
+            if corner is None:  # the first pass: the corners of the samples the cull left only
+                corner = (frame * V)[:, None] + self.sample_index[sample]
+                weight = self.sample_weight[sample]
             # a field that is a distance changes by at most |p - x_j| from a vertex to a sample: a vertex known to
             # be that far out proves the sample is not deep, and is not asked about it (exact for the exact field;
             # the network is a distance as far as its Eikonal term made it one)
