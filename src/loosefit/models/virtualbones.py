@@ -46,7 +46,10 @@ The garment's own state fed back (``feedback_frames > 0``; our departure from th
 physics, Holden et al. 2019): the low-frequency module also reads its own normalised bone outputs of the previous
 ``feedback_frames`` frames (zeros, the mean bone motion, before the first frame), so it runs frame by frame. It
 trains on its own rollouts through each window, with Gaussian noise of ``feedback_noise`` (normalised units) on
-the fed-back outputs so that it learns to recover from its own errors; inference feeds back without noise.
+the fed-back outputs so that it learns to recover from its own errors; inference feeds back without noise. Off by
+default: on held-out subjects of real capture (``bench-real-small.yaml``, validation only) two frames fed back
+validated at 65.6 mm against 58.0 for the preset at 300 s of one core, 60.1 against 55.4 at 1,200 s; the rollout
+runs at half the steps a second and fits the training motions worse per step (``benchmarks/experiments/LOG.md``).
 """
 
 from __future__ import annotations
