@@ -10,6 +10,7 @@ import torch
 
 from loosefit.config import load_config
 from loosefit.errors import InputError
+from loosefit.models.body_lbs import training_body
 from loosefit.models.dataset import GarmentSequences, WindowDataset
 from loosefit.models.motion_features import HISTORY_FRAMES, HISTORY_ROOT_FEATURES, ROOT_FEATURES, MotionHistory
 from loosefit.models.virtualbones import Config, VirtualBones, VirtualBonesConfig
@@ -392,3 +393,23 @@ def test_the_rollout_is_torchs_gru_when_nothing_is_fed_back(tiny_train):
         fused, _, _, _, h_fused = plain.low_frequency(x)
     assert (rolled - fused).abs().max() < 1e-5 and (h - h_fused).abs().max() < 1e-5
     assert rolled.abs().max() > 1e-3
+
+
+def test_ignored_joints_move_nothing_and_the_others_still_do(tiny_train):
+    model = _perturbed(_model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__,
+                                                                       "ignore_joints": ("Arm", "Hand")})))
+    names = training_body(tiny_train).joint_names[1:]
+    ignored = [i for i, n in enumerate(names) if "Arm" in n or "Hand" in n]
+    assert model.joint_read[:, 0].tolist() == [0.0 if i in ignored else 1.0 for i in range(len(names))]
+    assert ignored and len(ignored) < len(names)
+    seq = tiny_train.sequences[0]
+    root, joints = torch.from_numpy(seq.root)[None, :8], torch.from_numpy(seq.joints)[None, :8]
+    with torch.no_grad():
+        base = model(root, joints)["verts"]
+        for j, changes in ((ignored[0], False), (names.index("LeftUpLeg"), True)):
+            moved = joints.clone()
+            moved[:, 2:, j] += 0.5
+            diff = (model(root, moved)["verts"] - base).abs().max()
+            assert (diff > 1e-5) == changes, names[j]
+    with pytest.raises(InputError, match="match no joint"):
+        _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "ignore_joints": ("Tail",)}))

@@ -63,6 +63,7 @@ from torch import nn
 from loosefit.errors import InputError
 from loosefit.geometry.rotations import matrix_to_sixd, sixd_to_matrix
 from loosefit.models.base import GarmentModel
+from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
@@ -138,6 +139,9 @@ class VirtualBonesConfig:
         feedback_frames: previous frames of the low-frequency module's own bone outputs among its inputs (0: none,
             as in the paper; see the module docstring).
         feedback_noise: std of the noise on the fed-back outputs while training, normalised units.
+        ignore_joints: parts of body joint names (e.g. ``"Arm"``, ``"Hand"``) whose rotations the low-frequency
+            module does not read (their features held at zero; ours): a skirt moves with the hips and legs, and
+            arm poses it never met are then no input it can misread. Empty: every joint, as the paper.
     """
 
     lf_hidden: int = 600
@@ -157,6 +161,7 @@ class VirtualBonesConfig:
     history_vertical: bool = False
     feedback_frames: int = 0
     feedback_noise: float = 0.0
+    ignore_joints: tuple[str, ...] = ()
 
     def __post_init__(self):
         check_history(self.history_frames)
@@ -244,6 +249,8 @@ class VirtualBones(GarmentModel):
         self.register_buffer("lf_std", torch.ones(()))
         self.register_buffer("neighbours", torch.zeros(V, sizes["max_degree"], dtype=torch.long))
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D))
+        if config.ignore_joints:  # 1 for each joint read, 0 for each ignored (set from the body's names)
+            self.register_buffer("joint_read", torch.ones(J - 1, 1))
         c = config
         fed = c.feedback_frames * BONE_OUTPUTS * B
         self.low = GRUHead(self.root_features + 6 * (J - 1) + fed, c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
@@ -279,6 +286,13 @@ class VirtualBones(GarmentModel):
             raise InputError("VirtualBones trains on sequences with bone transforms: load the training split "
                              "with bones=True", data.store.path)
         stats = output_statistics(data.sequences, rig)
+        if self.config.ignore_joints:
+            names = training_body(data).joint_names[1:]
+            unknown = [p for p in self.config.ignore_joints if not any(p in n for n in names)]
+            if unknown:
+                raise InputError(f"ignore_joints {unknown} match no joint of the body: {names}")
+            read = [not any(p in n for p in self.config.ignore_joints) for n in names]
+            self.joint_read.copy_(torch.tensor(read, dtype=torch.float32)[:, None])
         with torch.no_grad():
             self.rest_verts.copy_(torch.from_numpy(rig.rest_verts))
             self.skin_weights.copy_(torch.from_numpy(rig.dense_weights()))
@@ -293,6 +307,8 @@ class VirtualBones(GarmentModel):
     def _inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
         """Normalised features ``(N, T, R + 6(J-1))``, ``R`` = :attr:`root_features`."""
         root, joints = self.normalise(root, joints)
+        if self.config.ignore_joints:
+            joints = joints * self.joint_read
         return torch.cat([root, joints.flatten(-2)], -1)
 
     def low_frequency(self, x: torch.Tensor, h=None, frames: torch.Tensor | None = None, noise: float = 0.0):
