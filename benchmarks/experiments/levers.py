@@ -1,13 +1,14 @@
-"""VirtualBones training levers side by side at equal CPU time: which ones help on held-out subjects of real capture?
+"""Training levers side by side at equal CPU time: which ones help on held-out subjects of real capture?
 
 For one garment of ``--data`` (a simulated store with ``val`` and ``test`` splits, e.g.
 ``configs/datasets/bench-real-small.yaml``; prepared here with ``--bones`` virtual bones), each ``--lever
-NAME=OVERRIDE [OVERRIDE ...]`` trains VirtualBones with the CPU preset of ``benchmarks/accuracy.py``
-(:data:`accuracy.CPU_TRAINING`) followed by the lever's overrides, into ``--runs/<NAME>/<garment>/virtualbones``
-(the folder ``learning_curve.py --runs RUNS/<NAME>`` shares as its whole-set run). Every lever gets the same CPU
+NAME=OVERRIDE [OVERRIDE ...]`` trains ``--method`` (VirtualBones, or JointNet) with the CPU preset of
+``benchmarks/accuracy.py`` (:data:`accuracy.CPU_TRAINING`) followed by the lever's overrides, into
+``--runs/<NAME>/<garment>/<method>`` (for VirtualBones the folder ``learning_curve.py --runs RUNS/<NAME>`` shares as
+its whole-set run). Every lever gets the same CPU
 budget ``--budget-s``: a probe run of one epoch per stage (``--runs/<NAME>/probe``, validation included) measures
 each stage's seconds per epoch, and the preset's epochs of both stages are scaled by one factor so that
-``epochs_low * s_low + epochs_high * s_high`` is the budget (:func:`scaled_epochs`; the probe's seconds are not
+``epochs_1 * s_1 + epochs_2 * s_2`` is the budget (:func:`scaled_epochs`; the probe's seconds are not
 counted). A lever whose overrides differ from an earlier lever's only in the learning rate or its schedule
 (``train.lr``, ``train.schedule``, ``train.min_lr``, ...) reuses that lever's probe.
 
@@ -26,7 +27,7 @@ motions}``.
 
 Run: .venv/bin/python benchmarks/experiments/levers.py --data DATA.zarr --runs RUNS --budget-s 300
          --lever baseline= --lever 'lr2e-3=train.lr=2e-3' [--garment skirt+average] [--name levers] [--score-test]
-         [--mirror]
+         [--mirror] [--method jointnet]
      (or --epochs LOW,HIGH instead of --budget-s: fixed epochs, no probe)
 """
 
@@ -55,7 +56,8 @@ from loosefit.rig.prepare import prepare  # noqa: E402
 from loosefit.rig.virtual_bones import DEFAULT_BONES  # noqa: E402
 from loosefit.train.validation import motion_kind  # noqa: E402
 
-STAGES = ("low", "high")
+#: The trainer stages of each method the levers script trains.
+STAGES = {"virtualbones": ("low", "high"), "jointnet": ("stage1", "stage2")}
 #: Override keys that change no step's cost: a lever differing from another only in these reuses its probe.
 COST_FREE = ("train.lr", "train.schedule", "train.min_lr", "train.step_epochs", "train.step_gamma", "train.seed")
 
@@ -159,6 +161,7 @@ def main() -> None:
     parser.add_argument("--epochs", default=None, help="LOW,HIGH: these epochs for every lever instead of a budget "
                         "(a seed repeat of a lever at the epochs its budget gave)")
     parser.add_argument("--bones", type=int, default=DEFAULT_BONES, help="virtual bones per garment when preparing")
+    parser.add_argument("--method", default="virtualbones", choices=sorted(STAGES), help="the network trained")
     parser.add_argument("--mirror", action="store_true", help="prepare the left-right mirror of every training "
                         "sequence too (its frames join the rig's solve), so that a lever may set data.mirror=true")
     parser.add_argument("--name", default="levers", help="results name: benchmarks/results/<name>.json")
@@ -167,13 +170,14 @@ def main() -> None:
     args = parser.parse_args()
     if (args.budget_s is None) == (args.epochs is None):
         parser.error("give --budget-s or --epochs")
-    fixed = None if args.epochs is None else dict(zip(STAGES, (int(e) for e in args.epochs.split(","))))
+    method, stages = args.method, STAGES[args.method]
+    fixed = None if args.epochs is None else dict(zip(stages, (int(e) for e in args.epochs.split(","))))
     try:
         levers = dict(parse_lever(v) for v in args.lever)
     except ValueError as e:
         parser.error(str(e))
     data, runs = Path(args.data), Path(args.runs)
-    preset = parse_sets([], "cpu")["virtualbones"]
+    preset = parse_sets([], "cpu")[method]
     earlier = {}
     if args.score_test and (RESULTS / f"{args.name}.json").is_file():
         earlier = json.loads((RESULTS / f"{args.name}.json").read_text())["results"]["levers"]
@@ -199,19 +203,19 @@ def main() -> None:
         if fixed is None and key not in probes:
             probe = runs / lever / "probe"
             print(f"== {lever}: probe one epoch per stage -> {probe}", flush=True)
-            train_run("virtualbones", data, garment, probe,
-                      [*sets, *(f"train.stages.{s}.epochs=1" for s in STAGES)], validation=validation)
+            train_run(method, data, garment, probe,
+                      [*sets, *(f"train.stages.{s}.epochs=1" for s in stages)], validation=validation)
             probes[key] = {"run": str(probe), "stages": stage_rows(probe)}
         if fixed is None:
-            seconds = {s: probes[key]["stages"][s]["seconds_per_epoch"] for s in STAGES}
-            train = load_config(run_config_class("virtualbones"), CONFIGS / "virtualbones.yaml", sets).train
-            epochs = scaled_epochs({s: train.stage(s).epochs for s in STAGES}, seconds, args.budget_s)
+            seconds = {s: probes[key]["stages"][s]["seconds_per_epoch"] for s in stages}
+            train = load_config(run_config_class(method), CONFIGS / f"{method}.yaml", sets).train
+            epochs = scaled_epochs({s: train.stage(s).epochs for s in stages}, seconds, args.budget_s)
         else:
             epochs = fixed
-        run = runs / lever / garment / "virtualbones"
+        run = runs / lever / garment / method
         print(f"== {lever}: {overrides} with epochs {epochs} -> {run}", flush=True)
         cpu = time.process_time()
-        summary = train_run("virtualbones", data, garment, run,
+        summary = train_run(method, data, garment, run,
                             [*sets, *(f"train.stages.{s}.epochs={e}" for s, e in epochs.items())], validation=validation)
         row = {"overrides": overrides, "epochs": epochs, "probe": probes.get(key), "cpu_s": time.process_time() - cpu,
                "train_wall_s": summary.get("train_wall_s"), "global_step": summary.get("global_step"),

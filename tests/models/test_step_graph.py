@@ -82,7 +82,7 @@ CASES = {
                                                                  edge_channels=(4,)), None),
     "virtualbones-fed-back": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
                                                                edge_channels=(4,), feedback_frames=2,
-                                                               ignore_joints=("Arm",)),
+                                                               exclude_joints=("Arm",)),
                               MotionHistory((6.0, 15.0))),
 }
 

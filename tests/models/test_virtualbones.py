@@ -397,7 +397,7 @@ def test_the_rollout_is_torchs_gru_when_nothing_is_fed_back(tiny_train):
 
 def test_ignored_joints_move_nothing_and_the_others_still_do(tiny_train):
     model = _perturbed(_model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__,
-                                                                       "ignore_joints": ("Arm", "Hand")})))
+                                                                       "exclude_joints": ("Arm", "Hand")})))
     names = training_body(tiny_train).joint_names[1:]
     ignored = [i for i, n in enumerate(names) if "Arm" in n or "Hand" in n]
     assert model.joint_read[:, 0].tolist() == [0.0 if i in ignored else 1.0 for i in range(len(names))]
@@ -412,4 +412,15 @@ def test_ignored_joints_move_nothing_and_the_others_still_do(tiny_train):
             diff = (model(root, moved)["verts"] - base).abs().max()
             assert (diff > 1e-5) == changes, names[j]
     with pytest.raises(InputError, match="match no joint"):
-        _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "ignore_joints": ("Tail",)}))
+        _model(tiny_train, config=VirtualBonesConfig(**{**TINY.__dict__, "exclude_joints": ("Tail",)}))
+
+
+def test_a_run_from_before_the_joint_names_reads_every_joint(tiny_train):
+    """Runs trained before the sizes held the body's joint names read every joint: the default exclusion must not
+    change what such a run (a shipped pretrained garment, say) predicts."""
+    sizes = VirtualBones.data_sizes(tiny_train)
+    assert sizes["joint_names"][0] == "Hips" and len(sizes["joint_names"]) == sizes["num_joints"]
+    old = {k: v for k, v in sizes.items() if k != "joint_names"}
+    assert VirtualBones(old, TINY).joint_read.min() == 1.0
+    assert VirtualBones(sizes, TINY).joint_read.min() == 0.0  # the default leaves the arms, hands and head out
+    assert "joint_read" not in VirtualBones(sizes, TINY).state_dict()  # checkpoints stay as they were

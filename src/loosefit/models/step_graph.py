@@ -218,8 +218,7 @@ class StepGraph(nn.Module):
         m = self.model
         root_n = (root[: m.root_features] - m.root_mean) / m.root_std
         joints_n = (joints - m.joints_mean) / m.joints_std
-        if m.config.ignore_joints:
-            joints_n = joints_n * m.joint_read
+        joints_n = joints_n * m.joint_read  # the joints not read held at zero
         x = torch.cat([root_n, joints_n.reshape(-1)])
         fed = self._recurrent(state, "fed_back", started).reshape(-1) if m.config.feedback_frames else None
         if fed is not None:

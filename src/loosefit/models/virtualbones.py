@@ -91,6 +91,9 @@ OUT_SCALE = 0.1
 #: Floors of the output scales, metres (a bone or an offset that never moves must not get a zero scale).
 MIN_POSITION_STD = 1e-3
 MIN_OFFSET_STD = 1e-4
+#: The body joints VirtualBones does not read by default: arms, hands, neck and head (chosen on validation subjects of
+#: real capture, benchmarks/experiments/LOG.md; the shoulders stay, for garments held by them).
+EXCLUDED_JOINTS = ("Arm", "Hand", "Thumb", "Finger", "Neck", "Head")
 #: What the high-frequency stage's position term compares with (see ``VirtualBonesConfig.hf_target``).
 HF_TARGETS = ("residual", "simulation")
 
@@ -139,9 +142,10 @@ class VirtualBonesConfig:
         feedback_frames: previous frames of the low-frequency module's own bone outputs among its inputs (0: none,
             as in the paper; see the module docstring).
         feedback_noise: std of the noise on the fed-back outputs while training, normalised units.
-        ignore_joints: parts of body joint names (e.g. ``"Arm"``, ``"Hand"``) whose rotations the low-frequency
-            module does not read (their features held at zero; ours): a skirt moves with the hips and legs, and
-            arm poses it never met are then no input it can misread. Empty: every joint, as the paper.
+        exclude_joints: parts of body joint names (any case, e.g. ``"Arm"``, ``"Hand"``; as JointNet's) whose
+            rotations the low-frequency module does not read (their features held at zero; ours): a skirt moves with
+            the hips and legs, and arm poses it never met are then no input it can misread. Default
+            :data:`EXCLUDED_JOINTS`; empty: every joint, as the paper.
     """
 
     lf_hidden: int = 600
@@ -161,7 +165,7 @@ class VirtualBonesConfig:
     history_vertical: bool = False
     feedback_frames: int = 0
     feedback_noise: float = 0.0
-    ignore_joints: tuple[str, ...] = ()
+    exclude_joints: tuple[str, ...] = EXCLUDED_JOINTS
 
     def __post_init__(self):
         check_history(self.history_frames)
@@ -195,6 +199,24 @@ class Config:
     train: TrainConfig = field(default_factory=_default_train)
     data: MemoryWindowConfig = field(default_factory=MemoryWindowConfig)
     ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
+
+
+def joints_read(names: list[str] | None, exclude: tuple[str, ...], num_joints: int) -> torch.Tensor:
+    """``(J-1, 1)`` float32: 1 for each non-root joint of ``names`` (the body's ``J`` joint names) whose name contains
+    none of the parts ``exclude`` (any case), else 0; all ones without ``names``.
+
+    Raises:
+        InputError: a part of ``exclude`` is in no joint's name, or ``names`` does not have ``num_joints`` entries.
+    """
+    if names is None or not exclude:
+        return torch.ones(num_joints - 1, 1)
+    if len(names) != num_joints:
+        raise InputError(f"sizes give {len(names)} joint names for {num_joints} joints")
+    parts = [p.lower() for p in exclude]
+    unknown = [p for p in exclude if not any(p.lower() in n.lower() for n in names[1:])]
+    if unknown:
+        raise InputError(f"exclude_joints {unknown} match no joint of the body: {list(names[1:])}")
+    return torch.tensor([[float(not any(p in n.lower() for p in parts))] for n in names[1:]])
 
 
 def output_statistics(sequences, rig) -> dict[str, np.ndarray]:
@@ -249,8 +271,10 @@ class VirtualBones(GarmentModel):
         self.register_buffer("lf_std", torch.ones(()))
         self.register_buffer("neighbours", torch.zeros(V, sizes["max_degree"], dtype=torch.long))
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D))
-        if config.ignore_joints:  # 1 for each joint read, 0 for each ignored (set from the body's names)
-            self.register_buffer("joint_read", torch.ones(J - 1, 1))
+        # (J-1, 1): 1 for each joint read, 0 for each excluded; a run from before sizes held the body's joint
+        # names read every joint (as it was trained), whatever its config says
+        self.register_buffer("joint_read", joints_read(sizes.get("joint_names"), config.exclude_joints, J),
+                             persistent=False)
         c = config
         fed = c.feedback_frames * BONE_OUTPUTS * B
         self.low = GRUHead(self.root_features + 6 * (J - 1) + fed, c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
@@ -272,6 +296,7 @@ class VirtualBones(GarmentModel):
         sizes = super().data_sizes(data)
         sizes["num_bones"] = load_rig(data.store, data.garment_name).num_bones
         sizes["max_degree"] = int(neighbour_table(data.faces, sizes["num_verts"]).shape[1])
+        sizes["joint_names"] = list(training_body(data).joint_names)
         return sizes
 
     def init_from_data(self, data: GarmentSequences) -> None:
@@ -286,13 +311,6 @@ class VirtualBones(GarmentModel):
             raise InputError("VirtualBones trains on sequences with bone transforms: load the training split "
                              "with bones=True", data.store.path)
         stats = output_statistics(data.sequences, rig)
-        if self.config.ignore_joints:
-            names = training_body(data).joint_names[1:]
-            unknown = [p for p in self.config.ignore_joints if not any(p in n for n in names)]
-            if unknown:
-                raise InputError(f"ignore_joints {unknown} match no joint of the body: {names}")
-            read = [not any(p in n for p in self.config.ignore_joints) for n in names]
-            self.joint_read.copy_(torch.tensor(read, dtype=torch.float32)[:, None])
         with torch.no_grad():
             self.rest_verts.copy_(torch.from_numpy(rig.rest_verts))
             self.skin_weights.copy_(torch.from_numpy(rig.dense_weights()))
@@ -307,9 +325,7 @@ class VirtualBones(GarmentModel):
     def _inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
         """Normalised features ``(N, T, R + 6(J-1))``, ``R`` = :attr:`root_features`."""
         root, joints = self.normalise(root, joints)
-        if self.config.ignore_joints:
-            joints = joints * self.joint_read
-        return torch.cat([root, joints.flatten(-2)], -1)
+        return torch.cat([root, (joints * self.joint_read).flatten(-2)], -1)
 
     def low_frequency(self, x: torch.Tensor, h=None, frames: torch.Tensor | None = None, noise: float = 0.0):
         """Low-frequency module: features ``x (N,T,F)`` -> ``(raw (N,T,B,9), rotations, translations, lf, h)``.
