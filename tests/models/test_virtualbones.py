@@ -424,3 +424,13 @@ def test_a_run_from_before_the_joint_names_reads_every_joint(tiny_train):
     assert VirtualBones(old, TINY).joint_read.min() == 1.0
     assert VirtualBones(sizes, TINY).joint_read.min() == 0.0  # the default leaves the arms, hands and head out
     assert "joint_read" not in VirtualBones(sizes, TINY).state_dict()  # checkpoints stay as they were
+
+
+def test_the_default_exclusion_on_smpl_leaves_out_its_hands_neck_and_head():
+    from loosefit.body.smpl_body import smpl_joint_names
+    from loosefit.models.virtualbones import EXCLUDED_JOINTS, joints_read
+
+    names = smpl_joint_names(24)
+    read = joints_read(names, EXCLUDED_JOINTS, len(names))[:, 0]
+    left_out = sorted(n for n, r in zip(names[1:], read.tolist()) if r == 0)
+    assert left_out == ["head", "left_hand", "neck", "right_hand"]

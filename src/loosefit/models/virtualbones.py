@@ -205,18 +205,21 @@ def joints_read(names: list[str] | None, exclude: tuple[str, ...], num_joints: i
     """``(J-1, 1)`` float32: 1 for each non-root joint of ``names`` (the body's ``J`` joint names) whose name contains
     none of the parts ``exclude`` (any case), else 0; all ones without ``names``.
 
+    Parts in no joint's name are skipped, as JointNet's (the default names Anny's joints; on SMPL it leaves out the
+    hands, neck and head).
+
     Raises:
-        InputError: a part of ``exclude`` is in no joint's name, or ``names`` does not have ``num_joints`` entries.
+        InputError: no part of ``exclude`` is in any joint's name, or ``names`` does not have ``num_joints`` entries.
     """
     if names is None or not exclude:
         return torch.ones(num_joints - 1, 1)
     if len(names) != num_joints:
         raise InputError(f"sizes give {len(names)} joint names for {num_joints} joints")
     parts = [p.lower() for p in exclude]
-    unknown = [p for p in exclude if not any(p.lower() in n.lower() for n in names[1:])]
-    if unknown:
-        raise InputError(f"exclude_joints {unknown} match no joint of the body: {list(names[1:])}")
-    return torch.tensor([[float(not any(p in n.lower() for p in parts))] for n in names[1:]])
+    read = torch.tensor([[float(not any(p in n.lower() for p in parts))] for n in names[1:]])
+    if read.min() > 0:
+        raise InputError(f"exclude_joints {list(exclude)} match no joint of the body: {list(names[1:])}")
+    return read
 
 
 def output_statistics(sequences, rig) -> dict[str, np.ndarray]:
