@@ -434,3 +434,23 @@ def test_the_default_exclusion_on_smpl_leaves_out_its_hands_neck_and_head():
     read = joints_read(names, EXCLUDED_JOINTS, len(names))[:, 0]
     left_out = sorted(n for n, r in zip(names[1:], read.tolist()) if r == 0)
     assert left_out == ["head", "left_hand", "neck", "right_hand"]
+
+
+def test_an_excluded_joint_the_garment_reaches_is_read():
+    """A sleeve follows its arm: a joint within GARMENT_REACH_M of the rest garment is read although excluded."""
+    from loosefit.models.virtualbones import EXCLUDED_JOINTS, joints_read
+
+    names = ["Hips", "LeftUpLeg", "LeftArm", "LeftForeArm", "LeftHand", "Neck"]
+    assert joints_read(names, EXCLUDED_JOINTS, 6)[:, 0].tolist() == [1, 0, 0, 0, 0]
+    assert joints_read(names, EXCLUDED_JOINTS, 6, ("LeftArm", "LeftForeArm", "Hips"))[:, 0].tolist() == [1, 1, 1, 0, 0]
+
+
+def test_the_garments_reach_comes_from_the_rest_pose(tiny_train):
+    from loosefit.models.virtualbones import GARMENT_REACH_M
+
+    sizes = VirtualBones.data_sizes(tiny_train)
+    body = training_body(tiny_train)
+    joints, verts = body.rest_joints(), tiny_train.garment.verts
+    brute = [n for n, j in zip(body.joint_names, joints)
+             if min(float(np.linalg.norm(v - j)) for v in verts) < GARMENT_REACH_M]
+    assert sizes["joints_reached"] == brute and "Hips" in brute and "LeftHand" not in brute

@@ -94,6 +94,9 @@ MIN_OFFSET_STD = 1e-4
 #: The body joints VirtualBones does not read by default: arms, hands, neck and head (chosen on validation subjects of
 #: real capture, benchmarks/experiments/LOG.md; the shoulders stay, for garments held by them).
 EXCLUDED_JOINTS = ("Arm", "Hand", "Thumb", "Finger", "Neck", "Head")
+#: A joint this close to the rest garment (metres) is read even when excluded: a sleeve follows its arm, a collar its
+#: neck (a limb's surface is 5-12 cm from its joint; the bench skirt's nearest arm joint, the elbow, is 20 cm away).
+GARMENT_REACH_M = 0.15
 #: What the high-frequency stage's position term compares with (see ``VirtualBonesConfig.hf_target``).
 HF_TARGETS = ("residual", "simulation")
 
@@ -144,7 +147,8 @@ class VirtualBonesConfig:
         feedback_noise: std of the noise on the fed-back outputs while training, normalised units.
         exclude_joints: parts of body joint names (any case, e.g. ``"Arm"``, ``"Hand"``; as JointNet's) whose
             rotations the low-frequency module does not read (their features held at zero; ours): a skirt moves with
-            the hips and legs, and arm poses it never met are then no input it can misread. Default
+            the hips and legs, and arm poses it never met are then no input it can misread. A joint within
+            :data:`GARMENT_REACH_M` of the rest garment is read all the same (sleeves, collars). Default
             :data:`EXCLUDED_JOINTS`; empty: every joint, as the paper.
     """
 
@@ -201,9 +205,11 @@ class Config:
     ensemble: EnsembleConfig = field(default_factory=EnsembleConfig)
 
 
-def joints_read(names: list[str] | None, exclude: tuple[str, ...], num_joints: int) -> torch.Tensor:
+def joints_read(names: list[str] | None, exclude: tuple[str, ...], num_joints: int,
+                reached: tuple[str, ...] = ()) -> torch.Tensor:
     """``(J-1, 1)`` float32: 1 for each non-root joint of ``names`` (the body's ``J`` joint names) whose name contains
-    none of the parts ``exclude`` (any case), else 0; all ones without ``names``.
+    none of the parts ``exclude`` (any case) or that is among ``reached`` (the joints the garment reaches), else 0;
+    all ones without ``names``.
 
     Parts in no joint's name are skipped, as JointNet's (the default names Anny's joints; on SMPL it leaves out the
     hands, neck and head).
@@ -216,10 +222,10 @@ def joints_read(names: list[str] | None, exclude: tuple[str, ...], num_joints: i
     if len(names) != num_joints:
         raise InputError(f"sizes give {len(names)} joint names for {num_joints} joints")
     parts = [p.lower() for p in exclude]
-    read = torch.tensor([[float(not any(p in n.lower() for p in parts))] for n in names[1:]])
-    if read.min() > 0:
+    matched = [any(p in n.lower() for p in parts) for n in names[1:]]
+    if not any(matched):
         raise InputError(f"exclude_joints {list(exclude)} match no joint of the body: {list(names[1:])}")
-    return read
+    return torch.tensor([[float(not m or n in reached)] for n, m in zip(names[1:], matched)])
 
 
 def output_statistics(sequences, rig) -> dict[str, np.ndarray]:
@@ -276,8 +282,8 @@ class VirtualBones(GarmentModel):
         self.register_buffer("identity_6d", torch.tensor(IDENTITY_6D))
         # (J-1, 1): 1 for each joint read, 0 for each excluded; a run from before sizes held the body's joint
         # names read every joint (as it was trained), whatever its config says
-        self.register_buffer("joint_read", joints_read(sizes.get("joint_names"), config.exclude_joints, J),
-                             persistent=False)
+        self.register_buffer("joint_read", joints_read(sizes.get("joint_names"), config.exclude_joints, J,
+                                                       tuple(sizes.get("joints_reached", ()))), persistent=False)
         c = config
         fed = c.feedback_frames * BONE_OUTPUTS * B
         self.low = GRUHead(self.root_features + 6 * (J - 1) + fed, c.lf_hidden, BONE_OUTPUTS * B, out_scale=OUT_SCALE)
@@ -299,7 +305,10 @@ class VirtualBones(GarmentModel):
         sizes = super().data_sizes(data)
         sizes["num_bones"] = load_rig(data.store, data.garment_name).num_bones
         sizes["max_degree"] = int(neighbour_table(data.faces, sizes["num_verts"]).shape[1])
-        sizes["joint_names"] = list(training_body(data).joint_names)
+        body = training_body(data)
+        sizes["joint_names"] = list(body.joint_names)
+        reach = np.linalg.norm(body.rest_joints()[:, None] - data.garment.verts[None], axis=-1).min(1)
+        sizes["joints_reached"] = [n for n, d in zip(body.joint_names, reach) if d < GARMENT_REACH_M]
         return sizes
 
     def init_from_data(self, data: GarmentSequences) -> None:
