@@ -48,6 +48,9 @@ log = logging.getLogger(__name__)
 CRASHED = "crashed:"
 #: Object store of a local Ray: results (a few tens of MB each) pass through it.
 _OBJECT_STORE_BYTES = 300 * 1024**2
+#: Ray's logger that announces, at every local start, the token authentication it turns on by itself (a notice about
+#: Ray's defaults that a user of loosefit cannot act on; the authentication stays on).
+RAY_AUTH_NOTICE_LOGGER = "ray._private.authentication.authentication_token_setup"
 
 
 @functools.lru_cache(maxsize=8)
@@ -508,6 +511,7 @@ def _start_ray(ray, workers: int, address: str | None) -> None:
             if address is not None:
                 ray.init(address=address, log_to_driver=False)
             else:
+                logging.getLogger(RAY_AUTH_NOTICE_LOGGER).setLevel(logging.ERROR)
                 ray.init(num_cpus=workers, include_dashboard=False, object_store_memory=_OBJECT_STORE_BYTES,
                          log_to_driver=False)
     except SystemExit as e:  # Ray's own SIGTERM handler ran while it started: act as the caller's would have
