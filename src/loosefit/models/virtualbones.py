@@ -361,11 +361,12 @@ class VirtualBones(GarmentModel):
         if fed is None:  # before the first frame: zeros, the mean bone motion
             fed = x.new_zeros(x.shape[0], gru.input_size - F)
         drive = x @ gru.weight_ih_l0[:, :F].T + gru.bias_ih_l0  # (N, T, 3H)
+        w_fed, w_hh = gru.weight_ih_l0[:, F:].T, gru.weight_hh_l0.T
         out = []
         for t in range(x.shape[1]):
             seen = fed + noise * torch.randn_like(fed) if noise > 0 else fed
-            i_r, i_z, i_n = (drive[:, t] + seen @ gru.weight_ih_l0[:, F:].T).chunk(3, -1)
-            h_r, h_z, h_n = (h @ gru.weight_hh_l0.T + gru.bias_hh_l0).chunk(3, -1)
+            i_r, i_z, i_n = (drive[:, t] + seen @ w_fed).chunk(3, -1)
+            h_r, h_z, h_n = (h @ w_hh + gru.bias_hh_l0).chunk(3, -1)
             r, z = torch.sigmoid(i_r + h_r), torch.sigmoid(i_z + h_z)
             h = (1 - z) * torch.tanh(i_n + r * h_n) + z * h
             out.append(self.low.out(h))

@@ -296,6 +296,11 @@ class CollisionResolver:
                 self._surface(out, sdf, inside, known, frames, outside)
         return out, inside
 
+    def _corners(self, frame: np.ndarray, sample: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` flat vertex indices ``t V + i`` of the corners of samples ``sample (N,)`` of frames
+        ``frame (N,)``."""
+        return (frame * self.num_verts)[:, None] + self.sample_index[sample]
+
     def _surface(self, out: torch.Tensor, sdf, moved: np.ndarray, known: np.ndarray, frames: bool,
                  outside) -> None:
         """The surface pass (loosefit's, beyond SwinGar Eq. 10; see the class), in place on ``out (T V, 3)``,
@@ -311,23 +316,17 @@ class CollisionResolver:
         for _ in range(self.passes):
             x = out.cpu().numpy().reshape(T * V, 3)
             sample, frame = cand % S, cand // S
-            corner = weight = None
             if last is None:  # every sample: one sparse product a frame
                 xt = x.reshape(T, V, 3).transpose(1, 0, 2).reshape(V, T * 3)
                 points = (self.sample_matrix @ xt).reshape(-1, T, 3).transpose(1, 0, 2)[:, :self.num_surface]
                 points = points.reshape(-1, 3).astype(dtype)
             else:
-                corner = (frame * V)[:, None] + self.sample_index[sample]  # (N, 3) flat vertices
-                weight = self.sample_weight[sample]
-                points = np.einsum("nk,nkd->nd", weight, x[corner]).astype(dtype)
+                corner = self._corners(frame, sample)
+                points = np.einsum("nk,nkd->nd", self.sample_weight[sample], x[corner]).astype(dtype)
             if outside is not None:
                 kept = ~self._culled(points, frame, T, outside, every=last is None)
                 cand, sample, frame, points = cand[kept], sample[kept], frame[kept], points[kept]
-                if corner is not None:
-                    corner, weight = corner[kept], weight[kept]
-            if corner is None:  # the first pass: the corners of the samples the cull left only
-                corner = (frame * V)[:, None] + self.sample_index[sample]
-                weight = self.sample_weight[sample]
+            corner, weight = self._corners(frame, sample), self.sample_weight[sample]  # of the samples the cull left
             # a field that is a distance changes by at most |p - x_j| from a vertex to a sample: a vertex known to
             # be that far out proves the sample is not deep, and is not asked about it (exact for the exact field;
             # the network is a distance as far as its Eikonal term made it one)
