@@ -111,8 +111,8 @@ def test_shipped_garments_export_and_step_as_they_animate(run, motion, tmp_path)
 @pytest.mark.parametrize("run", ["pretrained:skirt", "pretrained:skirt/jointnet"])
 def test_int8_weights_stay_within_millimetres_of_the_float_model(run, motion, tmp_path):
     """``--int8``: the shipped garments' large matrices in int8 blocks (under half the file), every vertex
-    of 100 frames within 5 mm of the float model (about 1-3 mm at most on real capture, benchmarks/README.md),
-    and the weights really rounded (the vertices move)."""
+    of 100 frames within 2 mm of the float model (the rounding of the weights: under 1 mm measured), and the
+    weights really rounded (the vertices move). ``tests/test_quantize.py`` removes that gap."""
     motion = motion.slice(0, 100)
     exact, small = tmp_path / "float.onnx", tmp_path / "int8.onnx"
     export_onnx(run, exact)
@@ -124,7 +124,7 @@ def test_int8_weights_stay_within_millimetres_of_the_float_model(run, motion, tm
     assert "MatMulNBits" in {n.op_type for n in onnx.load(str(small)).graph.node}
     gap = np.linalg.norm(stream(small, motion)[0] - stream(exact, motion)[0], axis=-1)
     print(f"{run}: int8 against float32, mean {gap.mean() * 1e3:.3f} mm, max {gap.max() * 1e3:.3f} mm")
-    assert 1e-5 < gap.max() <= 5e-3
+    assert 1e-5 < gap.max() <= 2e-3
 
 
 def test_metadata_round_trips_and_describes_the_state(runs, motion, body, tmp_path):

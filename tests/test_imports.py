@@ -14,7 +14,7 @@ a function, fails :func:`test_imports_point_down_the_layers`. The layers, as the
   run into a store), ``motion_range``;
 - ``train`` (the training loop, losses, checkpoints: it knows no model), then ``models``, then ``training`` (a
   method's training run: a model on the train loop) and ``pretrained``;
-- ``animate``, then what animates: ``animate_any``, ``export_rig``; then ``viz``, ``report``, ``demo``;
+- ``animate``, then what animates: ``animate_any``, ``export_rig``, ``export_onnx``, ``quantize``; then ``viz``, ``report``, ``demo``;
 - the command line.
 """
 
@@ -41,7 +41,7 @@ LAYERS = [
     ("models",),
     ("training", "pretrained"),
     ("animate",),
-    ("animate_any", "export_rig", "export_onnx"),
+    ("animate_any", "export_rig", "export_onnx", "quantize"),
     ("viz",),
     ("report",),
     ("demo",),

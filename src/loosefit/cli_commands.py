@@ -435,6 +435,20 @@ def cmd_export_onnx(args):
     bones = f", {s['bones']} bone transforms" if s["bones"] else ""
     print(f"wrote {s['path']}: {s['bytes']} bytes, {s['method']}, {s['joints']} joints in, {s['vertices']} vertices "
           f"out, state of {s['state_size']} floats{bones}")
+    if args.int8 and not s["weights"]["run_on_int8_grid"]:
+        print("  its weights are rounded to int8 here, not in the run: its vertices differ from loosefit animate's "
+              "by what that rounding does (about 0.5 mm); `loosefit quantize RUN --out RUN-int8` makes a run that "
+              "animates as this model does")
+
+
+def cmd_quantize(args):
+    from loosefit.quantize import quantize_run
+
+    writable(args.out, folder=True)
+    s = quantize_run(args.run, args.out, checkpoint=args.checkpoint)
+    print(f"wrote {s['path']}: {s['method']}, {s['weights_rounded']} weights of {s['matrices']} matrices "
+          f"({len(s['parameters'])} parameters) rounded to int8, the largest change {s['largest_change']:.2e}; "
+          f"export it with export-onnx --int8")
 
 
 def cmd_view(args):

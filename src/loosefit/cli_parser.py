@@ -21,6 +21,7 @@ from loosefit.cli_commands import (
     cmd_motion_import,
     cmd_motion_map,
     cmd_prepare,
+    cmd_quantize,
     cmd_render,
     cmd_report,
     cmd_simulate,
@@ -28,6 +29,7 @@ from loosefit.cli_commands import (
     cmd_view,
 )
 from loosefit.export_onnx import add_arguments as onnx_arguments
+from loosefit.quantize import add_arguments as quantize_arguments
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -252,6 +254,11 @@ def build_parser() -> argparse.ArgumentParser:
     onnx_arguments(sp)
     force_option(sp)
     sp.set_defaults(func=cmd_export_onnx)
+
+    sp = sub.add_parser("quantize", help="a copy of a run with its weights rounded as export-onnx --int8 rounds them: "
+                        "it animates as its int8 model does")
+    quantize_arguments(sp)
+    sp.set_defaults(func=cmd_quantize)
 
     sp = sub.add_parser("evaluate", help="compare predicted and ground-truth mesh sequences")
     sp.add_argument("pred", help="predicted .npz mesh sequence, or a folder of them named like the ground truth")

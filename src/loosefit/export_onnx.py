@@ -59,22 +59,24 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
         checkpoint: ``"best"``, ``"last"`` or a checkpoint path (:func:`loosefit.animate.load_run`).
         bones: also output the bones' world transforms (``bone_transforms``).
         int8: store the large weight matrices as int8 (:mod:`loosefit.io.onnx_int8`): about 30 % of the file and
-            twice to three times the frames per second on one CPU thread, within about 3 mm of the float model
-            (``benchmarks/README.md``); needs onnxruntime's ``MatMulNBits`` and ``DynamicQuantizeMatMul``.
+            about twice the frames per second on one CPU thread; needs onnxruntime's ``MatMulNBits`` and
+            ``DynamicQuantizeMatMul``. The products are those of the rounded weights (within about 0.02 mm of the
+            vertices), so a run made by :func:`loosefit.quantize.quantize_run` animates as its int8 model does;
+            any other run differs from its int8 model by what rounding its weights does (0.2-0.5 mm measured,
+            ``benchmarks/README.md``).
 
     Returns:
         ``{"path", "bytes", "method", "vertices", "joints", "state_size", "bones", "weights"}`` (``weights``:
-        ``"float32"``, or ``"int8"`` with the counts of :func:`~loosefit.io.onnx_int8.quantize_model`).
+        ``"float32"``, or ``"int8"`` with the counts of :func:`~loosefit.io.onnx_int8.quantize_model` and
+        ``run_on_int8_grid``: whether the run's own weights are those rounded values).
 
     Raises:
         InputError: not a run folder, a missing or corrupt ``model.json`` or checkpoint (naming the file), or a
             method without a one-frame graph.
     """
-    import torch
-
     from loosefit.animate import load_run, read_run_meta
     from loosefit.extras import require
-    from loosefit.models.step_graph import STEP_METHODS, StepGraph
+    from loosefit.models.step_graph import STEP_METHODS
 
     onnx = require("onnx", "loosefit export-onnx")
     out = Path(out)
@@ -87,30 +89,43 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
         raise InputError(f"{meta['method']} has no one-frame graph; export-onnx covers {', '.join(STEP_METHODS)}",
                          run_dir)
     meta, model, _ = load_run(run_dir, checkpoint)
-    graph = StepGraph(model.float().eval(), bones=bones)
-    J, V = graph.num_joints, int(model.template.shape[0])
-    example = (torch.zeros(J, 3), torch.tensor([0.0, 0.0, 1.0]), torch.from_numpy(graph.initial_state()))
-    outputs = list(OUTPUTS) + ([BONE_OUTPUT] if bones else [])
     with atomic_path(out) as tmp:  # a failed export leaves an earlier file as it was
-        with torch.no_grad(), warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the legacy exporter's deprecation notice and tracer notes
-            torch.onnx.export(graph, example, str(tmp), input_names=list(INPUTS), output_names=outputs,
-                              opset_version=OPSET, dynamo=False, do_constant_folding=True)
-        proto = onnx.load(str(tmp))
+        proto, graph = trace_step_model(model, tmp, bones)
         weights: dict = {"storage": "float32"}
         if int8:
             from loosefit.io.onnx_int8 import BLOCK_SIZE, quantize_model
 
             proto, counts = quantize_model(proto)
-            weights = {"storage": "int8", "block_size": BLOCK_SIZE, **counts}
+            weights = {"storage": "int8", "block_size": BLOCK_SIZE, **counts,
+                       "run_on_int8_grid": bool(meta.get("weights", {}).get("int8_grid"))}
         entry = proto.metadata_props.add()
         entry.key, entry.value = METADATA_KEY, json.dumps({**describe(graph, meta, model), "weights": weights})
         proto.producer_name = "loosefit"
         onnx.checker.check_model(proto)
         onnx.save(proto, str(tmp))
+    J, V = graph.num_joints, int(model.template.shape[0])
     return {"path": str(out), "bytes": out.stat().st_size, "method": graph.method, "vertices": V, "joints": J,
             "state_size": graph.state_size, "bones": int(graph.bone_rest_positions().shape[0]) if bones else 0,
             "weights": weights}
+
+
+def trace_step_model(model, path: Path, bones: bool = False):
+    """``model``'s one-frame graph (:class:`~loosefit.models.step_graph.StepGraph`) traced to ONNX at ``path``:
+    ``(onnx.ModelProto as written, the StepGraph)``, float32 weights, no metadata yet."""
+    import onnx
+    import torch
+
+    from loosefit.models.step_graph import StepGraph
+
+    graph = StepGraph(model.float().eval(), bones=bones)
+    example = (torch.zeros(graph.num_joints, 3), torch.tensor([0.0, 0.0, 1.0]),
+               torch.from_numpy(graph.initial_state()))
+    outputs = list(OUTPUTS) + ([BONE_OUTPUT] if bones else [])
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the legacy exporter's deprecation notice and tracer notes
+        torch.onnx.export(graph, example, str(path), input_names=list(INPUTS), output_names=outputs,
+                          opset_version=OPSET, dynamo=False, do_constant_folding=True)
+    return onnx.load(str(path)), graph
 
 
 def describe(graph, meta: dict, model) -> dict:
@@ -194,4 +209,5 @@ def add_arguments(sp: argparse.ArgumentParser) -> None:
                     "nothing), last or a checkpoint path")
     sp.add_argument("--bones", action="store_true", help="also output the bones' world transforms (GPU skinning)")
     sp.add_argument("--int8", action="store_true", help="large weight matrices in int8: about 30 %% of the file, "
-                    "2-3x faster on a CPU, within about 3 mm (not for the live page)")
+                    "about 2x faster on a CPU (not for the live page); a run made by loosefit quantize animates as "
+                    "this model does, any other within about 0.5 mm")

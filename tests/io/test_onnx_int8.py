@@ -110,13 +110,27 @@ def _input_rounding_bound(a, w):
     return (np.abs(w) * s[:, None] / 2).sum(0)
 
 
+def _dynamic_rounding_bound(m, w):
+    """``sum_k |W_kn| * s / 2``: the most that rounding ``m`` to uint8 with one scale ``s`` (its range / 255) can
+    move ``m @ W``."""
+    s = (max(m.max(), 0.0) - min(m.min(), 0.0)) / 255
+    return (np.abs(w) * s / 2).sum(0)
+
+
+def _deq_columns(w):
+    q, scales = quantize_columns(w)
+    return q.astype(np.float64) * scales
+
+
 @pytest.mark.parametrize("accuracy_level", [0, 4])
 def test_onnxruntime_multiplies_the_stored_weights(accuracy_level):
+    """One rounding of the input (``residual=False``): the products of the dequantized weights, within what
+    rounding the input moves them."""
     rng = np.random.default_rng(1)
     model, w = _graph(rng)
     feeds = {"a": rng.normal(size=(1, K)).astype(np.float32), "b": rng.normal(size=(G, 1, K)).astype(np.float32),
              "m": rng.normal(size=(R, K)).astype(np.float32)}
-    quantized, summary = quantize_model(model, min_elements=K * N, accuracy_level=accuracy_level)
+    quantized, summary = quantize_model(model, min_elements=K * N, accuracy_level=accuracy_level, residual=False)
     onnx.checker.check_model(quantized)
     ops = [n.op_type for n in quantized.graph.node]
     assert ops.count("MatMulNBits") == 2 + G and ops.count("MatMul") == 1  # the small product stays float
@@ -141,3 +155,66 @@ def test_onnxruntime_multiplies_the_stored_weights(accuracy_level):
                 bound = _input_rounding_bound(x[g] if y == "y3" else x, _deq(weight))
                 err = np.abs(got[y][g] - expected[y][g]).reshape(-1) if y == "y3" else np.abs(got[y] - expected[y])[0]
                 assert np.all(err <= bound * 1.01 + 1e-5), (y, g, (err / bound).max())
+
+
+def test_the_residual_makes_the_products_those_of_the_rounded_weights():
+    """The default (``residual=True``): every integer product also multiplies what rounding its input left over,
+    so it is the product of the dequantized weights and the exact input to a hundredth of the one-rounding bound
+    (the theory: 1/127 of it), for several rows, a vector, a per-group batch of two rows and a many-row product;
+    a product of constants stays float; ``rounded`` holds the dequantized weights in each initializer's layout."""
+    rng = np.random.default_rng(3)
+    w1, w3, w5, w6 = (rng.normal(size=s).astype(np.float32) for s in ((K, N), (G, K, N), (K, N), (K, N)))
+    w2 = rng.normal(size=(N, K)).astype(np.float32)
+    constant = rng.normal(size=(R, K)).astype(np.float32)
+    nodes = [helper.make_node("MatMul", ["a", "w1"], ["y1"]),
+             helper.make_node("Gemm", ["a", "w2"], ["y2"], transB=1),
+             helper.make_node("MatMul", ["b", "w3"], ["y3"]),
+             helper.make_node("MatMul", ["v", "w1"], ["y4"]),
+             helper.make_node("MatMul", ["m", "w5"], ["y5"]),
+             helper.make_node("MatMul", ["constant", "w6"], ["y6"])]
+    inputs = [helper.make_tensor_value_info("a", TensorProto.FLOAT, [3, K]),
+              helper.make_tensor_value_info("b", TensorProto.FLOAT, [G, 2, K]),
+              helper.make_tensor_value_info("v", TensorProto.FLOAT, [K]),
+              helper.make_tensor_value_info("m", TensorProto.FLOAT, [R, K])]
+    outputs = [helper.make_tensor_value_info(f"y{i}", TensorProto.FLOAT, None) for i in range(1, 7)]
+    inits = [numpy_helper.from_array(v, n) for n, v in (("w1", w1), ("w2", w2), ("w3", w3), ("w5", w5), ("w6", w6),
+                                                           ("constant", constant))]
+    model = helper.make_model(helper.make_graph(nodes, "g", inputs, outputs, inits),
+                              opset_imports=[helper.make_opsetid("", 17)])
+    feeds = {"a": rng.normal(size=(3, K)), "b": rng.normal(size=(G, 2, K)), "v": rng.normal(size=K),
+             "m": rng.normal(size=(R, K)) * np.linspace(0.1, 3, K)}
+    feeds = {k: v.astype(np.float32) for k, v in feeds.items()}
+    rounded: dict = {}
+    quantized, summary = quantize_model(model, min_elements=K * N, rounded=rounded)
+    single, _ = quantize_model(model, min_elements=K * N, residual=False)
+    onnx.checker.check_model(quantized)
+    ops = [n.op_type for n in quantized.graph.node]
+    assert ops.count("MatMulNBits") == 3 + G and ops.count("DynamicQuantizeMatMul") == 2  # the input, the residual
+    assert ops.count("MatMul") == 1 and summary["matrices"] == 4 + G  # the product of constants stays float
+
+    deq = {"w1": _deq(w1), "w2": _deq(w2.T).T, "w3": np.stack([_deq(w) for w in w3]), "w5": _deq_columns(w5)}
+    assert set(rounded) == set(deq)
+    for name, values in deq.items():
+        assert rounded[name].shape == values.shape
+        np.testing.assert_allclose(rounded[name], values, rtol=1e-6, atol=1e-7)
+
+    names = [f"y{i}" for i in range(1, 7)]
+    sess = {k: ort.InferenceSession(p.SerializeToString(), providers=["CPUExecutionProvider"])
+            for k, p in (("residual", quantized), ("single", single))}
+    got = {k: dict(zip(names, s.run(None, feeds))) for k, s in sess.items()}
+    x = {k: v.astype(np.float64) for k, v in feeds.items()}
+    cases = [("y1", x["a"][i], deq["w1"], _input_rounding_bound, (i,)) for i in range(3)]
+    cases += [("y2", x["a"][i], deq["w2"].T, _input_rounding_bound, (i,)) for i in range(3)]
+    cases += [("y3", x["b"][g, i], deq["w3"][g], _input_rounding_bound, (g, i)) for g in range(G) for i in range(2)]
+    cases += [("y4", x["v"], deq["w1"], _input_rounding_bound, ())]
+    cases += [("y5", x["m"], deq["w5"], lambda m, w: _dynamic_rounding_bound(m, w), ())]
+    worst = {"residual": 0.0, "single": 0.0}
+    for y, inp, weight, bound_of, index in cases:
+        bound = bound_of(inp, weight)
+        expected = inp @ weight
+        for k in worst:
+            err = np.abs(got[k][y][index] - expected)
+            worst[k] = max(worst[k], float((err / bound).max()))
+    assert worst["residual"] <= 1e-2, worst  # a hundredth of one rounding's bound
+    assert worst["single"] > 10 * worst["residual"], worst  # the control: one rounding is far coarser
+    np.testing.assert_allclose(got["residual"]["y6"], constant.astype(np.float64) @ w6, rtol=1e-5, atol=1e-4)

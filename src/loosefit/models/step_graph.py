@@ -259,7 +259,9 @@ class StepGraph(nn.Module):
         ``J_s`` joint features before the association mixes them into ``B`` bones (``W [A psi, f] = A (psi W_a^T) +
         W_f f``, the garment prior's part a constant), which saves most of that layer's work for ``B > J_s``."""
         m = self.model
-        x = m.joint_inputs(root[None, None], joints[None, None])[0, 0]  # (J_s, C)
+        # (J_s, C), its shape spelled out: the exported graph then knows it (the int8 rewrite needs it)
+        G, _, C = (int(d) for d in m.gru.weight_ih.shape)
+        x = m.joint_inputs(root[None, None], joints[None, None])[0, 0].reshape(G, C)
         h = self._recurrent(state, "gru_joints", started)  # (J_s, H)
         g = m.gru
         gi = (x[:, None] @ g.weight_ih.transpose(1, 2))[:, 0] + g.bias_ih[:, 0]
