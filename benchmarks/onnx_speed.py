@@ -17,9 +17,11 @@ untimed ones, feeding ``next_state`` back, for onnxruntime (``intra_op_num_threa
 and for PyTorch eager, and the largest vertex difference between the two. The machine is shared: the load average
 is recorded, and the CPU time (which leaves out the time spent waiting for a core) is the steadier figure.
 
-Every variant can also be timed exported with ``--int8`` (``<variant>-int8``: the large matrices in int8 blocks,
-:mod:`loosefit.io.onnx_int8`). With ``--runs``, trained run folders (``pretrained:skirt``, the garments loosefit
-ships; ``RUN-int8`` exported with ``--int8``) are timed the same way.
+Every variant can also be timed exported with ``--int8`` (``<variant>-int8``: the run quantized by
+:func:`loosefit.quantize.quantize_run`, then its large matrices in int8 blocks, :mod:`loosefit.io.onnx_int8`; the
+difference is from the quantized run, and ``weight_rounding_mm`` from the original). With ``--runs``, trained run
+folders (``pretrained:skirt``, the garments loosefit ships; ``RUN-int8`` exported with ``--int8``) are timed the
+same way.
 
 Run: .venv/bin/python benchmarks/onnx_speed.py [--vertices 12000] [--frames 200] [--warmup 20] [--bones 80]
          [--variants body-lbs,virtualbones,...] [--runs RUN,...] [--profile] [--name onnx-speed]
@@ -56,6 +58,7 @@ from loosefit.models.layers.edge_conv import neighbour_table  # noqa: E402
 from loosefit.models.motion_features import HISTORY_FRAMES, HISTORY_ROOT_FEATURES  # noqa: E402
 from loosefit.models.registry import model_class, run_config_class  # noqa: E402
 from loosefit.motion.procedural import generate  # noqa: E402
+from loosefit.quantize import quantize_run  # noqa: E402
 from loosefit.train.protocol import parameter_count  # noqa: E402
 from loosefit.training import METHOD_CONFIG, MODEL_META  # noqa: E402
 
@@ -191,9 +194,15 @@ def profile_summary(path: Path, top: int = 10) -> list[dict]:
 
 
 def time_run(run, path: Path, motion, args, checkpoint: str = "best", int8: bool = False) -> dict:
-    """Export ``run`` to ``path`` (``int8``: ``--int8``) and time it in onnxruntime and in torch eager along
-    ``motion``; ``max_vertex_difference_mm`` is the exported model's largest difference from torch."""
+    """Export ``run`` to ``path`` and time it in onnxruntime and in torch eager along ``motion``;
+    ``max_vertex_difference_mm`` is the exported model's largest difference from torch. With ``int8`` the run is
+    quantized first (``loosefit quantize``) and exported with ``--int8``: the difference is from the quantized run's
+    own animation, and ``weight_rounding_mm`` is how far the quantized run's vertices are from the original's."""
     start = time.perf_counter()
+    original, original_checkpoint = run, checkpoint
+    if int8:
+        run = Path(quantize_run(run, path.with_name(path.stem + "-quantized"), checkpoint=checkpoint)["path"])
+        checkpoint = "best"
     export_onnx(run, path, checkpoint=checkpoint, int8=int8)
     export_s = time.perf_counter() - start
     meta = read_metadata(path)
@@ -204,6 +213,9 @@ def time_run(run, path: Path, motion, args, checkpoint: str = "best", int8: bool
              "model_mb": path.stat().st_size / 2**20, "export_s": export_s, "onnxruntime": ort_time,
              "torch_eager": torch_time, "speedup_over_torch": torch_time["ms_mean"] / ort_time["ms_mean"],
              "max_vertex_difference_mm": float(np.abs(ort_verts - torch_verts).max() * 1e3)}
+    if int8:
+        float_verts = run_torch(original, motion, args.warmup, original_checkpoint)[0]
+        entry["weight_rounding_mm"] = float(np.abs(torch_verts - float_verts).max() * 1e3)
     if args.profile:
         sess = onnx_session(path, profile=path.with_suffix(""))
         run_onnx(sess, meta, motion.slice(0, args.warmup + 20), args.warmup)

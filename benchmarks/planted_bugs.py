@@ -304,9 +304,12 @@ BUGS = {
     "int8-columns-one-scale": (INT8, [("scales = (np.abs(weight).max(0) / 127.0).astype(np.float32)",
                                        "scales = np.full(weight.shape[1], np.abs(weight).max() / 127.0, np.float32)")],
                                T_INT8, "one scale for the whole matrix where each column has its own"),
-    "int8-split-first-group": (INT8, [("matmul_int8(parts[g], w[g], f\"{tag}_out{g}\")",
-                                       "matmul_int8(parts[g], w[0], f\"{tag}_out{g}\")")], T_INT8,
+    "int8-split-first-group": (INT8, [("products = [block_product(p, w[g]) for g, p in enumerate(parts)]",
+                                       "products = [block_product(p, w[0]) for g, p in enumerate(parts)]")], T_INT8,
                                "every group of a batched product multiplies the first group's weights"),
+    "int8-residual-floor": (INT8, [('node("Round", [node("Mul", [x, inverse])])',
+                                    'node("Floor", [node("Mul", [x, inverse])])')], T_INT8,
+                            "the residual of the input's rounding taken against its floor, not its nearest step"),
 }
 
 

@@ -13,6 +13,7 @@ from loosefit.animate import Animator
 from loosefit.cli import main
 from loosefit.errors import InputError
 from loosefit.export_onnx import METADATA_KEY, export_onnx, read_metadata
+from loosefit.io.onnx_int8 import BLOCK_SIZE
 from loosefit.export_rig import predict_bones
 from loosefit.motion.heading import heading_frames
 from loosefit.motion.procedural import generate
@@ -118,7 +119,7 @@ def test_int8_weights_stay_within_millimetres_of_the_float_model(run, motion, tm
     export_onnx(run, exact)
     assert main(["export-onnx", run, "--out", str(small), "--int8"]) == 0  # the command line's flag
     weights = read_metadata(small)["weights"]
-    assert weights["storage"] == "int8" and weights["block_size"] == 32
+    assert weights["storage"] == "int8" and weights["block_size"] == BLOCK_SIZE
     assert weights["weights_int8"] > 3 * weights["weights_float"]
     assert small.stat().st_size < 0.5 * exact.stat().st_size
     assert "MatMulNBits" in {n.op_type for n in onnx.load(str(small)).graph.node}

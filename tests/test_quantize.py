@@ -37,7 +37,8 @@ def test_a_quantized_run_animates_as_its_int8_model(run, quantized, motion, tmp_
     animated = Animator(quantized[run]).animate(motion)
     gap = np.abs(steps - animated).max()
     original = np.abs(steps - Animator(run).animate(motion)).max()
-    print(f"{run}: int8 model against the quantized run {gap * 1e3:.4f} mm, against the original {original * 1e3:.3f} mm")
+    print(f"{run}: int8 model against the quantized run {gap * 1e3:.4f} mm, "
+          f"against the original {original * 1e3:.3f} mm")
     assert gap <= TOLERANCE
     assert original > 2 * TOLERANCE  # the control: the rounding of the weights is what the run now holds
 

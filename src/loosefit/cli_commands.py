@@ -437,8 +437,8 @@ def cmd_export_onnx(args):
           f"out, state of {s['state_size']} floats{bones}")
     if args.int8 and not s["weights"]["run_on_int8_grid"]:
         print("  its weights are rounded to int8 here, not in the run: its vertices differ from loosefit animate's "
-              "by what that rounding does (about 0.5 mm); `loosefit quantize RUN --out RUN-int8` makes a run that "
-              "animates as this model does")
+              "by what that rounding does (about 1 mm at most); `loosefit quantize RUN --out RUN-int8` makes a run "
+              "that animates as this model does")
 
 
 def cmd_quantize(args):

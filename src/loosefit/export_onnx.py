@@ -62,7 +62,7 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
             about twice the frames per second on one CPU thread; needs onnxruntime's ``MatMulNBits`` and
             ``DynamicQuantizeMatMul``. The products are those of the rounded weights (within about 0.02 mm of the
             vertices), so a run made by :func:`loosefit.quantize.quantize_run` animates as its int8 model does;
-            any other run differs from its int8 model by what rounding its weights does (0.2-0.5 mm measured,
+            any other run differs from its int8 model by what rounding its weights does (up to about 1 mm measured,
             ``benchmarks/README.md``).
 
     Returns:
@@ -210,4 +210,4 @@ def add_arguments(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("--bones", action="store_true", help="also output the bones' world transforms (GPU skinning)")
     sp.add_argument("--int8", action="store_true", help="large weight matrices in int8: about 30 %% of the file, "
                     "about 2x faster on a CPU (not for the live page); a run made by loosefit quantize animates as "
-                    "this model does, any other within about 0.5 mm")
+                    "this model does, any other within about 1 mm")

@@ -3,7 +3,8 @@
 ``export-onnx --int8`` (:mod:`loosefit.io.onnx_int8`) rounds each large weight matrix of the one-frame graph to
 int8 blocks and multiplies the rounded values exactly enough that the exported model's vertices stay within about
 0.02 mm of the same graph with those rounded weights in float32. What separates it from ``loosefit animate`` on the
-original run is the rounding of the weights itself (0.2-0.5 mm of the vertices measured, ``benchmarks/README.md``).
+original run is the rounding of the weights itself (up to about 1 mm of the vertices measured,
+``benchmarks/README.md``).
 This module puts the rounded values back into the run's parameters: the quantized run animates, evaluates and
 renders as its int8 model does in a game engine, and its own accuracy can be measured as any run's.
 

@@ -9,10 +9,10 @@ import onnxruntime as ort
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from loosefit.io.onnx_int8 import (BLOCK_SIZE, DYNAMIC_MIN_ROWS, dequantize_blocks, quantize_blocks, quantize_columns,
-                                   quantize_model)
+from loosefit.io.onnx_int8 import (BLOCK_SIZE, DYNAMIC_MIN_ROWS, block_size_for, dequantize_blocks, quantize_blocks,
+                                   quantize_columns, quantize_model)
 
-K, N, G = 70, 24, 3  # K not a multiple of the block: the last block is padded
+K, N, G = 300, 24, 3  # K not a multiple of the block: the last block is padded
 R = DYNAMIC_MIN_ROWS + 4  # rows of the many-row product
 
 
@@ -218,3 +218,8 @@ def test_the_residual_makes_the_products_those_of_the_rounded_weights():
     assert worst["residual"] <= 1e-2, worst  # a hundredth of one rounding's bound
     assert worst["single"] > 10 * worst["residual"], worst  # the control: one rounding is far coarser
     np.testing.assert_allclose(got["residual"]["y6"], constant.astype(np.float64) @ w6, rtol=1e-5, atol=1e-4)
+
+
+def test_a_short_matrix_gets_the_power_of_two_block_that_holds_it():
+    assert [block_size_for(k) for k in (5, 16, 17, 50, 64, 65, 300, 4096)] == [16, 16, 32, 64, 64, 128, 128, 128]
+    assert block_size_for(300, 32) == 32
