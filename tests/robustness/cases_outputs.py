@@ -1,5 +1,5 @@
 """Cases of the verbs that run a trained model or read mesh sequences and write results: ``animate``,
-``export-rig``, ``export-onnx``, ``evaluate``, ``render``, ``report``, ``view`` (and raw requests to its server),
+``export-rig``, ``export-onnx``, ``quantize``, ``evaluate``, ``render``, ``report``, ``view`` (and raw requests to its server),
 ``demo`` and the command line itself."""
 
 from __future__ import annotations
@@ -109,6 +109,13 @@ def animate_cases() -> list[Case]:
             absent=("{tmp}/g.onnx",)),
         bad("export-onnx/checkpoint-garbage", ["export-onnx", "{tmp}/run", "--out", "{tmp}/g.onnx"],
             run_edit(lambda r: craft.garbage(r / "checkpoints" / "last.pt")), names=("last.pt",), absent=("{tmp}/g.onnx",)),
+        # quantize
+        ok("quantize/copy", ["quantize", "{run}", "--out", "{tmp}/q"], check=wrote("{tmp}/q/model.json"), cost=2),
+        bad("quantize/out-not-empty", ["quantize", "{run}", "--out", "{tmp}/full"],
+            lambda t, s: craft.write(t / "full" / "mine.txt", "a user's file\n"), names=("full",)),
+        bad("quantize/run-missing", ["quantize", "{tmp}/none", "--out", "{tmp}/q"], names=("none",), absent=("{tmp}/q",)),
+        bad("quantize/checkpoint-garbage", ["quantize", "{tmp}/run", "--out", "{tmp}/q"],
+            run_edit(lambda r: craft.garbage(r / "checkpoints" / "last.pt")), names=("last.pt",), absent=("{tmp}/q",)),
     ]
 
 
