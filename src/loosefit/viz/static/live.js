@@ -409,12 +409,14 @@ async function stepOnce(render) {
 // screen is redrawn on animation frames with the latest result: where drawing is slow (software WebGL), the
 // garment still runs at the motion's rate and the screen shows fewer of its frames.
 
+// After a stall (a slow draw, a collection) the garment catches up at most this many frames, then drops the rest.
+const CATCH_UP_FRAMES = 4;
 let playing = true, speed = 1, last = null, acc = 0, busy = false, timer = null;
 async function advance() {
   timer = null;
   if (!playing) return;
   const now = performance.now();
-  if (last !== null) acc = Math.min(acc + (now - last) / 1000 * M.fps * speed, 2);  // a slow page drops time
+  if (last !== null) acc = Math.min(acc + (now - last) / 1000 * M.fps * speed, CATCH_UP_FRAMES);  // a stall drops time
   last = now;
   busy = true;
   try {
