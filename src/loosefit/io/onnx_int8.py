@@ -20,11 +20,11 @@ Rounding the inputs, not the weights, is what moves a model's vertices most (mea
 skirt: 2.7 mm from the inputs, 0.5 mm from the weights). So by default each product is made twice, by the same
 kernel and weights: once on the input and once on its *residual*, the input minus its int8 rounding (computed in
 the graph as the kernel rounds: per block, or by ``DynamicQuantizeLinear`` per tensor), and the two added. The
-residual is at most half a rounding step, and the kernel's own rounding of it 127 (255) times finer still, so the
-sum is the product of the dequantized weights and the input as it was, to about 1/32,000 of a block's scale: the
-vertices within 0.02 mm of the float model with the rounded weights (:mod:`loosefit.quantize` makes a run of those
-weights), for 1.3-1.5x the time of a single rounding (still about twice the float model's speed at the papers'
-sizes). A product whose input depends on no graph input (JointNet's garment prior) stays float: onnxruntime folds
+residual is at most half a rounding step ``s / 2``, and the kernel's own rounding of it 254 times finer, so each input
+of the sum is within ``s / 508`` of its exact value (one rounding: ``s / 2``): the product of the dequantized weights
+and the input as it was, the vertices within 0.02 mm of the float model with the rounded weights
+(:mod:`loosefit.quantize` makes a run of those weights), for about 1.25x the time of a single rounding (still more
+than twice the float model's speed at the papers' sizes). A product whose input depends on no graph input (JointNet's garment prior) stays float: onnxruntime folds
 it when it loads the model.
 
 The tests bound both kernels against the dequantized weights and the input's rounding, with and without the
@@ -101,9 +101,9 @@ def quantize_model(model, block_size: int = BLOCK_SIZE, min_elements: int = MIN_
 
     Args:
         residual: the integer kernels also multiply what rounding their input to int8 left over
-            (:func:`_residual_rows`): the product is then that of the dequantized weights within about
-            1/16,000 of the input's block scale instead of 1/254 (a model's vertices 0.01-0.02 mm from the
-            dequantized model's instead of 1.6-2.7 mm), at the cost of twice the integer arithmetic.
+            (:func:`_residual_rows`): each input of the product is then within 1/508 of its rounding step of its
+            exact value instead of 1/2 (a model's vertices 0.001-0.02 mm from the dequantized model's instead of
+            1.6-2.7 mm), at the cost of twice the integer arithmetic.
         rounded: when given, filled with ``{initializer name: its dequantized values, in its own layout}`` for
             every rewritten weight (:mod:`loosefit.quantize` puts them back into the run's parameters).
 
@@ -244,8 +244,8 @@ def _residual_rows(a: str, K: int, block_size: int, node, constant) -> str:
     """The nodes of ``a - round8(a)`` for ``a (..., K)``: what ``MatMulNBits`` (``accuracy_level=4``) leaves of
     ``a`` when it rounds each block of ``block_size`` along ``K`` to int8 with scale ``s`` = the block's largest
     magnitude / 127, ``a`` times ``1 / s`` rounded half to even (as its x86 kernels do). Multiplied by the same
-    kernel, whose own rounding of it is 127 times finer, and added, it makes the product that of the
-    dequantized weights and the input as it was, to about ``s / 32,000``."""
+    kernel, whose own rounding of it (at most ``s / 2`` in magnitude) is 254 times finer, and added, it makes the
+    product that of the dequantized weights and the input as it was, each input within ``s / 508``."""
     blocks = -(-K // block_size)
     flat = node("Reshape", [a, constant([-1, K])])
     if blocks * block_size != K:
