@@ -160,7 +160,7 @@ def test_onnxruntime_multiplies_the_stored_weights(accuracy_level):
 def test_the_residual_makes_the_products_those_of_the_rounded_weights():
     """The default (``residual=True``): every integer product also multiplies what rounding its input left over,
     so it is the product of the dequantized weights and the exact input to a hundredth of the one-rounding bound
-    (the theory: 1/127 of it), for several rows, a vector, a per-group batch of two rows and a many-row product;
+    (the theory: 1/254 of it), for several rows, a vector, a per-group batch of two rows and a many-row product;
     a product of constants stays float; ``rounded`` holds the dequantized weights in each initializer's layout."""
     rng = np.random.default_rng(3)
     w1, w3, w5, w6 = (rng.normal(size=s).astype(np.float32) for s in ((K, N), (G, K, N), (K, N), (K, N)))
