@@ -534,6 +534,8 @@ Object.assign(live, {
   },
   garment: () => Array.from(garmentMesh.geometry.attributes.position.array),
   body: () => Array.from(bodyMesh.geometry.attributes.position.array),
+  // the vertex normals drawn (updateNormals), of the garment or the body
+  normals: (which) => Array.from((which === 'body' ? bodyMesh : garmentMesh).geometry.attributes.normal.array),
   state: () => Array.from(state),
   // The resolution while playing: adaptRenderScale(garment fps, asked fps) as the page applies it each second;
   // setRenderScale(s) fixes it (null: adaptive again); drawingBuffer(): the canvas' drawn [width, height] and the
