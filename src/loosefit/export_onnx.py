@@ -74,20 +74,14 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
         InputError: not a run folder, a missing or corrupt ``model.json`` or checkpoint (naming the file), or a
             method without a one-frame graph.
     """
-    from loosefit.animate import load_run, read_run_meta
+    from loosefit.animate import load_run
     from loosefit.extras import require
-    from loosefit.models.step_graph import STEP_METHODS
 
     onnx = require("onnx", "loosefit export-onnx")
     out = Path(out)
     if out.suffix.lower() != ".onnx":
         raise InputError("the exported model is an .onnx file", out)
-    meta = read_run_meta(run_dir)
-    if meta["method"] in NOT_EXPORTED:
-        raise InputError(NOT_EXPORTED[meta["method"]], run_dir)
-    if meta["method"] not in STEP_METHODS:
-        raise InputError(f"{meta['method']} has no one-frame graph; export-onnx covers {', '.join(STEP_METHODS)}",
-                         run_dir)
+    check_step_method(run_dir)
     meta, model, _ = load_run(run_dir, checkpoint)
     with atomic_path(out) as tmp:  # a failed export leaves an earlier file as it was
         proto, graph = trace_step_model(model, tmp, bones)
@@ -107,6 +101,19 @@ def export_onnx(run_dir: str | Path, out: str | Path, checkpoint: str = "best", 
     return {"path": str(out), "bytes": out.stat().st_size, "method": graph.method, "vertices": V, "joints": J,
             "state_size": graph.state_size, "bones": int(graph.bone_rest_positions().shape[0]) if bones else 0,
             "weights": weights}
+
+
+def check_step_method(run_dir: str | Path) -> None:
+    """Refuse a run whose method has no one-frame graph (:data:`NOT_EXPORTED`, or none in ``STEP_METHODS``),
+    naming the run folder."""
+    from loosefit.animate import read_run_meta
+    from loosefit.models.step_graph import STEP_METHODS
+
+    method = read_run_meta(run_dir)["method"]
+    if method in NOT_EXPORTED:
+        raise InputError(NOT_EXPORTED[method], run_dir)
+    if method not in STEP_METHODS:
+        raise InputError(f"{method} has no one-frame graph; export-onnx covers {', '.join(STEP_METHODS)}", run_dir)
 
 
 def trace_step_model(model, path: Path, bones: bool = False):

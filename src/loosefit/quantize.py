@@ -49,21 +49,17 @@ def quantize_run(run_dir: str | Path, out: str | Path, checkpoint: str = "best")
     """
     import torch
 
-    from loosefit.animate import load_run, read_run_meta
+    from loosefit.animate import load_run
     from loosefit.config import save_config
-    from loosefit.export_onnx import NOT_EXPORTED, trace_step_model
+    from loosefit.export_onnx import check_step_method, trace_step_model
     from loosefit.io.onnx_int8 import quantize_model
-    from loosefit.models.step_graph import STEP_METHODS
     from loosefit.train.run import RunDir
     from loosefit.training import METHOD_CONFIG, MODEL_META, _save_weights
 
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise InputError("the quantized run's folder exists and is not empty: name a new one", out)
-    meta = read_run_meta(run_dir)
-    if meta["method"] in NOT_EXPORTED or meta["method"] not in STEP_METHODS:
-        raise InputError(f"{meta['method']} has no one-frame graph to quantize; quantize covers "
-                         f"{', '.join(STEP_METHODS)}", run_dir)
+    check_step_method(run_dir)
     meta, model, cfg = load_run(run_dir, checkpoint)
     model = model.float().eval()
     with tempfile.TemporaryDirectory() as tmp:
