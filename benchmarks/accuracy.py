@@ -434,10 +434,12 @@ def ensemble_benchmark(data: Path, runs: Path, overrides: list[str], bones: int)
         print(f"== ensemble: train the VirtualBones of parameters {params_key(params)} -> {run}", flush=True)
         training[params_key(params)] = train_run("virtualbones", data, garment, run, overrides, sim_params=params)
         models.append(Animator(run, checkpoint="last").model)
-        train_data.append(GarmentSequences(store, garment, "train", sim_params=params, bones=False, body=False))
+        train_data.append(GarmentSequences(store, garment, "train", sim_params=params, bones=False, body=False,
+                                           frame=models[-1].frame))
     config = load_config(run_config_class("virtualbones"), CONFIGS / "virtualbones.yaml", overrides).ensemble
     ensemble, report = fit_ensemble(models, train_sets, train_data, config)
-    held_data = [GarmentSequences(store, garment, "test", sim_params=p, bones=False, body=False) for p in held_sets]
+    held_data = [GarmentSequences(store, garment, "test", sim_params=p, bones=False, body=False, frame=models[0].frame)
+                 for p in held_sets]
     result = evaluate_parameter_sets(ensemble, held_sets, held_data)
     fixed = f" (bandwidth x{ensemble.bandwidth:g}; the fixed kernel {result['rbf_sigma1_rmse_mm']:.2f} mm)" \
         if "rbf_sigma1_rmse_mm" in result else ""

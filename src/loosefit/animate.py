@@ -20,7 +20,7 @@ from loosefit.config import load_config
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
 from loosefit.models.motion_features import FeatureStream, motion_features
-from loosefit.motion.heading import heading_frames, to_world
+from loosefit.motion.heading import garment_frames, motion_frames, to_world
 from loosefit.models.registry import model_class, run_config_class
 from loosefit.motion.motion import Motion
 from loosefit.motion_range import range_warnings
@@ -133,6 +133,7 @@ class Animator:
         self.threads = threads
         # the motion history among the root features, where the model reads one
         self.history = getattr(model, "history", None)
+        self.frame = getattr(model, "frame", "heading")  # the frame the model's garment is in
 
     @property
     def method(self) -> str:
@@ -189,7 +190,7 @@ class Animator:
         canonical = torch.cat(chunks, 1).cpu().numpy()
         out = []
         for m, c in zip(motions, canonical):
-            rot, origin = heading_frames(m)
+            rot, origin = motion_frames(m, self.frame)
             out.append(to_world(c[: m.num_frames], rot, origin))
         return out
 
@@ -211,6 +212,9 @@ class AnimationStream:
         if rotations.shape != (self.animator.num_joints, 3):
             raise InputError(f"a frame needs rotations of shape ({self.animator.num_joints}, 3), got {rotations.shape}")
         root, joints, (rot, origin) = self.features.step(rotations, translation)
+        if self.animator.frame != "heading":
+            rot, origin = (f[0] for f in garment_frames(rotations[None, 0], np.reshape(translation, (1, 3)),
+                                                          self.animator.frame))
         with torch_threads(self.animator.threads), torch.no_grad():
             device = self.animator.device
             out = self.animator.model(torch.from_numpy(root)[None, None].to(device),

@@ -21,7 +21,7 @@ from loosefit.animate import Animator
 from loosefit.errors import InputError
 from loosefit.io.skinned_mesh import SkinnedMesh, dense_to_sparse
 from loosefit.models.motion_features import motion_features
-from loosefit.motion.heading import heading_frames
+from loosefit.motion.heading import motion_frames
 from loosefit.motion.motion import Motion
 from loosefit.threads import torch_threads
 
@@ -43,8 +43,9 @@ def predict_bones(animator: Animator, motion: Motion) -> tuple[np.ndarray, np.nd
     """World bone transforms of a virtual-bone run along ``motion``: rotations ``(T, B, 3, 3)`` and
     translations ``(T, B, 3)`` float64 mapping rest-mesh points ``p`` to ``R p + T`` in the world.
 
-    The network predicts them in the heading frame ``[Rh | o]`` of each frame
-    (:mod:`loosefit.models.motion_features`); in the world they are ``[Rh R | Rh T + o]``. Frames run
+    The network predicts them in the frame ``[Rh | o]`` of each frame (heading or pelvis, the model's
+    :attr:`~loosefit.models.base.GarmentModel.frame`; :mod:`loosefit.motion.heading`); in the world they are
+    ``[Rh R | Rh T + o]``. Frames run
     :attr:`Animator.chunk_frames` at a time with the recurrent state carried, as :meth:`Animator.animate_batch`.
     """
     model = animator.model
@@ -61,7 +62,7 @@ def predict_bones(animator: Animator, motion: Motion) -> tuple[np.ndarray, np.nd
             translations.append(out["bones"][1][0].double().numpy())
             state = out["state"]
     R, T = np.concatenate(rotations), np.concatenate(translations)
-    Rh, origin = heading_frames(motion)
+    Rh, origin = motion_frames(motion, animator.frame)
     return Rh[:, None] @ R, (Rh[:, None] @ T[..., None])[..., 0] + origin[:, None]
 
 

@@ -196,13 +196,14 @@ def _train_model(method, cls, cfg, data, garment, run: RunDir, resume: bool, val
     if train_fraction is not None:
         validation = train_on_fraction(store, validation, train_fraction)
     history = _motion_history(cfg.model)  # the model reads as many root features as its data has
+    frame = getattr(cfg.model, "frame", "heading")  # where the model predicts the garment
     train_data = GarmentSequences(store, garment, "train", sim_params=sim_params, bones=cls.needs_rig,
-                                  names=validation.train, history=history,
+                                  names=validation.train, history=history, frame=frame,
                                   mirror=getattr(getattr(cfg, "data", None), "mirror", False))
     val_data = None
     if validation.val:
         val_data = GarmentSequences(store, garment, None, sim_params=sim_params, bones=False, body=False,
-                                    names=validation.val, history=history)
+                                    names=validation.val, history=history, frame=frame)
     model = cls.from_data(train_data, cfg.model)
     meta = {"method": method, "garment": garment, "data": str(Path(data).resolve()), "sizes": model.sizes(),
             "sim_params": sim_params,  # train_sequences: the stored ones (their mirrors, if any, train too)

@@ -1,8 +1,8 @@
 """The one-frame graph of the ONNX export, in torch: stepping it with its flat state gives the vertices of
 ``Animator.animate`` for configurations the trained test runs do not reach (no motion history, a vertical
 history, JointNet's summed Fourier prior and a one-layer bone MLP, VirtualBones' factorised global layer and a
-hidden head, the low-frequency module's own outputs fed back, joints not read), with random weights and rig
-buffers on a small grid garment."""
+hidden head, the low-frequency module's own outputs fed back, joints not read, the pelvis frame), with random
+weights and rig buffers on a small grid garment."""
 
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def build(cls, config, body, history: MotionHistory | None):
              "history_frames": list(history.frames) if history else [],
              "history_vertical": bool(history and history.vertical), "num_bones": BONES,
              "max_degree": int(neighbour_table(faces, V).shape[1]), "joint_names": list(body.joint_names),
-             "parents": [int(p) for p in body.parents]}
+             "parents": [int(p) for p in body.parents], **({"frame": config.frame} if config.frame != "heading" else {})}
     torch.manual_seed(0)
     model = cls(sizes, config)
     g = torch.Generator().manual_seed(1)
@@ -84,6 +84,13 @@ CASES = {
                                                                edge_channels=(4,), feedback_frames=2,
                                                                exclude_joints=("Arm",)),
                               MotionHistory((6.0, 15.0))),
+    "virtualbones-pelvis": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
+                                                             edge_channels=(4,), frame="pelvis"),
+                            MotionHistory((6.0,))),
+    "jointnet-pelvis": (JointNet, JointNetConfig(gru_hidden=12, features=8, bone_mlp=[16], psd_mlp=[8], psd_shapes=3,
+                                                 frame="pelvis"), None),
+    "virtualbones-raised": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
+                                                             edge_channels=(4,), frame="raised"), None),
 }
 
 
@@ -106,6 +113,35 @@ def test_stepping_the_graph_is_animate(case, body):
     assert ("history" in names) == (history is not None)
     assert np.abs(np.stack(frames) - expected).max() <= 1e-5
     assert np.ptp(expected, axis=0).max() > 0.01  # the garment moves: the comparison is not of constants
+
+
+@pytest.mark.parametrize("case", ["virtualbones-pelvis", "jointnet-pelvis", "virtualbones-raised"])
+def test_a_model_in_a_root_frame_carries_its_garment_with_the_root_joint(case, body):
+    """A model trained in the raised or the pelvis frame: ``animate`` and the stream put its canonical output ``c``
+    at ``R c + p_root``, ``p_root`` the root joint's position and ``R`` the root's heading (raised) or its whole
+    rotation (pelvis), not in the heading frame on the floor (checked, so that the comparison can fail)."""
+    from loosefit.geometry.rotations import axis_angle_to_matrix
+    from loosefit.models.motion_features import motion_features
+    from loosefit.motion.heading import heading_angles, motion_frames, rot_z, to_world
+
+    cls, config, history = CASES[case]
+    model = build(cls, config, body, history)
+    assert model.frame == config.frame
+    motion = generate("walk", 1.0, 3, body)
+    feats = motion_features(motion, model.history)
+    with torch.no_grad():
+        canonical = model(torch.from_numpy(feats["root"])[None], torch.from_numpy(feats["joints"])[None])["verts"][0]
+    R = axis_angle_to_matrix(torch.from_numpy(motion.rotations[:, 0]).double()).numpy()
+    if config.frame == "raised":
+        R = rot_z(heading_angles(R))
+    expected = np.einsum("tij,tvj->tvi", R, canonical.double().numpy()) + motion.translation[:, None]
+    animator = Animator.from_model(model)
+    assert np.abs(animator.animate(motion) - expected).max() <= 1e-5
+    stream = animator.stream()
+    streamed = np.stack([stream.step(motion.rotations[t], motion.translation[t]) for t in range(motion.num_frames)])
+    assert np.abs(streamed - expected).max() <= 1e-5
+    heading = to_world(canonical.numpy(), *motion_frames(motion, "heading"))
+    assert np.abs(heading - expected).max() > 0.5  # the pelvis sits ~0.9 m above the heading frame's origin
 
 
 def test_methods_without_a_frame_graph_are_refused(body):

@@ -1,8 +1,9 @@
 """What every per-garment model shares: sizes read from the data, feature normalisation, the trainer
 protocol (:mod:`loosefit.train.protocol`) and the canonical-frame prediction interface used by animation.
 
-A model predicts *canonical* garment vertices (heading frame, :mod:`loosefit.models.motion_features`)
-from normalised motion features, frame by frame with a recurrent state::
+A model predicts *canonical* garment vertices (in the heading frame, or the frame the model was trained
+in, :attr:`GarmentModel.frame`: :mod:`loosefit.motion.heading`) from normalised
+motion features, frame by frame with a recurrent state::
 
     out = model(root (B, T, R), joints (B, T, J-1, 6), state=None)
     out["verts"]  (B, T, V, 3) canonical vertices, metres;  out["state"]  the recurrent state after frame T-1
@@ -25,6 +26,7 @@ from torch import nn
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, ROOT_FEATURES, MotionHistory
+from loosefit.motion.heading import FRAMES
 from loosefit.rig.virtual_bones import skin_bones, sparse_weights
 from loosefit.train.losses import frame_mask, masked_errors_mm
 
@@ -49,7 +51,8 @@ class GarmentModel(nn.Module):
     ``sizes`` (JSON-able dict) holds at least ``num_verts`` (V), ``num_joints`` (J, root included) and
     ``num_faces`` (F), ``root_features`` (R; runs made before it existed read 11), and the motion history among
     them: ``history_frames`` (its time constants, frames; [] for none; runs made before it existed read none for
-    11 root features and :data:`HISTORY_FRAMES` for 20) and ``history_vertical`` (runs before it: false); methods
+    11 root features and :data:`HISTORY_FRAMES` for 20), ``history_vertical`` (runs before it: false) and ``frame``
+    (where the garment is predicted, :data:`~loosefit.motion.heading.FRAMES`; absent: heading); methods
     add theirs (``num_bones``...). Never hard-code them.
     """
 
@@ -66,6 +69,10 @@ class GarmentModel(nn.Module):
         self.root_features = int(sizes.get("root_features", ROOT_FEATURES))
         #: the motion history among the root features (None: none)
         self.history = _history_of(sizes, self.root_features, self.method)
+        #: the frame the canonical garment is in (:func:`loosefit.motion.heading.motion_frames`)
+        self.frame = str(sizes.get("frame", "heading"))
+        if self.frame not in FRAMES:
+            raise InputError(f"{self.method}: unknown frame {self.frame!r} (sizes {sizes}; one of {FRAMES})")
         self.register_buffer("root_mean", torch.zeros(self.root_features))
         self.register_buffer("root_std", torch.ones(self.root_features))
         self.register_buffer("joints_mean", torch.zeros(J - 1, 6))
@@ -82,7 +89,8 @@ class GarmentModel(nn.Module):
         return {"num_verts": int(first.verts.shape[1]), "num_joints": int(first.joints.shape[1] + 1),
                 "num_faces": int(len(data.faces)), "root_features": int(first.root.shape[1]),
                 "history_frames": list(data.history.frames) if data.history else [],
-                "history_vertical": bool(data.history and data.history.vertical)}
+                "history_vertical": bool(data.history and data.history.vertical),
+                **({"frame": data.frame} if data.frame != "heading" else {})}  # heading runs keep their sizes
 
     @classmethod
     def from_data(cls, data: GarmentSequences, config) -> "GarmentModel":

@@ -1,8 +1,9 @@
 """Training data of one garment for the per-garment methods (VirtualBones, JointNet, body-LBS).
 
-Everything is expressed in the heading frame of each frame (:mod:`loosefit.models.motion_features`):
-the networks see heading-invariant motion features and predict canonical garment vertices; the
-canonical result is put back in the world with the frame's heading rotation and origin.
+Everything is expressed in the heading frame of each frame (:mod:`loosefit.models.motion_features`), or in
+the frame the model asks for (:mod:`loosefit.motion.heading`): the networks see
+heading-invariant motion features and predict canonical garment vertices; the canonical result is put back
+in the world with the frame's rotation and origin.
 
 A :class:`GarmentSequences` holds, in memory and per sequence of one garment and split: the motion
 features, the heading frames, the canonical simulated vertices and their low-frequency part, the
@@ -28,7 +29,7 @@ from loosefit.errors import InputError
 from loosefit.geometry.normals import vertex_normals
 from loosefit.geometry.smoothing import frequency_split
 from loosefit.models.motion_features import MotionHistory, motion_features
-from loosefit.motion.heading import heading_frames, to_canonical
+from loosefit.motion.heading import motion_frames, to_canonical
 from loosefit.motion.mirror import joint_partners, mirror_motion
 from loosefit.motion.motion import Motion
 from loosefit.rig.prepared import load_bone_transforms, prepared_split
@@ -48,7 +49,7 @@ class SequenceData:
         name, motion_name, body_name: store names. sim_params: the simulation parameters (JSON).
         motion: the :class:`Motion` (world). root ``(T, R)`` (R = 11, or more with a
         :class:`MotionHistory`; :func:`motion_features`), joints ``(T, J-1, 6)``: motion features.
-        frame_rot ``(T, 3, 3)`` float64, frame_origin ``(T, 3)`` float64: heading frames.
+        frame_rot ``(T, 3, 3)`` float64, frame_origin ``(T, 3)`` float64: the frames (:mod:`loosefit.motion.heading`).
         verts ``(T, V, 3)``: canonical simulated garment. lf ``(T, V, 3)``: its low-frequency part.
         bone_rot ``(T, B, 3, 3)``, bone_trans ``(T, B, 3)``: canonical virtual-bone transforms, or None.
         body ``(T, Vb, 3)``, body_normals ``(T, Vb, 3)``: canonical collision proxy, or None.
@@ -98,12 +99,13 @@ class GarmentSequences:
         mirror: also hold the left-right mirror of every sequence (:mod:`loosefit.data.mirror`: the motion mirrored,
             the simulated garment read back through the garment's mirror correspondence), named
             ``<sequence>=mirrored``; with ``bones``, the store must be prepared with ``mirror``.
+        frame: the frame the garment is expressed in (:data:`~loosefit.motion.heading.FRAMES`).
     """
 
     def __init__(self, store, garment: str, split: str | None = "train", sim_params: dict | None = None,
                  bones: bool = True, body: bool = True, names: list[str] | None = None, smoothing: str | None = None,
-                 history: MotionHistory | None = MotionHistory(), mirror: bool = False):
-        self.history = history
+                 history: MotionHistory | None = MotionHistory(), mirror: bool = False, frame: str = "heading"):
+        self.history, self.frame = history, frame
         self.store = store if isinstance(store, DatasetStore) else DatasetStore.open(store, mode="r")
         if garment not in self.store.garment_names():
             raise InputError(f"no garment {garment!r} in the store (has {self.store.garment_names()})", self.store.path)
@@ -135,7 +137,7 @@ class GarmentSequences:
         if mirrored:
             motion = mirror_motion(motion, joint_partners(proxy.joint_names, proxy.rest_joints()))
             world, name = self._mirror(world), name + MIRRORED
-        rot, origin = heading_frames(motion)
+        rot, origin = motion_frames(motion, self.frame)
         verts = to_canonical(world, rot, origin)
         lf = frequency_split(verts, self.faces, self.smoothing, fixed=self.fixed)[0].astype(np.float32)
         feats = motion_features(motion, self.history)

@@ -64,6 +64,7 @@ from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
+from loosefit.motion.heading import check_frame
 from loosefit.models.layers.gru_bptt import by_hand, gru_layers
 from loosefit.models.layers.mlp import MLP
 from loosefit.rig.prepared import load_rig
@@ -138,6 +139,9 @@ class JointNetConfig:
             demo's held-out spin (``benchmarks/experiments/LOG.md``, "Motion history").
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
+        frame: where the network predicts the garment (ours; :mod:`loosefit.motion.heading`): ``"heading"`` (the
+            heading frame on the floor, as the paper's canonical space), ``"raised"`` (the heading frame at the root
+            joint: crouching carries the garment) or ``"pelvis"`` (the root joint's whole frame: leaning does too).
     """
 
     joints: Optional[list[str]] = None
@@ -160,9 +164,11 @@ class JointNetConfig:
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
     history_vertical: bool = False
+    frame: str = "heading"
 
     def __post_init__(self):
         check_history(self.history_frames)
+        check_frame(self.frame)
         sizes = [self.gru_hidden, self.features, self.psd_shapes, *self.bone_mlp, *self.psd_mlp]
         if min(sizes) < 1:
             raise InputError(f"JointNet layer sizes must be >= 1, got {sizes}")

@@ -2,9 +2,9 @@
 
 :class:`StepGraph` is the frame-by-frame path of :class:`loosefit.animate.AnimationStream` (the motion
 features of :class:`~loosefit.models.motion_features.FeatureStream`, the model's forward pass on one frame, the
-heading frame put back) written so that every quantity a frame needs from the frames before it lives in one
-flat float32 ``state (S,)`` vector, in and out. Traced once, it is an ONNX model a game engine or a web page
-steps without Python (:mod:`loosefit.export_onnx`).
+model's frame put back: :mod:`loosefit.motion.heading`) written so that every quantity a frame
+needs from the frames before it lives in one flat float32 ``state (S,)`` vector, in and out. Traced once, it is an
+ONNX model a game engine or a web page steps without Python (:mod:`loosefit.export_onnx`).
 
 Per frame, all float32::
 
@@ -178,7 +178,10 @@ class StepGraph(nn.Module):
         joints = _sixd(R[1:])  # (J-1, 6)
         network = getattr(self, "_" + self.method.replace("-", "_"))
         verts, bone_R, bone_T, recurrent = network(root, joints, state, started)
-        origin = torch.cat([root_position[:2], zero[None]])
+        frame = getattr(self.model, "frame", "heading")  # the frame the garment is in (motion.heading.FRAMES)
+        origin = torch.cat([root_position[:2], zero[None]]) if frame == "heading" else root_position
+        if frame == "pelvis":
+            Rh = root_rot
         world = verts @ Rh.T + origin
         next_state = torch.cat(next_parts + [r.reshape(-1) for r in recurrent])
         if not self.bones:

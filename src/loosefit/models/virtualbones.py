@@ -67,6 +67,7 @@ from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
+from loosefit.motion.heading import check_frame
 from loosefit.models.ensemble import EnsembleConfig
 from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
 from loosefit.models.layers.gru import GRUHead
@@ -150,6 +151,9 @@ class VirtualBonesConfig:
             the hips and legs, and arm poses it never met are then no input it can misread. A joint within
             :data:`GARMENT_REACH_M` of the rest garment is read all the same (sleeves, collars). Default
             :data:`EXCLUDED_JOINTS`; empty: every joint, as the paper.
+        frame: where the network predicts the garment (ours; :mod:`loosefit.motion.heading`): ``"heading"`` (the
+            heading frame on the floor, as the paper's canonical space), ``"raised"`` (the heading frame at the root
+            joint: crouching carries the garment) or ``"pelvis"`` (the root joint's whole frame: leaning does too).
     """
 
     lf_hidden: int = 600
@@ -170,9 +174,11 @@ class VirtualBonesConfig:
     feedback_frames: int = 0
     feedback_noise: float = 0.0
     exclude_joints: tuple[str, ...] = EXCLUDED_JOINTS
+    frame: str = "heading"
 
     def __post_init__(self):
         check_history(self.history_frames)
+        check_frame(self.frame)
         sizes = (self.lf_hidden, self.hf_hidden, self.global_channels, *self.edge_channels, *self.head_hidden)
         if min(sizes) < 1 or not self.edge_channels or self.global_rank < 0:
             raise InputError(f"layer sizes must be >= 1 (global_rank >= 0) and edge_channels non-empty, got {self}")
