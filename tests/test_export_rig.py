@@ -16,7 +16,7 @@ from loosefit.data import DatasetStore
 from loosefit.errors import InputError
 from loosefit.export_rig import body_rig, export_rig, garment_rig
 from loosefit.models.motion_features import motion_features
-from loosefit.motion.heading import heading_frames, to_world
+from loosefit.motion.heading import motion_frames, to_world
 from loosefit.motion import Motion
 from loosefit.training import train_model
 from tests.io.conftest import blender_skinned_frames
@@ -52,7 +52,7 @@ def _jointnet_low_frequency(run, motion):
     feats = motion_features(motion, model.history)
     with torch.no_grad():
         out = model(torch.from_numpy(feats["root"])[None], torch.from_numpy(feats["joints"])[None], psd=False)
-    return to_world(out["verts"][0].numpy(), *heading_frames(motion)).astype(np.float64)
+    return to_world(out["verts"][0].numpy(), *motion_frames(motion, model.frame)).astype(np.float64)
 
 
 def test_blender_plays_the_virtualbones_prediction(runs, motion, body, tmp_path):

@@ -140,8 +140,8 @@ class JointNetConfig:
         history_frames: the averages' time constants, frames (6, 15, 30: 0.2, 0.5 and 1 s at 30 fps).
         history_vertical: average the vertical root displacement too (rising and falling, as in a jump).
         frame: where the network predicts the garment (ours; :mod:`loosefit.motion.heading`): ``"heading"`` (the
-            heading frame on the floor, as the paper's canonical space), ``"raised"`` (the heading frame at the root
-            joint: crouching carries the garment) or ``"pelvis"`` (the root joint's whole frame: leaning does too).
+            heading frame on the floor, the paper's root-relative input read as a canonical space), ``"raised"`` (the
+            default, as VirtualBones': the heading frame at the root joint) or ``"pelvis"`` (the root's whole frame).
     """
 
     joints: Optional[list[str]] = None
@@ -164,7 +164,7 @@ class JointNetConfig:
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
     history_vertical: bool = False
-    frame: str = "heading"
+    frame: str = "raised"
 
     def __post_init__(self):
         check_history(self.history_frames)
