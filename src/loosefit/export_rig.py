@@ -43,10 +43,10 @@ def predict_bones(animator: Animator, motion: Motion) -> tuple[np.ndarray, np.nd
     """World bone transforms of a virtual-bone run along ``motion``: rotations ``(T, B, 3, 3)`` and
     translations ``(T, B, 3)`` float64 mapping rest-mesh points ``p`` to ``R p + T`` in the world.
 
-    The network predicts them in the frame ``[Rh | o]`` of each frame (heading or pelvis, the model's
-    :attr:`~loosefit.models.base.GarmentModel.frame`; :mod:`loosefit.motion.heading`); in the world they are
-    ``[Rh R | Rh T + o]``. Frames run
-    :attr:`Animator.chunk_frames` at a time with the recurrent state carried, as :meth:`Animator.animate_batch`.
+    The network predicts them in the frame ``[Rh | o]`` of each frame (the model's
+    :attr:`~loosefit.models.base.GarmentModel.frame`: :mod:`loosefit.motion.heading`); in the world they are
+    ``[Rh R | Rh T + o]``. Frames run :attr:`Animator.chunk_frames` at a time with the recurrent state carried, as
+    :meth:`Animator.animate_batch`.
     """
     model = animator.model
     if not hasattr(model, "skin_weights") or not hasattr(model, "bone_rest"):
