@@ -121,3 +121,9 @@ def test_resume_refuses_a_run_of_other_data(tiny_store, tmp_path):
         train_model("jointnet", again, "skirt+average", run, overrides=SMALL_JOINTNET, resume=True)
     assert str(run) in str(e.value)
     assert (run / "checkpoints" / "last.pt").read_bytes() == before
+    # the same data in another frame is another model: refused too, naming the setting (the run records its frame)
+    assert json.loads((run / MODEL_META).read_text())["sizes"]["frame"] == "raised"  # the default
+    with pytest.raises(InputError, match="model.frame: 'raised' in the run, 'heading' now"):
+        train_model("jointnet", tiny_store, "skirt+average", run, resume=True,
+                    overrides=[*SMALL_JOINTNET, "model.frame=heading"])
+    assert (run / "checkpoints" / "last.pt").read_bytes() == before
