@@ -211,10 +211,9 @@ class AnimationStream:
         rotations = np.asarray(rotations, np.float32)
         if rotations.shape != (self.animator.num_joints, 3):
             raise InputError(f"a frame needs rotations of shape ({self.animator.num_joints}, 3), got {rotations.shape}")
-        root, joints, (rot, origin) = self.features.step(rotations, translation)
-        if self.animator.frame != "heading":
-            rot, origin = (f[0] for f in garment_frames(rotations[None, 0], np.reshape(translation, (1, 3)),
-                                                          self.animator.frame))
+        root, joints, _ = self.features.step(rotations, translation)
+        rot, origin = (f[0] for f in garment_frames(rotations[None, 0], np.reshape(translation, (1, 3)),
+                                                      self.animator.frame))
         with torch_threads(self.animator.threads), torch.no_grad():
             device = self.animator.device
             out = self.animator.model(torch.from_numpy(root)[None, None].to(device),

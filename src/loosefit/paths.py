@@ -1,10 +1,11 @@
-"""Project-controlled directories (caches), atomic file writes and checks that an output can be written."""
+"""Project-controlled directories (caches), atomic file and folder writes and checks that an output can be written."""
 
 from __future__ import annotations
 
 import contextlib
 import os
 import re
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Iterator
@@ -212,3 +213,29 @@ def guard_output(path: str | Path, force: bool | None = False, names: tuple[str,
             advice = "choose another output" + (", or give --force to overwrite it" if force is not None else "")
             link = "" if seen == target else f" (a link to {seen})"
             raise InputError(f"this is {what}{link}; an output here would write over it: {advice}", target)
+
+
+@contextlib.contextmanager
+def atomic_folder(target: str | Path) -> Iterator[Path]:
+    """Yield an empty temporary folder beside ``target``; on success it replaces ``target``.
+
+    On an exception the temporary folder is removed and ``target`` is left as it was.
+    """
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    old = tmp.with_name(tmp.name + ".old")
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes folders 0700: give them the usual permissions
+        if target.exists():
+            os.replace(target, old)  # a folder cannot be renamed over a non-empty one: swap in two steps
+        os.replace(tmp, target)
+    except BaseException:
+        if old.exists() and not target.exists():
+            os.replace(old, target)
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    shutil.rmtree(old, ignore_errors=True)

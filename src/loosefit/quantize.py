@@ -18,13 +18,13 @@ name, and the result is checked: the quantized run exported again rounds to the 
 from __future__ import annotations
 
 import json
-import shutil
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from loosefit.errors import InputError
+from loosefit.paths import atomic_folder
 
 #: How far (relative to a matrix's largest weight) the quantized run's weights may sit from its own rounding:
 #: recomputing a block's scale from its rounded values moves it by a float32 unit at most.
@@ -83,20 +83,12 @@ def quantize_run(run_dir: str | Path, out: str | Path, checkpoint: str = "best")
             raise InputError(f"the graph's weight {name} does not stay on its int8 grid once written back (a "
                              f"parameter used by two products rounded differently)", run_dir)
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    partial = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))  # renamed when whole: never half a run
-    try:
+    with atomic_folder(out) as partial:  # renamed when whole: never half a run
         run = RunDir(partial)
         meta = {**meta, "weights": {"int8_grid": True, "quantized_from": str(run_dir), "checkpoint": checkpoint}}
         (run.path / MODEL_META).write_text(json.dumps(meta, indent=1))
         save_config(run.path / METHOD_CONFIG, cfg)
         _save_weights(model, run, ["fixed"])
-        if out.is_dir():
-            out.rmdir()  # empty (checked above)
-        partial.rename(out)
-    finally:
-        if partial.exists():
-            shutil.rmtree(partial)
     return {"path": str(out), "method": meta["method"], "matrices": len(rounded), "parameters": sorted(changed),
             "weights_rounded": int(sum(v.size for v in rounded.values())), "largest_change": largest}
 

@@ -13,19 +13,15 @@ and renamed; an existing OBJ-sequence folder at the target is replaced, any othe
 
 from __future__ import annotations
 
-import contextlib
-import os
 import re
-import shutil
-import tempfile
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
 from loosefit.errors import InputError
 from loosefit.io.mesh_sequence import MeshSequence
 from loosefit.io.obj import read_obj, write_obj
+from loosefit.paths import atomic_folder
 
 _FILE = re.compile(r"(frame|body)_(\d+)\.obj")
 
@@ -40,7 +36,7 @@ def write_obj_sequence(folder: str | Path, seq: MeshSequence) -> None:
         if foreign:
             raise InputError(f"folder holds files that are not OBJ-sequence frames ({foreign[0]} ...); refusing to replace it", folder)
     body_verts, body_faces = seq.extra.get("body_verts"), seq.extra.get("body_faces")
-    with _atomic_folder(folder) as tmp:
+    with atomic_folder(folder) as tmp:
         for t, verts in enumerate(seq.verts):
             header = f"loosefit mesh sequence frame {t}\nfps {float(seq.fps)!r}"  # repr: the float reads back exactly
             write_obj(tmp / f"frame_{t:05d}.obj", verts, seq.faces, header)
@@ -111,26 +107,3 @@ def read_fps(path: str | Path) -> float:
     return 30.0
 
 
-@contextlib.contextmanager
-def _atomic_folder(target: Path) -> Iterator[Path]:
-    """Yield an empty temporary folder beside ``target``; on success it replaces ``target``.
-
-    On an exception the temporary folder is removed and ``target`` is left as it was.
-    """
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    old = tmp.with_name(tmp.name + ".old")
-    try:
-        yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes folders 0700: give them the usual permissions
-        if target.exists():
-            os.replace(target, old)  # a folder cannot be renamed over a non-empty one: swap in two steps
-        os.replace(tmp, target)
-    except BaseException:
-        if old.exists() and not target.exists():
-            os.replace(old, target)
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    shutil.rmtree(old, ignore_errors=True)

@@ -24,8 +24,8 @@ residual is at most half a rounding step ``s / 2``, and the kernel's own roundin
 of the sum is within ``s / 508`` of its exact value (one rounding: ``s / 2``): the product of the dequantized weights
 and the input as it was, the vertices within 0.02 mm of the float model with the rounded weights
 (:mod:`loosefit.quantize` makes a run of those weights), for about 1.25x the time of a single rounding (still more
-than twice the float model's speed at the papers' sizes). A product whose input depends on no graph input (JointNet's garment prior) stays float: onnxruntime folds
-it when it loads the model.
+than twice the float model's speed at the papers' sizes). A product whose input depends on no graph input
+(JointNet's garment prior) stays float: onnxruntime folds it when it loads the model.
 
 The tests bound both kernels against the dequantized weights and the input's rounding, with and without the
 residual.

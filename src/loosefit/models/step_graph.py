@@ -100,6 +100,7 @@ class StepGraph(nn.Module):
         self.model = model.eval()
         self.method = model.method
         self.bones = bones
+        self.frame = getattr(model, "frame", "heading")  # the frame the garment is in (motion.heading.FRAMES)
         self.num_joints = int(model.sizes()["num_joints"])
         history = model.history
         frames = history.frames if history else ()
@@ -178,9 +179,8 @@ class StepGraph(nn.Module):
         joints = _sixd(R[1:])  # (J-1, 6)
         network = getattr(self, "_" + self.method.replace("-", "_"))
         verts, bone_R, bone_T, recurrent = network(root, joints, state, started)
-        frame = getattr(self.model, "frame", "heading")  # the frame the garment is in (motion.heading.FRAMES)
-        origin = torch.cat([root_position[:2], zero[None]]) if frame == "heading" else root_position
-        if frame == "pelvis":
+        origin = torch.cat([root_position[:2], zero[None]]) if self.frame == "heading" else root_position
+        if self.frame == "pelvis":
             Rh = root_rot
         world = verts @ Rh.T + origin
         next_state = torch.cat(next_parts + [r.reshape(-1) for r in recurrent])
