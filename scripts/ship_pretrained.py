@@ -6,7 +6,7 @@ Run: .venv/bin/python scripts/ship_pretrained.py --accuracy benchmarks/results/a
 (writes src/loosefit/pretrained/<name>-<method>/)
 
 ``--psd-modes K`` ships a JointNet run trained with a free PSD basis with that basis projected onto the garment's K
-smoothest modes (``loosefit.models.jointnet.project_psd``): its smooth part, without the lumps the free basis adds
+smoothest modes (``loosefit.models.jointnet_psd.project_psd``): its smooth part, without the lumps the free basis adds
 on new motions.
 
 Each shipped garment is checked against its run on the test sequences of the JSON's store (when the store is here):
@@ -34,7 +34,7 @@ def projected_run(run: Path, out: Path, modes: int) -> Path:
     import yaml
 
     from loosefit.animate import load_run
-    from loosefit.models.jointnet import project_psd
+    from loosefit.models.jointnet_psd import project_psd
     from loosefit.train.run import RunDir, load_checkpoint
 
     shutil.copytree(run, out, ignore=shutil.ignore_patterns("tensorboard", "last.pt"))

@@ -5,7 +5,8 @@ import pytest
 from scipy.spatial.distance import cdist
 
 from loosefit.errors import InputError
-from loosefit.metrics.errors import hausdorff_mm, hausdorff_per_frame, mean_vertex_error_mm, rmse_mm, vertex_errors
+from loosefit.metrics.errors import (error_parts_mm, hausdorff_mm, hausdorff_per_frame, mean_vertex_error_mm, rmse_mm,
+                                     vertex_errors)
 
 
 def test_rmse_is_the_root_of_the_mean_square_not_the_mean():
@@ -42,3 +43,27 @@ def test_mismatched_or_bad_inputs():
         rmse_mm(np.zeros((2, 5, 3)), np.zeros((2, 6, 3)))
     with pytest.raises(InputError, match="NaN"):
         rmse_mm(np.full((1, 2, 3), np.nan), np.zeros((1, 2, 3)))
+
+
+def test_error_parts_split_a_constant_offset_from_a_swing():
+    rng = np.random.default_rng(0)
+    T, V = 40, 30
+    gt = rng.normal(size=(T, V, 3))
+    # a constant offset of 3 cm along x: all of it is the mean shape's error
+    parts = error_parts_mm(gt + np.array([0.03, 0.0, 0.0]), gt)
+    assert parts["mean_shape"] == pytest.approx(30.0) and parts["motion"] == pytest.approx(0.0, abs=1e-9)
+    # a swing of amplitude a (cos over whole periods, mean zero): RMS a / sqrt(2), none of it in the mean shape
+    t = np.arange(T) / T
+    swing = 0.04 * np.cos(2 * np.pi * 2 * t)[:, None, None] * np.array([0.0, 1.0, 0.0])
+    parts = error_parts_mm(gt + swing, gt)
+    assert parts["mean_shape"] == pytest.approx(0.0, abs=1e-9)
+    assert parts["motion"] == pytest.approx(40.0 / np.sqrt(2))
+    # any residual: the two parts are orthogonal, and the total is rmse_mm
+    pred = gt + rng.normal(scale=0.02, size=gt.shape) + rng.normal(scale=0.05, size=(V, 3))
+    parts = error_parts_mm(pred, gt)
+    assert parts["total"] == pytest.approx(rmse_mm(pred, gt))
+    assert parts["total"] ** 2 == pytest.approx(parts["mean_shape"] ** 2 + parts["motion"] ** 2)
+    # a prediction that holds the simulation's mean still misses exactly the simulation's own motion
+    still = np.broadcast_to(gt.mean(0), gt.shape)
+    parts = error_parts_mm(still, gt)
+    assert parts["motion"] == pytest.approx(parts["simulated_motion"]) and parts["mean_shape"] == pytest.approx(0.0, abs=1e-9)

@@ -1,4 +1,5 @@
-"""JointNet: the grouped GRU, joint neighbourhoods, association, Euler bones, PSD stages, sizes, streaming, overfitting."""
+"""JointNet: the grouped GRU, joint neighbourhoods, association, Euler and 6D bones, PSD stages, sizes, streaming,
+overfitting."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from torch.utils.data import Subset, default_collate
 
 from loosefit.config import load_config
 from loosefit.errors import InputError
-from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
+from loosefit.geometry.rotations import axis_angle_to_matrix, euler_to_matrix, matrix_to_euler, matrix_to_sixd
 from loosefit.models.dataset import GarmentSequences, WindowDataset
 from loosefit.models.jointnet import (Config, JointGRU, JointNet, JointNetConfig, nearby_association, neighbour_table,
                                      select_joints)
@@ -212,6 +213,38 @@ def test_euler_angles_and_offsets_make_the_bone_transforms(tiny_train):
     euler = matrix_to_euler(rot, "xyz")
     assert torch.allclose(euler_to_matrix(euler, "xyz"), rot, atol=1e-6)
     assert torch.allclose(model.euler_mean.double(), euler.mean(0), atol=1e-5)
+
+
+def test_sixd_bones_make_the_bone_transforms_and_do_not_wrap(tiny_train):
+    model = _model(tiny_train, dataclasses.replace(TINY, rotation="sixd"))
+    assert model.sizes()["rotation"] == "sixd" and model.bone_mlp[-1].out_features == 9
+    assert "rotation" not in _model(tiny_train).sizes()  # Euler runs keep the sizes they had
+    # the statistics: the mean and std of the rig's rotation matrices' first two columns
+    rot = torch.from_numpy(np.concatenate([s.bone_rot for s in tiny_train.sequences])).double()
+    columns = torch.cat([rot[..., :, 0], rot[..., :, 1]], -1)
+    assert torch.allclose(model.sixd_mean.double(), columns.mean(0), atol=1e-5)
+    assert torch.allclose(model.sixd_std.double(), columns.std(0, unbiased=False).clamp_min(1e-3), atol=1e-5)
+    # a constant network output: the bone turns by the rotation whose columns it gives, about its rest position
+    target = axis_angle_to_matrix(torch.tensor([0.4, -1.1, 2.9]))
+    offset = torch.tensor([0.01, -0.02, 0.03])
+    last = model.bone_mlp[-1]
+    with torch.no_grad():
+        last.weight.zero_()
+        last.bias.copy_(torch.cat([(matrix_to_sixd(target) - model.sixd_mean[1]) / model.sixd_std[1],
+                                   (offset - model.offset_mean[1]) / model.offset_std[1]]))
+    R, T = model.bone_transforms(torch.zeros(1, 1, model.bone_rest.shape[0], model.bone_mlp[0].in_features))
+    assert torch.allclose(R[0, 0, 1], target, atol=1e-5)
+    centre = model.bone_rest[1]
+    assert torch.allclose(R[0, 0, 1] @ centre + T[0, 0, 1], centre + offset, atol=1e-6)
+    # any output is a rotation (Gram-Schmidt), where Euler angles past half a turn about Z jump by 2 pi
+    R, _ = model.bone_outputs(torch.randn(7, model.bone_rest.shape[0], 9))
+    assert torch.allclose(R @ R.transpose(-1, -2), torch.eye(3).expand_as(R), atol=1e-5)
+    assert torch.allclose(torch.linalg.det(R), torch.ones(R.shape[:-2]), atol=1e-5)
+    turns = axis_angle_to_matrix(torch.tensor([[0.0, 0.0, math.pi - 0.01], [0.0, 0.0, -math.pi + 0.01]]))
+    assert (matrix_to_euler(turns, "xyz")[0] - matrix_to_euler(turns, "xyz")[1]).abs().max() > 6.0
+    assert (matrix_to_sixd(turns)[0] - matrix_to_sixd(turns)[1]).abs().max() < 0.03
+    with pytest.raises(InputError, match="rotation"):
+        dataclasses.replace(TINY, rotation="quaternion")
 
 
 #: The joints of the paper-width regression test: the legs and the lower back (the ones that swing a skirt), so that
@@ -487,7 +520,7 @@ def test_projecting_a_free_psd_keeps_its_smooth_part(tiny_train):
     """project_psd: C_j = Phi^T M D_j. A free basis already in the modes' span comes back exactly (same
     garment); a random one becomes Phi Phi^T M D (numpy), everything else unchanged."""
     from loosefit.geometry.laplacian import mass_matrix, smoothest_modes
-    from loosefit.models.jointnet import project_psd
+    from loosefit.models.jointnet_psd import project_psd
 
     model = _model(tiny_train)
     rest, faces = model.rig_rest.double().numpy(), model.faces.numpy()

@@ -41,7 +41,8 @@ def build(cls, config, body, history: MotionHistory | None):
              "history_frames": list(history.frames) if history else [],
              "history_vertical": bool(history and history.vertical), "num_bones": BONES,
              "max_degree": int(neighbour_table(faces, V).shape[1]), "joint_names": list(body.joint_names),
-             "parents": [int(p) for p in body.parents], **({"frame": config.frame} if config.frame != "heading" else {})}
+             "parents": [int(p) for p in body.parents], **({"frame": config.frame} if config.frame != "heading" else {}),
+             **({"rotation": config.rotation} if getattr(config, "rotation", "euler") != "euler" else {})}
     torch.manual_seed(0)
     model = cls(sizes, config)
     g = torch.Generator().manual_seed(1)
@@ -53,6 +54,8 @@ def build(cls, config, body, history: MotionHistory | None):
                "root_std": 0.5 + torch.rand(model.root_features, generator=g),
                "joints_mean": 0.1 * torch.randn(body.num_joints - 1, 6, generator=g),
                "euler_std": 0.2 + torch.rand(BONES, 3, generator=g),
+               "sixd_mean": torch.tensor([1.0, 0, 0, 0, 1, 0]) + 0.2 * torch.randn(BONES, 6, generator=g),
+               "sixd_std": 0.1 + 0.2 * torch.rand(BONES, 6, generator=g),
                "offset_std": 0.02 + 0.01 * torch.rand(BONES, 3, generator=g),
                "joint_read": (torch.arange(body.num_joints - 1) % 3 > 0).float()[:, None]}
     if cls is VirtualBones:
@@ -89,6 +92,8 @@ CASES = {
                             MotionHistory((6.0,))),
     "jointnet-pelvis": (JointNet, JointNetConfig(gru_hidden=12, features=8, bone_mlp=[16], psd_mlp=[8], psd_shapes=3,
                                                  frame="pelvis"), None),
+    "jointnet-sixd": (JointNet, JointNetConfig(gru_hidden=12, features=8, bone_mlp=[16], psd_mlp=[8], psd_shapes=3,
+                                               rotation="sixd"), MotionHistory((6.0,))),
     "virtualbones-raised": (VirtualBones, VirtualBonesConfig(lf_hidden=10, hf_hidden=12, global_channels=3,
                                                              edge_channels=(4,), frame="raised"), None),
 }

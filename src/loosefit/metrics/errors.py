@@ -65,3 +65,26 @@ def hausdorff_per_frame(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
 def hausdorff_mm(pred: np.ndarray, gt: np.ndarray) -> float:
     """Mean over frames of the per-frame symmetric vertex-set Hausdorff distance, millimetres."""
     return float(1000.0 * hausdorff_per_frame(pred, gt).mean())
+
+
+def error_parts_mm(pred: np.ndarray, gt: np.ndarray) -> dict[str, float]:
+    """A sequence's RMSE split into its two orthogonal parts, millimetres, for ``pred`` and ``gt`` ``(T, V, 3)``
+    given in the garment's own moving frame (:func:`loosefit.motion.heading.to_canonical`; in the world the mean
+    over a walk would mix places). With the residual ``r_ti = pred_ti - gt_ti`` and its mean over the frames
+    ``b_i``:
+
+    - ``mean_shape``: ``sqrt(mean_i |b_i|^2)``, how far the sequence's average garment is from the simulation's
+      (a constant error: the wrong drape for the motion as a whole);
+    - ``motion``: ``sqrt(mean_{t,i} |r_ti - b_i|^2)``, the error of the movement about that average (the swing);
+    - ``total``: the RMSE, with ``total^2 = mean_shape^2 + motion^2`` exactly (the frames' deviations from a mean
+      sum to zero);
+    - ``simulated_motion``: ``sqrt(mean_{t,i} |g_ti - mean_t g_ti|^2)``, how much the simulation moves about its
+      own average: what a prediction that does not move at all would leave as ``motion``.
+    """
+    pred, gt = check_pair(pred, gt)
+    r = pred - gt
+    b = r.mean(0)
+    g = gt - gt.mean(0)
+    mm = lambda sq: float(1000.0 * np.sqrt(sq))  # noqa: E731
+    return {"total": mm((r * r).sum(-1).mean()), "mean_shape": mm((b * b).sum(-1).mean()),
+            "motion": mm(((r - b) ** 2).sum(-1).mean()), "simulated_motion": mm((g * g).sum(-1).mean())}

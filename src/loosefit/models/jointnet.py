@@ -18,8 +18,8 @@ windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints 
    concatenated with the bone features, as the paper's Fig. 2 and Sec. 3.2 text have it (``F`` reads
    ``2 K`` values); its Eq. 4 writes a sum, ``fourier="add"`` (``F`` reads ``K``).
 4. **Bone transforms.** A per-bone (shared) MLP ``F`` (2K, 1024, 2048, 1024, 6) gives three Euler angles
-   and a three-vector offset, both standardised by the training statistics of the rig's bone
-   transforms. The bone rotates about its rest position ``c`` and moves by the offset, so
+   (or, with ``rotation="sixd"``, ours, a 6D rotation: ``F`` ends in 9) and a three-vector offset, both
+   standardised by the training statistics of the rig's bone transforms. The bone rotates about its rest position ``c`` and moves by the offset, so
    rotation ``R = euler(angles)`` and translation ``c + offset - R c`` (``R p`` plus it takes ``c`` to
    ``c + offset``);
    the rotation and the translation are thereby decoupled.
@@ -38,6 +38,8 @@ Departures from the paper, named:
   tilt), its own rotation, its parent's and those of all its selected children, as 6D rotations; the paper
   concatenates the root position, the joint's axis-angle and those of its two skeleton neighbours;
 - the Euler angles and offsets are standardised by the rig's training statistics (the paper does not say);
+- ``rotation="sixd"``: the bone rotation as its matrix's first two columns (Zhou et al. 2019), where an Euler
+  angle jumps by 2 pi past half a turn (a dress's hem bones on a spin: 13 % of their training frames);
 - the association (``association="hoyer"``, the default): bones read the rows of ``relu(A)`` normalised to sum 1
   and the sparsity term is the rows' L1/L2 (the paper: ``relu(A)`` and its L1), and ``A`` starts from the bones'
   rest distances to the joints (``association_radius``); ``association="l1"``, ``association_radius=0`` is the
@@ -49,7 +51,7 @@ Departures from the paper, named:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Optional
 
 import numpy as np
@@ -57,8 +59,8 @@ import torch
 from torch import nn
 
 from loosefit.errors import InputError
-from loosefit.geometry.laplacian import mass_matrix, smoothest_modes
-from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler
+from loosefit.geometry.laplacian import smoothest_modes
+from loosefit.geometry.rotations import euler_to_matrix, matrix_to_euler, matrix_to_sixd, sixd_to_matrix
 from loosefit.models.base import GarmentModel
 from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
@@ -78,6 +80,9 @@ PSD_INIT_STD = 1e-5
 #: Smallest standard deviation of a bone output (radians or metres): bones that barely move in the
 #: training data still get a usable output scale.
 MIN_OUTPUT_STD = 1e-3
+#: How the bone MLP gives a rotation (:attr:`JointNetConfig.rotation`), with the numbers it outputs for it.
+ROTATIONS = ("euler", "sixd")
+ROTATION_SIZE = {"euler": 3, "sixd": 6}
 
 
 @dataclass(frozen=True)
@@ -98,15 +103,11 @@ class JointNetConfig:
         psd_modes: 0: each displacement basis ``D_j`` is a free ``(|X|, V, 3)`` array, as in the paper; ``k > 0``
             (ours): it lives in the span of the garment's ``k`` smoothest vibration modes ``Phi (V, k)``
             (:func:`loosefit.geometry.laplacian.smoothest_modes` of the rig's rest mesh; at most ``V - 1``),
-            ``D_j = Phi C_j`` with learnt coefficients ``C_j (|X|, k, 3)``. A free basis memorises the training subjects' wrinkles, which a
-            deterministic network cannot place on new motions: on held-out real capture it added a lumpy surface
-            (dihedral angles 3x those without it) and crumpled triangles for no accuracy (RMSE within 0.3 mm of
-            the same network without the PSD). Projecting a trained free basis onto k modes (:func:`project_psd`)
-            removes the lumps: on the real-capture skirt's validation subject RMSE 61.86 / 61.80 / 61.73 / 61.72 mm
-            at k = 16 / 64 / 256 / 512 against 61.76 free and 61.96 without the PSD, the dihedral angles 0.42x the
-            simulation's at 256 against 0.96x free (the shipped JointNet skirt is projected onto 256). Training in
-            256 modes from the start did worse on the demo's validation motions (best 58.6 against 55.6 mm; on its
-            1,171-vertex skirt 256 modes are a fifth of all), so the default stays the paper's free basis.
+            ``D_j = Phi C_j`` with learnt coefficients ``C_j (|X|, k, 3)``. A free basis memorises the training
+            subjects' wrinkles and replays them out of place on new motions (a lumpy surface for no accuracy; its
+            projection, :func:`~loosefit.models.jointnet_psd.project_psd`, removes them, and the shipped JointNet
+            garments are projected); training in modes from the start did worse on the demo's validation motions,
+            so the default stays the paper's free basis (``benchmarks/experiments/LOG.md``).
         fourier_scale: standard deviation of the Fourier frequencies ``c_m``, cycles per metre (not in
             the paper; 2 separates bones about 10 cm apart on a garment about 1 m across).
         fourier: how the Fourier features join the bone features: ``"concat"`` (the paper's Fig. 2 and
@@ -114,6 +115,8 @@ class JointNetConfig:
         bone_init: the initial last layer of ``F``: ``"zero"`` (every bone starts at its mean training
             transform) or ``"torch"`` (drawn as any linear layer).
         euler_order: intrinsic axis order of the predicted Euler angles.
+        rotation: ``"euler"`` (the paper: ``F`` gives three angles) or ``"sixd"`` (ours: the matrix's first two
+            columns, Gram-Schmidt). Recorded among a run's sizes (absent: Euler, as every run made before).
         lambda_norm: weight of the normal loss (not in the paper: the normal term is then roughly a
             third of the L1 vertex term, in metres, at a few millimetres of error).
         lambda_sparse: weight of the association's sparsity term (not in the paper). Shipped: 1e-4 with the
@@ -156,6 +159,7 @@ class JointNetConfig:
     fourier: str = "concat"
     bone_init: str = "torch"
     euler_order: str = "xyz"
+    rotation: str = "euler"
     lambda_norm: float = 0.05
     lambda_sparse: float = 1e-4
     association: str = "hoyer"
@@ -176,6 +180,8 @@ class JointNetConfig:
             raise InputError(f"features must be even (half cosines, half sines), got {self.features}")
         if sorted(self.euler_order.lower()) != ["x", "y", "z"]:
             raise InputError(f"euler_order must be a permutation of 'xyz', got {self.euler_order!r}")
+        if self.rotation not in ROTATIONS:
+            raise InputError(f"rotation must be one of {ROTATIONS}, got {self.rotation!r}")
         if self.fourier not in ("concat", "add"):
             raise InputError(f"fourier must be 'concat' or 'add', got {self.fourier!r}")
         if self.bone_init not in ("zero", "torch"):
@@ -338,19 +344,24 @@ def grouped_linear(weight: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     return torch.bmm(weight, x.transpose(1, 2)).transpose(1, 2)
 
 
-def bone_output_statistics(sequences, bone_rest: np.ndarray, euler_order: str) -> dict[str, np.ndarray]:
-    """Mean and std over every training frame of what JointNet's bone MLP outputs, float64 ``(B, 3)`` each:
-    ``euler_mean/std`` (radians, the canonical bone rotations as Euler angles in ``euler_order``) and
-    ``offset_mean/std`` (metres, where each bone's rest position ``c`` went: ``R c + T - c``), the stds floored
-    at :data:`MIN_OUTPUT_STD`. ``sequences``: :class:`~loosefit.models.dataset.SequenceData` with canonical
-    bone transforms; ``bone_rest (B, 3)``: the rig's bone rest positions."""
+def bone_output_statistics(sequences, bone_rest: np.ndarray, euler_order: str,
+                           rotation: str = "euler") -> dict[str, np.ndarray]:
+    """Mean and std over every training frame of what JointNet's bone MLP outputs, float64: ``euler_mean/std``
+    (``(B, 3)`` radians, the canonical bone rotations as Euler angles in ``euler_order``; with ``rotation="sixd"``
+    ``sixd_mean/std (B, 6)``, their matrices' first two columns) and ``offset_mean/std`` (``(B, 3)`` metres, where
+    each bone's rest position ``c`` went: ``R c + T - c``), the stds floored at :data:`MIN_OUTPUT_STD`.
+    ``sequences``: :class:`~loosefit.models.dataset.SequenceData` with canonical bone transforms; ``bone_rest
+    (B, 3)``: the rig's bone rest positions."""
     centre = bone_rest.astype(np.float64)
     rot = np.concatenate([s.bone_rot for s in sequences]).astype(np.float64)
     trans = np.concatenate([s.bone_trans for s in sequences]).astype(np.float64)
-    euler = matrix_to_euler(torch.from_numpy(rot), euler_order).numpy()
+    if rotation == "sixd":
+        angles = matrix_to_sixd(torch.from_numpy(rot)).numpy()
+    else:
+        angles = matrix_to_euler(torch.from_numpy(rot), euler_order).numpy()
     offset = np.einsum("tbij,bj->tbi", rot, centre) + trans - centre  # where each bone's rest position went
     out = {}
-    for name, values in (("euler", euler), ("offset", offset)):
+    for name, values in ((rotation, angles), ("offset", offset)):
         out[f"{name}_mean"], out[f"{name}_std"] = values.mean(0), np.maximum(values.std(0), MIN_OUTPUT_STD)
     return out
 
@@ -364,7 +375,8 @@ class JointNet(GarmentModel):
 
     Buffers (filled by :meth:`init_from_data`): ``rig_rest (V, 3)`` the rig's rest mesh, ``skin_weights
     (V, B)``, ``bone_rest (B, 3)`` bone rest positions, ``psd_modes (V, k)`` with ``sizes["psd_modes"]`` = k > 0 (the PSD's
-    vibration modes; a run's sizes without the entry: none), ``euler_mean/std (B, 3)`` radians and
+    vibration modes; a run's sizes without the entry: none), ``euler_mean/std (B, 3)`` radians (with
+    ``sizes["rotation"]`` = ``"sixd"``: ``sixd_mean/std (B, 6)``) and
     ``offset_mean/std (B, 3)`` metres (the bone outputs' training statistics), ``fourier_freqs (K/2, 3)``.
     """
 
@@ -394,7 +406,12 @@ class JointNet(GarmentModel):
         self.association = nn.Parameter(torch.rand(B, G) * (2.0 / G))
         self.fourier_alpha = nn.Parameter(torch.randn(K // 2))
         self.register_buffer("fourier_freqs", torch.randn(K // 2, 3) * config.fourier_scale)
-        self.bone_mlp = MLP([2 * K if config.fourier == "concat" else K, *config.bone_mlp, 6])
+        # sizes, not config: a run made before the 6D rotation has no entry and Euler angles
+        self.rotation = str(sizes.get("rotation", "euler"))
+        if self.rotation not in ROTATIONS:
+            raise InputError(f"jointnet: unknown bone rotation {self.rotation!r} (sizes; one of {ROTATIONS})")
+        rotation_size = ROTATION_SIZE[self.rotation]
+        self.bone_mlp = MLP([2 * K if config.fourier == "concat" else K, *config.bone_mlp, rotation_size + 3])
         if config.bone_init == "zero":  # every bone starts at its mean training transform
             nn.init.zeros_(self.bone_mlp[-1].weight)
             nn.init.zeros_(self.bone_mlp[-1].bias)
@@ -409,9 +426,9 @@ class JointNet(GarmentModel):
         self.register_buffer("rig_rest", torch.zeros(V, 3))
         self.register_buffer("skin_weights", torch.zeros(V, B))
         self.register_buffer("bone_rest", torch.zeros(B, 3))
-        for name in ("euler", "offset"):
-            self.register_buffer(f"{name}_mean", torch.zeros(B, 3))
-            self.register_buffer(f"{name}_std", torch.ones(B, 3))
+        for name, size in ((self.rotation, rotation_size), ("offset", 3)):
+            self.register_buffer(f"{name}_mean", torch.zeros(B, size))
+            self.register_buffer(f"{name}_std", torch.ones(B, size))
         self.carry = StateCarry(state_dim=0)  # stateful training: the GRU state at each window's end
 
     # ------------------------------------------------------------------ construction
@@ -427,7 +444,10 @@ class JointNet(GarmentModel):
         """As :meth:`GarmentModel.from_data`, the PSD's mode count (``config.psd_modes``, at most ``V - 1``: a coarse
         garment has fewer modes) recorded among the sizes, so that the run's model.json rebuilds the same model."""
         sizes = cls.data_sizes(data)
-        model = cls({**sizes, "psd_modes": min(config.psd_modes, sizes["num_verts"] - 1)}, config)
+        sizes["psd_modes"] = min(config.psd_modes, sizes["num_verts"] - 1)
+        if config.rotation != "euler":  # Euler runs keep the sizes they had
+            sizes["rotation"] = config.rotation
+        model = cls(sizes, config)
         model.init_from_data(data)
         return model
 
@@ -438,7 +458,7 @@ class JointNet(GarmentModel):
             raise InputError("JointNet trains on the bone transforms of a prepared store's training sequences "
                              "(load the data with bones=True)", data.store.path)
         rig = load_rig(data.store, data.garment_name)
-        stats = bone_output_statistics(data.sequences, rig.bone_rest_positions, self.config.euler_order)
+        stats = bone_output_statistics(data.sequences, rig.bone_rest_positions, self.config.euler_order, self.rotation)
         with torch.no_grad():
             self.rig_rest.copy_(torch.from_numpy(rig.rest_verts))
             if self.psd_mode_count:
@@ -488,10 +508,17 @@ class JointNet(GarmentModel):
     def bone_transforms(self, bone_features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(N, T, B, 2K or K)`` bone features (:meth:`join_prior`) -> rotations ``(N, T, B, 3, 3)`` and
         translations ``(N, T, B, 3)``."""
-        out = self.bone_mlp(bone_features)
-        euler = self.euler_mean + self.euler_std * out[..., :3]
-        offset = self.offset_mean + self.offset_std * out[..., 3:]
-        R = euler_to_matrix(euler, self.config.euler_order)
+        return self.bone_outputs(self.bone_mlp(bone_features))
+
+    def bone_outputs(self, out: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The bone MLP's standardised ``(..., B, 6 or 9)`` -> rotations ``(..., B, 3, 3)`` about each bone's rest
+        position and translations ``(..., B, 3)`` (the rest position moved by the offset)."""
+        n = ROTATION_SIZE[self.rotation]
+        if self.rotation == "sixd":
+            R = sixd_to_matrix(self.sixd_mean + self.sixd_std * out[..., :n])
+        else:
+            R = euler_to_matrix(self.euler_mean + self.euler_std * out[..., :n], self.config.euler_order)
+        offset = self.offset_mean + self.offset_std * out[..., n:]
         return R, self.bone_rest + offset - (R @ self.bone_rest[:, :, None])[..., 0]
 
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None, psd: bool = True,
@@ -571,28 +598,3 @@ class JointNet(GarmentModel):
             out = self(batch["root"], batch["joints"], self.carry.initial(batch), psd=stage == "stage2")
             self.carry.keep(batch, out["state"])
             return masked_errors_mm(out["verts"], batch["verts"], self.mask(batch))
-
-
-def project_psd(model: JointNet, modes: int) -> JointNet:
-    """A copy of the trained ``model`` whose PSD bases (free, per vertex) are projected onto the garment's ``modes``
-    smoothest vibration modes, ``C_j = Phi^T M D_j`` (``config.psd_modes = modes``): their smooth part, what a
-    model trained with ``psd_modes`` could hold; everything else as trained. For measuring what the free basis's
-    high frequencies add, and for a smaller model.
-
-    Raises:
-        InputError: the model's basis is already in modes, or ``modes`` is out of range.
-    """
-    if model.psd_mode_count:
-        raise InputError(f"the model's PSD is already in {model.psd_mode_count} modes")
-    if not 1 <= modes < model.rig_rest.shape[0]:
-        raise InputError(f"the garment of {model.rig_rest.shape[0]} vertices has no {modes} smoothest modes")
-    out = JointNet({**model.sizes(), "psd_modes": modes}, replace(model.config, psd_modes=modes))
-    rest, faces = model.rig_rest.double().numpy(), model.faces.numpy()
-    phi = smoothest_modes(rest, faces, out.psd_mode_count)
-    weighted = phi * mass_matrix(rest, faces).diagonal()[:, None]  # M Phi, M diagonal
-    state = model.state_dict()
-    basis = state.pop("psd_basis").double()
-    state["psd_basis"] = torch.einsum("vk,gxvc->gxkc", torch.from_numpy(weighted), basis).float()
-    state["psd_modes"] = torch.from_numpy(phi).float()
-    out.load_state_dict(state)
-    return out.eval()

@@ -32,7 +32,7 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.geometry.lbs import forward_kinematics
-from loosefit.geometry.rotations import axis_angle_to_matrix, euler_to_matrix, sixd_to_matrix
+from loosefit.geometry.rotations import axis_angle_to_matrix, sixd_to_matrix
 from loosefit.models.layers.mlp import NEGATIVE_SLOPE
 
 #: The methods :class:`StepGraph` runs (the per-garment recurrent ones and the baseline).
@@ -298,8 +298,4 @@ class StepGraph(nn.Module):
             hidden = A @ (psi @ first.weight[:, :K].T) + nn.functional.linear(prior, first.weight[:, K:], first.bias)
         for layer in list(m.bone_mlp)[1:]:  # the activation after the first layer, then the others
             hidden = layer(hidden)
-        out = hidden
-        euler = m.euler_mean + m.euler_std * out[..., :3]
-        offset = m.offset_mean + m.offset_std * out[..., 3:]
-        R = euler_to_matrix(euler, m.config.euler_order)
-        return R, m.bone_rest + offset - (R @ m.bone_rest[:, :, None])[..., 0]
+        return m.bone_outputs(hidden)
