@@ -454,3 +454,32 @@ def test_the_garments_reach_comes_from_the_rest_pose(tiny_train):
     brute = [n for n, j in zip(body.joint_names, joints)
              if min(float(np.linalg.norm(v - j)) for v in verts) < GARMENT_REACH_M]
     assert sizes["joints_reached"] == brute and "Hips" in brute and "LeftHand" not in brute
+
+
+def test_pose_noise_is_one_offset_per_window_and_joint_on_the_read_joints_in_training_only(tiny_train):
+    config = VirtualBonesConfig(**{**TINY.__dict__, "exclude_joints": ("Arm", "Hand"), "pose_noise": 0.3})
+    model = _model(tiny_train, config=config)
+    batch = _batch(WindowDataset(tiny_train, window=16, stride=16, burn_in=4))
+    clean = model._inputs(batch["root"], batch["joints"])
+    torch.manual_seed(0)
+    noisy = model._inputs(batch["root"], batch["joints"], 0.3)
+    offset = noisy - clean
+    R = model.root_features
+    assert offset[..., :R].abs().max() == 0  # the root is not a pose
+    joints = offset[..., R:].unflatten(-1, (-1, 6))  # (N, T, J-1, 6)
+    assert (joints - joints[:, :1]).abs().max() < 1e-6  # the same offset in every frame of a window
+    read = model.joint_read[:, 0].bool()
+    assert joints[:, :, ~read].abs().max() == 0 and (~read).any()  # an unread joint stays unread
+    drawn = joints[:, 0, read]
+    assert drawn.std().item() == pytest.approx(0.3, rel=0.15)  # the std asked, in normalised units
+    assert (drawn[0] - drawn[1]).abs().min() > 0  # each window its own
+    # the low stage's loss draws it (torch's generator), the high stage's does not
+    losses = {}
+    for stage in ("low", "high"):
+        for seed in (0, 0, 1):
+            torch.manual_seed(seed)
+            losses.setdefault(stage, []).append(model.training_loss(batch, stage)[0].item())
+    assert losses["low"][0] == losses["low"][1] != losses["low"][2]
+    assert losses["high"][0] == losses["high"][1] == losses["high"][2]
+    with pytest.raises(InputError, match="pose_noise"):
+        VirtualBonesConfig(**{**TINY.__dict__, "pose_noise": -0.1})

@@ -146,6 +146,9 @@ class VirtualBonesConfig:
         feedback_frames: previous frames of the low-frequency module's own bone outputs among its inputs (0: none,
             as in the paper; see the module docstring).
         feedback_noise: std of the noise on the fed-back outputs while training, normalised units.
+        pose_noise: std (normalised units) of a random offset added to each read joint's rotation features, the same
+            through a training window (ours, not in the paper; 0: none): each person's capture holds a pose with
+            its own calibration, and a network that keys on exact angles learns its training subjects.
         exclude_joints: parts of body joint names (any case, e.g. ``"Arm"``, ``"Hand"``; as JointNet's) whose
             rotations the low-frequency module does not read (their features held at zero; ours): a skirt moves with
             the hips and legs, and arm poses it never met are then no input it can misread. A joint within
@@ -175,6 +178,7 @@ class VirtualBonesConfig:
     history_vertical: bool = False
     feedback_frames: int = 0
     feedback_noise: float = 0.0
+    pose_noise: float = 0.0
     exclude_joints: tuple[str, ...] = EXCLUDED_JOINTS
     frame: str = "raised"
 
@@ -185,7 +189,7 @@ class VirtualBonesConfig:
         if min(sizes) < 1 or not self.edge_channels or self.global_rank < 0:
             raise InputError(f"layer sizes must be >= 1 (global_rank >= 0) and edge_channels non-empty, got {self}")
         for name in ("laplacian_weight", "collision_weight", "collision_margin", "bone_weight", "hf_loss_frames",
-                     "feedback_frames", "feedback_noise"):
+                     "feedback_frames", "feedback_noise", "pose_noise"):
             if not getattr(self, name) >= 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.hf_target not in HF_TARGETS:
@@ -342,9 +346,12 @@ class VirtualBones(GarmentModel):
 
     # ------------------------------------------------------------------ prediction
 
-    def _inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
-        """Normalised features ``(N, T, R + 6(J-1))``, ``R`` = :attr:`root_features`."""
+    def _inputs(self, root: torch.Tensor, joints: torch.Tensor, pose_noise: float = 0.0) -> torch.Tensor:
+        """Normalised features ``(N, T, R + 6(J-1))``, ``R`` = :attr:`root_features`; ``pose_noise``: the std of an
+        offset drawn per window and joint feature, the same in every frame (training only)."""
         root, joints = self.normalise(root, joints)
+        if pose_noise > 0:
+            joints = joints + pose_noise * torch.randn_like(joints[:, :1])
         return torch.cat([root, (joints * self.joint_read).flatten(-2)], -1)
 
     def low_frequency(self, x: torch.Tensor, h=None, frames: torch.Tensor | None = None, noise: float = 0.0):
@@ -443,8 +450,8 @@ class VirtualBones(GarmentModel):
 
     def training_loss(self, batch: dict, stage: str):
         mask = self.mask(batch)
-        x = self._inputs(batch["root"], batch["joints"])
         c = self.config
+        x = self._inputs(batch["root"], batch["joints"], c.pose_noise if stage == "low" else 0.0)
         h_low, h_high = self.carry.initial(batch) or (None, None)
         if stage == "low":
             raw, _, _, lf, h_low = self.low_frequency(x, h_low, noise=c.feedback_noise)
