@@ -544,3 +544,29 @@ def test_projecting_a_free_psd_keeps_its_smooth_part(tiny_train):
                    if k not in ("psd_basis", "psd_modes"))
     with pytest.raises(InputError, match="already in 5 modes"):
         project_psd(projected, 5)
+
+
+def test_pose_noise_offsets_each_joint_rotation_per_window_in_training_only(tiny_train):
+    model = _model(tiny_train, dataclasses.replace(TINY, pose_noise=0.3))
+    batch = _batch(tiny_train, frames=16)
+    clean = model.joint_inputs(batch["root"], batch["joints"])
+    torch.manual_seed(0)
+    offset = model.joint_inputs(batch["root"], batch["joints"], 0.3) - clean  # (N, T, J_s, R + 6 (2 + C))
+    R = model.root_features
+    assert offset[..., :R].abs().max() == 0  # the root's features are not a pose
+    assert (offset - offset[:, :1]).abs().max() < 1e-6  # the same in every frame of the window
+    own = offset[:, 0, :, R:R + 6]  # each selected joint's own rotation
+    assert own.std().item() == pytest.approx(0.3, rel=0.2)
+    # a joint's offset is the one its neighbours read for it: its parent row in a child's input is the same draw
+    torch.manual_seed(0)
+    _, joints = model.normalise(batch["root"], batch["joints"], 0.3)
+    _, plain = model.normalise(batch["root"], batch["joints"])
+    drawn = (joints - plain)[:, 0]  # (N, J-1, 6)
+    assert torch.allclose(own, drawn[:, [j - 1 for j in model.selected]], atol=1e-6)
+    losses = []
+    for seed in (0, 0, 1):
+        torch.manual_seed(seed)
+        losses.append(model.training_loss(batch, "stage1")[0].item())
+    assert losses[0] == losses[1] != losses[2]
+    with torch.no_grad():  # validation and prediction read the pose as it is
+        assert model.validation_metrics(batch, "stage1") == model.validation_metrics(batch, "stage1")

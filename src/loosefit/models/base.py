@@ -114,13 +114,21 @@ class GarmentModel(nn.Module):
 
     # ------------------------------------------------------------------ prediction
 
-    def normalise(self, root: torch.Tensor, joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Standardised features: ``root (B,T,R)`` -> its first :attr:`root_features`, ``joints (B,T,J-1,6)``."""
+    def normalise(self, root: torch.Tensor, joints: torch.Tensor,
+                  pose_noise: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
+        """Standardised features: ``root (B,T,R)`` -> its first :attr:`root_features`, ``joints (B,T,J-1,6)``.
+
+        ``pose_noise`` (training only; ours, not in the papers): the std of an offset added to each standardised
+        joint rotation feature, drawn per window and the same in every frame. Each person's capture holds a pose
+        with its own calibration; a network that keys on exact angles learns its training subjects."""
         if root.shape[-1] < self.root_features:
             raise InputError(f"{self.method} reads {self.root_features} root features, got {root.shape[-1]}: "
                              f"compute them with motion_features(..., {self.history})")
         root = root[..., : self.root_features]
-        return (root - self.root_mean) / self.root_std, (joints - self.joints_mean) / self.joints_std
+        joints = (joints - self.joints_mean) / self.joints_std
+        if pose_noise > 0:
+            joints = joints + pose_noise * torch.randn_like(joints[:, :1])
+        return (root - self.root_mean) / self.root_std, joints
 
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None) -> dict:
         """Raw (un-normalised) features -> ``{"verts": (B,T,V,3) canonical, "state": ..., other outputs}``."""

@@ -19,10 +19,9 @@ windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints 
    ``2 K`` values); its Eq. 4 writes a sum, ``fourier="add"`` (``F`` reads ``K``).
 4. **Bone transforms.** A per-bone (shared) MLP ``F`` (2K, 1024, 2048, 1024, 6) gives three Euler angles
    (or, with ``rotation="sixd"``, ours, a 6D rotation: ``F`` ends in 9) and a three-vector offset, both
-   standardised by the training statistics of the rig's bone transforms. The bone rotates about its rest position ``c`` and moves by the offset, so
-   rotation ``R = euler(angles)`` and translation ``c + offset - R c`` (``R p`` plus it takes ``c`` to
-   ``c + offset``);
-   the rotation and the translation are thereby decoupled.
+   standardised by the training statistics of the rig's bone transforms. The bone rotates about its rest
+   position ``c`` and moves by the offset, so rotation ``R = euler(angles)`` and translation ``c + offset - R c``
+   (``R p`` plus it takes ``c`` to ``c + offset``); the rotation and the translation are thereby decoupled.
 5. **Joint-specific PSD.** A shared MLP ``phi`` (K, 480, 128, |X|) gives ``|X|`` blend weights per
    joint; with a learnt displacement basis ``D_j (|X|, V, 3)`` per joint, the rest mesh becomes
    ``U + sum_j phi(psi_j) D_j`` in the canonical (rest) space, before the skinning.
@@ -115,15 +114,11 @@ class JointNetConfig:
         bone_init: the initial last layer of ``F``: ``"zero"`` (every bone starts at its mean training
             transform) or ``"torch"`` (drawn as any linear layer).
         euler_order: intrinsic axis order of the predicted Euler angles.
-        rotation: ``"euler"`` (the paper: ``F`` gives three angles) or ``"sixd"`` (ours: the matrix's first two
-            columns, Gram-Schmidt). Recorded among a run's sizes (absent: Euler, as every run made before).
-        lambda_norm: weight of the normal loss (not in the paper: the normal term is then roughly a
-            third of the L1 vertex term, in metres, at a few millimetres of error).
+        rotation: ``"euler"`` (the paper: three angles) or ``"sixd"`` (ours: 6D); a run's sizes keep it (absent: Euler).
+        lambda_norm: weight of the normal loss (not in the paper: then about a third of the L1 vertex term).
         lambda_sparse: weight of the association's sparsity term (not in the paper). Shipped: 1e-4 with the
-            ``"hoyer"`` term and ``association_radius`` 0.4 m, where an arm nudge moved the skirt below the knees
-            0.06-0.12x as much as VirtualBones' on the three seeds tried; the paper's L1 at 1e-5 left the association
-            dense and that ratio a draw of the seed (0.25x or 0.78x), and at 1e-3 it shrank ``A`` so far that on
-            80 bones training lagged (``benchmarks/experiments/jointnet_sparsity.py``, ``benchmarks/experiments/LOG.md``).
+            ``"hoyer"`` term and ``association_radius`` 0.4 m: an arm nudge moved the skirt below the knees 0.06-0.12x
+            as much as VirtualBones' (``benchmarks/experiments/LOG.md``, JointNet's association sparsity).
         association: ``"l1"`` (the paper): bones read ``relu(A) psi`` and the loss holds ``||relu(A)||_1``;
             or ``"hoyer"`` (ours): bones read each row of ``relu(A)`` normalised to sum 1 (a weighted mean of
             joint features, on the same scale however few joints a bone listens to) and the loss holds the
@@ -134,6 +129,8 @@ class JointNetConfig:
             that radius, summing to 1, so that a bone first listens to the joints near it and the sparsity term
             prunes the far ones first (the paper does not say how ``A`` starts). Shipped: 0.4 m, on the
             ``memory.yaml`` store as robust as 0.2 m and 5-15 mm better on the held-out spin on each of three seeds.
+        pose_noise: std (normalised units) of a random offset on each joint's rotation features, the same
+            through a training window (ours; 0: none; :meth:`GarmentModel.normalise`).
         loss_frames: frames of each training window (after the burn-in) that the losses see, drawn at
             random each step (:meth:`GarmentModel.loss_frames`); 0 for all. Not in the paper: on a CPU
             the bone MLP, PSD and skinning of every frame dominate a step; the GRUs still run over all.
@@ -165,6 +162,7 @@ class JointNetConfig:
     association: str = "hoyer"
     association_radius: float = 0.4
     loss_frames: int = 0
+    pose_noise: float = 0.0
     root_history: bool = True
     history_frames: tuple[float, ...] = HISTORY_FRAMES
     history_vertical: bool = False
@@ -186,8 +184,9 @@ class JointNetConfig:
             raise InputError(f"fourier must be 'concat' or 'add', got {self.fourier!r}")
         if self.bone_init not in ("zero", "torch"):
             raise InputError(f"bone_init must be 'zero' or 'torch', got {self.bone_init!r}")
-        if not (self.fourier_scale > 0 and self.lambda_norm >= 0 and self.lambda_sparse >= 0 and self.loss_frames >= 0):
-            raise InputError("fourier_scale must be > 0, lambda_norm, lambda_sparse and loss_frames >= 0")
+        if not (self.fourier_scale > 0 and min(self.lambda_norm, self.lambda_sparse, self.loss_frames,
+                                               self.pose_noise) >= 0):
+            raise InputError("fourier_scale must be > 0, lambda_norm, lambda_sparse, loss_frames and pose_noise >= 0")
         if self.psd_modes < 0:
             raise InputError(f"psd_modes must be >= 0 (0: a free basis per vertex), got {self.psd_modes}")
         if not self.association_radius >= 0:
@@ -496,10 +495,10 @@ class JointNet(GarmentModel):
             return features + prior  # JointNet Eq. 4
         return torch.cat([features, prior.expand(features.shape[:-1] + prior.shape[-1:])], -1)
 
-    def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+    def joint_inputs(self, root: torch.Tensor, joints: torch.Tensor, pose_noise: float = 0.0) -> torch.Tensor:
         """Raw features -> ``(N, T, J_s, R + 6 * (2 + C))`` per-joint GRU inputs (standardised; ``R`` =
-        :attr:`root_features`)."""
-        root, joints = self.normalise(root, joints)
+        :attr:`root_features`; ``pose_noise``: :meth:`normalise`)."""
+        root, joints = self.normalise(root, joints, pose_noise)
         pad = joints.new_zeros(joints.shape[:2] + (1, 6))
         table = torch.cat([root[:, :, None, 5:11], joints, pad], 2)  # (N, T, J + 1, 6): rows as in neighbour_table
         gathered = table[:, :, self.neighbours].flatten(-2)  # (N, T, J_s, 6 * (2 + C))
@@ -522,14 +521,14 @@ class JointNet(GarmentModel):
         return R, self.bone_rest + offset - (R @ self.bone_rest[:, :, None])[..., 0]
 
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None, psd: bool = True,
-                frames: torch.Tensor | None = None) -> dict:
+                frames: torch.Tensor | None = None, pose_noise: float = 0.0) -> dict:
         """Raw features ``root (N, T, R)`` (the first :attr:`root_features` read), ``joints (N, T, J-1, 6)`` and the
         GRU state ``(N, J_s, H)`` (None: zeros, the start of a motion) -> ``{"verts": (N, T, V, 3) canonical,
         "bones": (rotations (N, T, B, 3, 3), translations (N, T, B, 3)), "association": (B, J_s), "displacement":
-        (N, T, V, 3) PSD
-        offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state": (N, J_s, H)}``.
-        With ``frames`` (``(T',)`` indices) the outputs hold those frames only; the GRUs run over all ``T``."""
-        hidden, state = self.gru(self.joint_inputs(root, joints), state)
+        (N, T, V, 3) PSD offsets of the rest mesh (None with ``psd=False``: stage 1 runs without the PSD), "state":
+        (N, J_s, H)}``. With ``frames`` (``(T',)`` indices) the outputs hold those frames only; the GRUs run over all
+        ``T``. ``pose_noise``: :meth:`normalise` (training)."""
+        hidden, state = self.gru(self.joint_inputs(root, joints, pose_noise), state)
         if frames is not None:
             hidden = hidden[:, frames]
         N, T, G, _ = hidden.shape
@@ -582,7 +581,8 @@ class JointNet(GarmentModel):
     def training_loss(self, batch: dict, stage: str):
         mask = self.mask(batch)
         frames = self.loss_frames(mask, self.config.loss_frames)
-        out = self(batch["root"], batch["joints"], self.carry.initial(batch), psd=stage == "stage2", frames=frames)
+        out = self(batch["root"], batch["joints"], self.carry.initial(batch), psd=stage == "stage2", frames=frames,
+                   pose_noise=self.config.pose_noise)
         self.carry.keep(batch, out["state"])
         pred = out["verts"]
         target, mask = batch["verts"][:, frames], mask[:, frames]

@@ -146,9 +146,8 @@ class VirtualBonesConfig:
         feedback_frames: previous frames of the low-frequency module's own bone outputs among its inputs (0: none,
             as in the paper; see the module docstring).
         feedback_noise: std of the noise on the fed-back outputs while training, normalised units.
-        pose_noise: std (normalised units) of a random offset added to each read joint's rotation features, the same
-            through a training window (ours, not in the paper; 0: none): each person's capture holds a pose with
-            its own calibration, and a network that keys on exact angles learns its training subjects.
+        pose_noise: std (normalised units) of a random offset on each read joint's rotation features, the same
+            through a training window (ours; 0: none; :meth:`GarmentModel.normalise`).
         exclude_joints: parts of body joint names (any case, e.g. ``"Arm"``, ``"Hand"``; as JointNet's) whose
             rotations the low-frequency module does not read (their features held at zero; ours): a skirt moves with
             the hips and legs, and arm poses it never met are then no input it can misread. A joint within
@@ -347,11 +346,9 @@ class VirtualBones(GarmentModel):
     # ------------------------------------------------------------------ prediction
 
     def _inputs(self, root: torch.Tensor, joints: torch.Tensor, pose_noise: float = 0.0) -> torch.Tensor:
-        """Normalised features ``(N, T, R + 6(J-1))``, ``R`` = :attr:`root_features`; ``pose_noise``: the std of an
-        offset drawn per window and joint feature, the same in every frame (training only)."""
-        root, joints = self.normalise(root, joints)
-        if pose_noise > 0:
-            joints = joints + pose_noise * torch.randn_like(joints[:, :1])
+        """Normalised features ``(N, T, R + 6(J-1))``, ``R`` = :attr:`root_features` (``pose_noise``:
+        :meth:`normalise`)."""
+        root, joints = self.normalise(root, joints, pose_noise)
         return torch.cat([root, (joints * self.joint_read).flatten(-2)], -1)
 
     def low_frequency(self, x: torch.Tensor, h=None, frames: torch.Tensor | None = None, noise: float = 0.0):
