@@ -13,7 +13,8 @@ from loosefit.models.streams import MemoryWindowConfig, StreamWindows
 from loosefit.models.virtualbones import VirtualBones, VirtualBonesConfig
 from loosefit.train import StageConfig, TrainConfig, seed_everything, train
 
-VB = VirtualBonesConfig(lf_hidden=24, hf_hidden=24, global_channels=4, edge_channels=(8,))
+VB = VirtualBonesConfig(lf_hidden=24, hf_hidden=24, global_channels=4, edge_channels=(8,),
+                        pose_noise=0.0)  # the losses compared are of the same draw-free inputs
 JN = JointNetConfig(gru_hidden=24, features=16, bone_mlp=[32], psd_mlp=[16], psd_shapes=4)
 #: (model class, config, stages)
 MODELS = {"virtualbones": (VirtualBones, VB, ("low", "high")), "jointnet": (JointNet, JN, ("stage1", "stage2"))}
