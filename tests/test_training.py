@@ -127,3 +127,27 @@ def test_resume_refuses_a_run_of_other_data(tiny_store, tmp_path):
         train_model("jointnet", tiny_store, "skirt+average", run, resume=True,
                     overrides=[*SMALL_JOINTNET, "model.frame=heading"])
     assert (run / "checkpoints" / "last.pt").read_bytes() == before
+
+
+
+def test_a_run_made_before_a_default_changed_resumes_only_with_its_former_value(tiny_store, tmp_path):
+    """A run whose method.yaml predates ``model.frame`` and ``model.pose_noise`` was trained in the heading frame
+    without pose noise: resuming it under today's defaults (raised, 0.5) would train it on other targets in silence.
+    Refused, naming both; given its former values it resumes."""
+    import yaml
+
+    run = tmp_path / "vb"
+    small = ["model.lf_hidden=8", "model.hf_hidden=8", "model.global_channels=2", "model.edge_channels=[4]",
+             "train.stages.low.epochs=1", "train.stages.high.epochs=1", "train.progress=false",
+             "train.tensorboard=false", "model.frame=heading", "model.pose_noise=0"]
+    train_model("virtualbones", tiny_store, "skirt+average", run, overrides=small)
+    saved = yaml.safe_load((run / "method.yaml").read_text())
+    del saved["model"]["frame"], saved["model"]["pose_noise"]  # as a run made before either existed
+    (run / "method.yaml").write_text(yaml.safe_dump(saved, sort_keys=False))
+    written = (run / "method.yaml").read_bytes()
+    today = [o for o in small if not o.startswith(("model.frame", "model.pose_noise"))]
+    with pytest.raises(InputError, match="model.frame: 'heading' in the run, 'raised' now; model.pose_noise: 0.0 in "
+                                         "the run, 0.5 now"):
+        train_model("virtualbones", tiny_store, "skirt+average", run, overrides=today, resume=True)
+    assert (run / "method.yaml").read_bytes() == written
+    train_model("virtualbones", tiny_store, "skirt+average", run, overrides=small, resume=True)  # its own values

@@ -29,6 +29,8 @@ import logging
 from pathlib import Path
 from typing import Iterator
 
+import yaml
+
 from loosefit.config import config_to_dict, load_config, save_config
 from loosefit.data import lock
 from loosefit.data.mirror import MIRRORED
@@ -138,18 +140,22 @@ def _remove_if_empty(path: Path) -> None:
         pass
 
 
+#: Settings whose default changed after runs were made without them: a run whose ``method.yaml`` lacks one was
+#: trained with the value here, not today's default (the frame was the heading frame before ``model.frame``;
+#: no pose noise before ``model.pose_noise``), and is resumed only with that value.
+FORMER_DEFAULTS = {"model.frame": "heading", "model.pose_noise": 0.0}
+
+
+def _flat(value, key: str = "") -> dict:
+    """A nested dict as ``{"section.key": value}``."""
+    if isinstance(value, dict) and value:
+        return {k: v for name, item in value.items() for k, v in _flat(item, f"{key}.{name}" if key else str(name)).items()}
+    return {key: value}
+
+
 def _settings(cfg) -> dict:
     """A run config as ``{"section.key": value}`` without the keys a resume may change."""
-    flat: dict = {}
-
-    def walk(value, key: str) -> None:
-        if isinstance(value, dict) and value:
-            for k, v in value.items():
-                walk(v, f"{key}.{k}" if key else str(k))
-        else:
-            flat[key] = value
-
-    walk(config_to_dict(cfg), "")
+    flat = _flat(config_to_dict(cfg))
     return {k: v for k, v in flat.items() if not (k.startswith("train.") and k.split(".", 1)[1] in RESUME_MAY_CHANGE)}
 
 
@@ -158,6 +164,8 @@ def _check_same_settings(saved: Path, cfg) -> None:
     keys :data:`~loosefit.train.trainer.RESUME_MAY_CHANGE`): its checkpoint would not fit, or train on
     differently. Reads only."""
     before, now = _settings(load_config(type(cfg), saved)), _settings(cfg)
+    written = _flat(yaml.safe_load(saved.read_text()) or {})
+    before.update({k: v for k, v in FORMER_DEFAULTS.items() if k in before and k not in written})
     changed = sorted(k for k in set(before) | set(now) if before.get(k, "(none)") != now.get(k, "(none)"))
     if changed:
         shown = "; ".join(f"{k}: {before.get(k, '(none)')!r} in the run, {now.get(k, '(none)')!r} now" for k in changed[:5])
