@@ -149,7 +149,8 @@ FORMER_DEFAULTS = {"model.frame": "heading", "model.pose_noise": 0.0}
 def _flat(value, key: str = "") -> dict:
     """A nested dict as ``{"section.key": value}``."""
     if isinstance(value, dict) and value:
-        return {k: v for name, item in value.items() for k, v in _flat(item, f"{key}.{name}" if key else str(name)).items()}
+        return {k: v for name, item in value.items()
+                for k, v in _flat(item, f"{key}.{name}" if key else str(name)).items()}
     return {key: value}
 
 

@@ -37,8 +37,8 @@ Departures from the paper, named:
   tilt), its own rotation, its parent's and those of all its selected children, as 6D rotations; the paper
   concatenates the root position, the joint's axis-angle and those of its two skeleton neighbours;
 - the Euler angles and offsets are standardised by the rig's training statistics (the paper does not say);
-- ``rotation="sixd"``: the bone rotation as its matrix's first two columns (Zhou et al. 2019), where an Euler
-  angle jumps by 2 pi past half a turn (a dress's hem bones on a spin: 13 % of their training frames);
+- ``rotation="sixd"`` (an option, a tie on validation): the bone rotation as its matrix's first two columns (Zhou et
+  al. 2019), continuous where an Euler angle jumps by 2 pi (13 % of a dress's hem-bone frames on a spin);
 - the association (``association="hoyer"``, the default): bones read the rows of ``relu(A)`` normalised to sum 1
   and the sparsity term is the rows' L1/L2 (the paper: ``relu(A)`` and its L1), and ``A`` starts from the bones'
   rest distances to the joints (``association_radius``); ``association="l1"``, ``association_radius=0`` is the
