@@ -49,22 +49,25 @@ def main() -> None:
     runs = dict(r.split("=", 1) for r in a.run)
     garment = a.garment or store.garment_names()[0]
     results = {"data": str(Path(a.data).resolve()), "garment": garment, "frame": a.frame, "runs": runs, "splits": {}}
-    for name, path in runs.items():
-        animator = Animator(path)
-        for split in splits:
-            rows = []
-            for seq_name in store.sequence_names(split=split):
-                seq = store.sequence(seq_name)
-                if seq.garment != garment:
-                    continue
-                motion = store.motion(seq.motion)
-                frame = motion_frames(motion, a.frame)
-                parts = error_parts_mm(to_canonical(animator.animate(motion), *frame),
-                                       to_canonical(np.asarray(seq.verts[:]), *frame))
-                rows.append({"sequence": seq_name, "frames": int(seq.verts.shape[0]), **parts})
-            if not rows:
+    animators = {name: Animator(path) for name, path in runs.items()}
+    for split in splits:
+        rows: dict[str, list] = {name: [] for name in runs}
+        for seq_name in store.sequence_names(split=split):
+            seq = store.sequence(seq_name)
+            if seq.garment != garment:
                 continue
-            entry = results["splits"].setdefault(split, {})[name] = {"pooled": pooled(rows), "sequences": rows}
+            # the simulation read and put in the garment's frame once, for every run
+            motion = store.motion(seq.motion)
+            frame = motion_frames(motion, a.frame)
+            simulated = to_canonical(np.asarray(seq.verts[:]), *frame)
+            for name, animator in animators.items():
+                parts = error_parts_mm(to_canonical(animator.animate(motion), *frame), simulated)
+                rows[name].append({"sequence": seq_name, "frames": len(simulated), **parts})
+        for name, sequences in rows.items():
+            if not sequences:
+                continue
+            entry = {"pooled": pooled(sequences), "sequences": sequences}
+            results["splits"].setdefault(split, {})[name] = entry
             p = entry["pooled"]
             print(f"{name:14s} {split:5s} total {p['total']:6.1f}  mean shape {p['mean_shape']:6.1f}  motion "
                   f"{p['motion']:6.1f}  (the simulation moves {p['simulated_motion']:6.1f}) mm", flush=True)

@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from loosefit.config import load_config
 from loosefit.device import resolve_device
 from loosefit.errors import InputError
 from loosefit.models.motion_features import FeatureStream, motion_features
@@ -26,7 +25,7 @@ from loosefit.motion.motion import Motion
 from loosefit.motion_range import range_warnings
 from loosefit.pretrained import resolve_run
 from loosefit.threads import torch_threads
-from loosefit.training import METHOD_CONFIG, MODEL_META
+from loosefit.training import METHOD_CONFIG, MODEL_META, load_run_config
 from loosefit.train.run import RunDir, load_weights
 
 log = logging.getLogger(__name__)
@@ -45,7 +44,7 @@ def load_run(run_dir: str | Path, checkpoint: str = "best"):
         cls = model_class(meta["method"])
     except InputError as e:
         raise InputError(f"run record is corrupt: {e.problem}", run.path / MODEL_META) from None
-    cfg = load_config(run_config_class(meta["method"]), run.path / METHOD_CONFIG)
+    cfg = load_run_config(run_config_class(meta["method"]), run.path / METHOD_CONFIG)
     try:
         model = cls(meta["sizes"], cfg.model)
     except (KeyError, TypeError, ValueError) as e:

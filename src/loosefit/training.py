@@ -29,9 +29,8 @@ import logging
 from pathlib import Path
 from typing import Iterator
 
-import yaml
-
-from loosefit.config import config_to_dict, load_config, save_config
+from loosefit.config import (apply_overrides, config_from_dict, config_to_dict, load_config, load_yaml,
+                             read_yaml_text, save_config)
 from loosefit.data import lock
 from loosefit.data.mirror import MIRRORED
 from loosefit.data.store import DatasetStore
@@ -142,8 +141,17 @@ def _remove_if_empty(path: Path) -> None:
 
 #: Settings whose default changed after runs were made without them: a run whose ``method.yaml`` lacks one was
 #: trained with the value here, not today's default (the frame was the heading frame before ``model.frame``;
-#: no pose noise before ``model.pose_noise``), and is resumed only with that value.
+#: no pose noise before ``model.pose_noise``): :func:`load_run_config` reads it so.
 FORMER_DEFAULTS = {"model.frame": "heading", "model.pose_noise": 0.0}
+
+
+def load_run_config(cls: type, path: Path):
+    """A run's ``method.yaml`` as config ``cls``: the settings the run was trained with. A setting the file lacks
+    is today's default, except those of :data:`FORMER_DEFAULTS`, which take the value they had then."""
+    values = load_yaml(read_yaml_text(path, "config"), path)
+    cfg = config_from_dict(cls, values, path)
+    written, known = _flat(values or {}), _flat(config_to_dict(cfg))
+    return apply_overrides(cfg, [f"{k}={v}" for k, v in FORMER_DEFAULTS.items() if k in known and k not in written])
 
 
 def _flat(value, key: str = "") -> dict:
@@ -164,9 +172,7 @@ def _check_same_settings(saved: Path, cfg) -> None:
     """Refuse to resume the run whose ``method.yaml`` is ``saved`` with other settings than its own (except the
     keys :data:`~loosefit.train.trainer.RESUME_MAY_CHANGE`): its checkpoint would not fit, or train on
     differently. Reads only."""
-    before, now = _settings(load_config(type(cfg), saved)), _settings(cfg)
-    written = _flat(yaml.safe_load(saved.read_text()) or {})
-    before.update({k: v for k, v in FORMER_DEFAULTS.items() if k in before and k not in written})
+    before, now = _settings(load_run_config(type(cfg), saved)), _settings(cfg)
     changed = sorted(k for k in set(before) | set(now) if before.get(k, "(none)") != now.get(k, "(none)"))
     if changed:
         shown = "; ".join(f"{k}: {before.get(k, '(none)')!r} in the run, {now.get(k, '(none)')!r} now" for k in changed[:5])

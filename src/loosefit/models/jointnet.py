@@ -80,8 +80,8 @@ PSD_INIT_STD = 1e-5
 #: training data still get a usable output scale.
 MIN_OUTPUT_STD = 1e-3
 #: How the bone MLP gives a rotation (:attr:`JointNetConfig.rotation`), with the numbers it outputs for it.
-ROTATIONS = ("euler", "sixd")
 ROTATION_SIZE = {"euler": 3, "sixd": 6}
+ROTATIONS = tuple(ROTATION_SIZE)
 
 
 @dataclass(frozen=True)
