@@ -64,9 +64,10 @@ def parse_run(spec: str) -> tuple[str, Path, object]:
         return name, Path(run), store.garment(gname)
 
 
-def animate_as_cli(run: Path, garment, body, motion):
+def animate_as_cli(run: Path, garment, body, motion, passes: int):
     """What ``loosefit animate RUN --motion M [--garment G]`` computes with its defaults, split into its two
-    timed steps: ``(animator, raw (T, V, 3), corrected (T, V, 3), model seconds, handling seconds)``."""
+    timed steps: ``(animator, raw (T, V, 3), corrected (T, V, 3), model seconds, handling seconds)``; ``passes``: the
+    handling's surface passes at most."""
     from loosefit.animate import Animator
     from loosefit.models.collision import handle_motion_collisions
 
@@ -76,7 +77,7 @@ def animate_as_cli(run: Path, garment, body, motion):
     t = time.perf_counter()
     raw = animator.animate_batch([motion])[0]
     t_model = time.perf_counter() - t
-    handle = dict(mode="exact", margin=0.0)
+    handle = dict(mode="exact", margin=0.0, passes=passes)
     handle_motion_collisions(raw, animator.faces, body, motion, **handle)  # warm-up (kernels)
     t = time.perf_counter()
     fixed = handle_motion_collisions(raw, animator.faces, body, motion, **handle)
@@ -91,8 +92,12 @@ def main() -> None:
     ap.add_argument("--motion", action="append", default=None,
                     help="kind:seed:seconds or a motion file (default: walk and spin, seed 1234, 4 s, and CMU 07_01)")
     ap.add_argument("--joint-map", default="cc", help="joint map of BVH motions (default cc: ../shared/mocap)")
+    ap.add_argument("--passes", type=int, default=None, help="surface passes at most (default: the handling's)")
     ap.add_argument("--out", default="penetration")
     args = ap.parse_args()
+    from loosefit.models.collision import SURFACE_PASSES
+
+    passes = SURFACE_PASSES if args.passes is None else args.passes
 
     body = AnnyBody(AnnyShape.parse(None))  # loosefit animate's body without --shape
     specs = args.motion or DEFAULT_MOTIONS + ([str(DEFAULT_BVH)] if DEFAULT_BVH.is_file() else [])
@@ -106,7 +111,7 @@ def main() -> None:
     for spec in args.run:
         name, run, garment = parse_run(spec)
         for label, motion in motions.items():
-            animator, raw, fixed, t_model, t_coll = animate_as_cli(run, garment, body, motion)
+            animator, raw, fixed, t_model, t_coll = animate_as_cli(run, garment, body, motion, passes)
             T = len(raw)
             on_proxy, on_full = posed[label]
             before, after = _per_frame(raw, *on_proxy), _per_frame(fixed, *on_proxy)
@@ -145,7 +150,8 @@ def main() -> None:
                   f"none {pct('none_surface_inside_5mm_percent')}; deepest {row['deepest_mm']:.1f} mm "
                   f"(none {row['none_deepest_mm']:.1f}); {row['fps_exact']:.0f} fps with, "
                   f"{row['fps_none']:.0f} without; handling {row['collision_ms_per_frame']:.1f} ms/frame", flush=True)
-    save_results(args.out, {"depth_m": 0.005, "floor_percent": 1.0, "torch_threads": 1, "rows": rows})
+    save_results(args.out, {"depth_m": 0.005, "floor_percent": 1.0, "torch_threads": 1, "rows": rows,
+                            "surface_passes": passes})
 
 
 def _per_frame(verts, posed: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -7,7 +7,10 @@ Run: .venv/bin/python scripts/ship_pretrained.py --accuracy benchmarks/results/a
 
 ``--psd-modes K`` ships a JointNet run trained with a free PSD basis with that basis projected onto the garment's K
 smoothest modes (``loosefit.models.jointnet_psd.project_psd``): its smooth part, without the lumps the free basis adds
-on new motions.
+on new motions. ``--pin-radius R`` ships a run trained without pins keeping its garment's pins
+(``loosefit.models.pins``; they are applied where the garment is animated, not in training, so the weights are the
+run's); ``--pin-shipped GARMENT.obj --pin-radius R`` gives already shipped garments theirs (the garment file they were
+trained on) where their runs and store are not at hand.
 
 Each shipped garment is checked against its run on the test sequences of the JSON's store (when the store is here):
 the largest vertex distance between the two animations and both RMSEs against the simulation, kept in its
@@ -30,26 +33,73 @@ from loosefit.pretrained import ROOT, ship
 def projected_run(run: Path, out: Path, modes: int) -> Path:
     """A copy of the JointNet run folder ``run`` in ``out`` whose best checkpoint's free PSD basis is projected onto
     ``modes`` smoothest modes; its model.json sizes and method.yaml say so."""
-    import torch
-    import yaml
-
     from loosefit.animate import load_run
     from loosefit.models.jointnet_psd import project_psd
-    from loosefit.train.run import RunDir, load_checkpoint
 
     shutil.copytree(run, out, ignore=shutil.ignore_patterns("tensorboard", "last.pt"))
     meta, model, _ = load_run(run)
-    projected = project_psd(model, modes)
-    meta["sizes"]["psd_modes"] = modes
-    (out / "model.json").write_text(json.dumps(meta, indent=1))
+    return _rewritten(out, meta, {**meta["sizes"], "psd_modes": modes}, project_psd(model, modes), "psd_modes", modes)
+
+
+def _rewritten(out: Path, meta: dict, sizes: dict, model, setting: str, value) -> Path:
+    """The run folder ``out`` with ``model``'s weights in its best checkpoint, ``sizes`` in its model.json and the
+    model ``setting`` at ``value`` in its method.yaml. Returns ``out``."""
+    import torch
+    import yaml
+
+    from loosefit.train.run import RunDir, load_checkpoint
+
+    (out / "model.json").write_text(json.dumps({**meta, "sizes": sizes}, indent=1))
     config = yaml.safe_load((out / "method.yaml").read_text())
-    config["model"]["psd_modes"] = modes
+    config["model"][setting] = value
     (out / "method.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
     checkpoint = RunDir(out).best_checkpoint
     state = load_checkpoint(checkpoint)
-    state["model"] = projected.state_dict()
+    state["model"] = model.state_dict()
     torch.save(state, checkpoint)
     return out
+
+
+def pinned_run(run: Path, out: Path, radius: float, garment=None, body=None) -> Path:
+    """A copy of the run folder ``run`` in ``out`` (or ``run`` itself when it is already there) whose best checkpoint
+    keeps its garment's pins over ``radius`` metres (:func:`loosefit.models.pins.with_pins`: ``garment`` and ``body``,
+    by default those of its training store); its model.json sizes and method.yaml say so."""
+    from loosefit.animate import load_run
+    from loosefit.body import AnnyBody, AnnyShape
+    from loosefit.data import DatasetStore
+    from loosefit.models.pins import with_pins
+
+    if run != out:
+        shutil.copytree(run, out, ignore=shutil.ignore_patterns("tensorboard", "last.pt"))
+    meta, model, _ = load_run(out)
+    if garment is None:
+        with DatasetStore.open(meta["data"]) as store:
+            first = store.sequence(meta["train_sequences"][0])
+            body = AnnyBody(AnnyShape.from_array(store.body(first.body)), rig=store.motion(first.motion).rig)
+            garment = store.garment(meta["garment"])
+    pinned = with_pins(model, garment, body, radius)
+    return _rewritten(out, meta, pinned.sizes(), pinned, "pin_radius", radius)
+
+
+def pin_shipped(folder: Path, garment_file: Path, radius: float) -> None:
+    """Give the shipped garment ``folder`` (``src/loosefit/pretrained/<name>-<method>``) its garment's pins in place,
+    from the garment file it was trained on (``Garment.save``: an OBJ and its sidecar; the body: the file's shape, or
+    the average one), for a garment whose store is not here. Its weights stay as shipped; the storage check of the
+    former pinless files is dropped (it needs the store)."""
+    from loosefit.body import AnnyBody, AnnyShape
+    from loosefit.garment import Garment
+
+    garment = Garment.load(garment_file)
+    body = AnnyBody(AnnyShape(**garment.body_shape) if garment.body_shape else AnnyShape())
+    scratch = Path(tempfile.mkdtemp(prefix="loosefit-pins-")) / folder.name
+    shutil.copytree(folder, scratch)
+    pinned_run(scratch, scratch, radius, garment, body)
+    info = json.loads((folder / "pretrained.json").read_text())
+    info = {k: v for k, v in info.items() if k not in ("checkpoint", "checkpoint_bytes", "int8", "storage_check")}
+    info["trained_on"]["pins_added_with_radius"] = radius
+    info["trained_on"]["pins_garment_file"] = garment_file.name
+    ship(scratch, folder, info)
+    print(f"{folder}: pins over {radius} m from {garment_file}")
 
 
 def storage_check(run: Path, shipped: Path, data: Path, sequences: list[str]) -> dict:
@@ -75,14 +125,24 @@ def storage_check(run: Path, shipped: Path, data: Path, sequences: list[str]) ->
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--accuracy", required=True, help="the accuracy.py results JSON that trained and scored the runs")
-    ap.add_argument("--runs", required=True, help="accuracy.py's --runs folder")
-    ap.add_argument("--garment", required=True, help="the store's garment entry, e.g. skirt+average")
+    ap.add_argument("--accuracy", help="the accuracy.py results JSON that trained and scored the runs")
+    ap.add_argument("--runs", help="accuracy.py's --runs folder")
+    ap.add_argument("--garment", help="the store's garment entry, e.g. skirt+average")
     ap.add_argument("--name", required=True, help="the shipped name: pretrained:<name>[/<method>]")
     ap.add_argument("--methods", nargs="+", default=["virtualbones", "jointnet"])
     ap.add_argument("--psd-modes", type=int, default=0, help="JointNet: its free PSD basis projected onto this many "
                     "smoothest modes (0: as trained)")
+    ap.add_argument("--pin-radius", type=float, default=None, help="keep the garment's pins over this many metres "
+                    "(loosefit.models.pins) in a run trained without them (default: as trained)")
+    ap.add_argument("--pin-shipped", type=Path, default=None, metavar="GARMENT.obj", help="give the already shipped "
+                    "<name>-<method> garments pins (--pin-radius) from this garment file, without runs or store")
     a = ap.parse_args()
+    if a.pin_shipped is not None:
+        for method in a.methods:
+            pin_shipped(ROOT / f"{a.name}-{method}", a.pin_shipped, a.pin_radius)
+        return
+    if not (a.accuracy and a.runs and a.garment):
+        ap.error("--accuracy, --runs and --garment are needed to ship runs")
     scratch = Path(tempfile.mkdtemp(prefix="loosefit-ship-"))
     results = json.loads(Path(a.accuracy).read_text())["results"]
     garment = results["garments"][a.garment]
@@ -102,11 +162,13 @@ def main() -> None:
         if method == "jointnet" and a.psd_modes:
             run = projected_run(run, scratch / method, a.psd_modes)
             info["trained_on"]["psd_projected_onto_modes"] = a.psd_modes
+        if a.pin_radius is not None:
+            run = pinned_run(run, scratch / method, a.pin_radius)
+            info["trained_on"]["pins_added_with_radius"] = a.pin_radius
         out = ship(run, ROOT / f"{a.name}-{method}", info)
-        if Path(results["data"]).is_dir():
+        if Path(results["data"]).is_dir():  # the shipped garment against the float32 run it was made from
             meta = json.loads((out / "pretrained.json").read_text())
-            meta["storage_check"] = storage_check(Path(a.runs) / a.garment / method, out, Path(results["data"]),
-                                                  garment["sequences"]["test"])
+            meta["storage_check"] = storage_check(run, out, Path(results["data"]), garment["sequences"]["test"])
             (out / "pretrained.json").write_text(json.dumps(meta, indent=1))
             print(f"{out}: int8 {meta['int8'] or 'nothing'}, float16 the rest; it moves the test animations by at most "
                   f"{meta['storage_check']['max_vertex_distance_mm']:.2f} mm")

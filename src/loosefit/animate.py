@@ -161,8 +161,9 @@ class Animator:
         at a time with the recurrent state carried over (the same vertices as one pass over all frames;
         memory grows with the chunk, not with the motions' length).
 
-        ``output`` names the model output returned: ``"verts"`` (the garment), or another canonical
-        ``(B, T, V, 3)`` vertex output of the model, such as VirtualBones' low-frequency mesh ``"lf"``.
+        ``output`` names the model output returned: ``"verts"`` (the garment, with its pins kept:
+        :meth:`GarmentModel.pinned`), or another canonical ``(B, T, V, 3)`` vertex output of the model, as it is,
+        such as VirtualBones' low-frequency mesh ``"lf"``.
         """
         for m in motions:
             self._check(m)
@@ -176,15 +177,16 @@ class Animator:
         chunks, state = [], None
         with torch_threads(self.threads), torch.no_grad():
             for start in range(0, T, self.chunk_frames):
-                outputs = self.model(root[:, start:start + self.chunk_frames], joints[:, start:start + self.chunk_frames],
-                                     state)
+                part = slice(start, start + self.chunk_frames)
+                outputs = self.model(root[:, part], joints[:, part], state)
                 if start == 0:
                     shape = outputs["verts"].shape
                     vertex_outputs = sorted(k for k, v in outputs.items()
                                             if isinstance(v, torch.Tensor) and v.shape == shape)
                     if output not in vertex_outputs:
                         raise InputError(f"{self.method} has no vertex output {output!r} (it has {vertex_outputs})")
-                chunks.append(outputs[output])
+                chunks.append(self._pinned(outputs["verts"], root[:, part], joints[:, part]) if output == "verts"
+                              else outputs[output])
                 state = outputs["state"]
         canonical = torch.cat(chunks, 1).cpu().numpy()
         out = []
@@ -192,6 +194,11 @@ class Animator:
             rot, origin = motion_frames(m, self.frame)
             out.append(to_world(c[: m.num_frames], rot, origin))
         return out
+
+    def _pinned(self, verts: torch.Tensor, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+        """The per-garment model's pins kept (:meth:`GarmentModel.pinned`); a multi-garment model's as it is."""
+        pinned = getattr(self.model, "pinned", None)
+        return verts if pinned is None else pinned(verts, root, joints)
 
     def stream(self) -> "AnimationStream":
         """A frame-by-frame animator carrying the recurrent state (see :class:`AnimationStream`)."""
@@ -218,7 +225,9 @@ class AnimationStream:
             out = self.animator.model(torch.from_numpy(root)[None, None].to(device),
                                       torch.from_numpy(joints)[None, None].to(device), self.state)
         self.state = out["state"]
-        return to_world(out["verts"][0].cpu().numpy(), rot[None], origin[None])[0]
+        verts = self.animator._pinned(out["verts"], torch.from_numpy(root)[None, None].to(device),
+                                      torch.from_numpy(joints)[None, None].to(device))
+        return to_world(verts[0].cpu().numpy(), rot[None], origin[None])[0]
 
 
 def _bind_garment(model, config, garment, body):

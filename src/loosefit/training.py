@@ -141,8 +141,9 @@ def _remove_if_empty(path: Path) -> None:
 
 #: Settings whose default changed after runs were made without them: a run whose ``method.yaml`` lacks one was
 #: trained with the value here, not today's default (the frame was the heading frame before ``model.frame``;
-#: no pose noise before ``model.pose_noise``): :func:`load_run_config` reads it so.
-FORMER_DEFAULTS = {"model.frame": "heading", "model.pose_noise": 0.0}
+#: no pose noise before ``model.pose_noise``, no pins before ``model.pin_radius``): :func:`load_run_config` reads
+#: it so.
+FORMER_DEFAULTS = {"model.frame": "heading", "model.pose_noise": 0.0, "model.pin_radius": None}
 
 
 def load_run_config(cls: type, path: Path):
@@ -151,7 +152,8 @@ def load_run_config(cls: type, path: Path):
     values = load_yaml(read_yaml_text(path, "config"), path)
     cfg = config_from_dict(cls, values, path)
     written, known = _flat(values or {}), _flat(config_to_dict(cfg))
-    return apply_overrides(cfg, [f"{k}={v}" for k, v in FORMER_DEFAULTS.items() if k in known and k not in written])
+    return apply_overrides(cfg, [f"{k}={json.dumps(v)}" for k, v in FORMER_DEFAULTS.items()
+                                 if k in known and k not in written])
 
 
 def _flat(value, key: str = "") -> dict:

@@ -112,3 +112,18 @@ def test_loading_waits_for_another_process_on_the_cache_lock():
         assert not done.wait(1.5)
     worker.join(60)
     assert done.is_set()
+
+
+def test_collision_proxy_is_made_once_per_shape_and_topology_is_shared_read_only(body):
+    from loosefit.body import AnnyBody
+
+    proxy = body.collision_proxy()
+    assert body.collision_proxy() is proxy  # asked for by every motion's collision handling
+    other = AnnyBody(AnnyShape(gender=1.0))
+    assert other.collision_proxy() is not proxy and other.collision_proxy().shape == other.shape
+    # a body's topology is Anny's, read once per process: equal to the model's own, each body with its own copy
+    model = load_anny(body.rig, "anny")
+    np.testing.assert_array_equal(other.faces, model.get_triangular_faces().numpy())
+    other.faces[0, 0] += 1
+    np.testing.assert_array_equal(body.faces, model.get_triangular_faces().numpy())
+    np.testing.assert_array_equal(AnnyBody(AnnyShape()).faces, body.faces)

@@ -100,6 +100,20 @@ def load_anny(rig: str = "cmu_mb", topology: str = "anny"):
     return model.eval()
 
 
+@functools.lru_cache(maxsize=4)
+def _anny_topology(rig: str, topology: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, np.ndarray]:
+    """Joint names, parents ``(J,)`` int64, triangles ``(F, 3)`` int64 and skinning weights ``(V, J)`` float32 of an
+    Anny rig and topology, read once per process (Anny lists its faces in Python: about 0.1 s a read; a copy
+    takes a millisecond)."""
+    model = load_anny(rig, topology)
+    parents = np.asarray(model.bone_parents, dtype=np.int64)
+    faces = model.get_triangular_faces().numpy().astype(np.int64)
+    dense = torch.zeros(model.vertex_bone_indices.shape[0], model.bone_count, dtype=torch.float64)
+    dense.scatter_add_(1, model.vertex_bone_indices.long(), model.vertex_bone_weights.double())
+    weights = (dense / dense.sum(1, keepdim=True)).numpy().astype(np.float32)
+    return tuple(model.bone_labels), parents, faces, weights
+
+
 def anny_rest_pose(model, shape: AnnyShape) -> tuple[np.ndarray, np.ndarray]:
     """Anny's rest vertices ``(V, 3)`` and joint heads ``(J, 3)`` in Anny's own frame, float64."""
     J = model.bone_count
@@ -126,14 +140,11 @@ class AnnyBody(BodyModel):
         self.resolution = resolution
         self.rig = rig
         self.name = f"anny-{resolution}"
-        model = load_anny(rig, TOPOLOGIES[resolution])
-        self.joint_names = list(model.bone_labels)
-        self.parents = np.asarray(model.bone_parents, dtype=np.int64)
-        self.faces = model.get_triangular_faces().numpy().astype(np.int64)
-        dense = torch.zeros(model.vertex_bone_indices.shape[0], model.bone_count, dtype=torch.float64)
-        dense.scatter_add_(1, model.vertex_bone_indices.long(), model.vertex_bone_weights.double())
-        self._weights = (dense / dense.sum(1, keepdim=True)).numpy().astype(np.float32)
+        joint_names, parents, faces, weights = _anny_topology(rig, TOPOLOGIES[resolution])
+        self.joint_names = list(joint_names)
+        self.parents, self.faces, self._weights = parents.copy(), faces.copy(), weights.copy()  # each body its own
         self._rest: dict[AnnyShape, tuple[np.ndarray, np.ndarray]] = {}
+        self._proxy: AnnyBody | None = None
 
     def _resolve(self, shape) -> AnnyShape:
         if shape is None:
@@ -190,8 +201,12 @@ class AnnyBody(BodyModel):
 
     def collision_proxy(self) -> "AnnyBody":
         """The same body at low resolution (1,229 vertices), in the same frame, for simulation
-        and collision checks."""
-        return self if self.resolution == "low" else AnnyBody(self.shape, "low", self.rig)
+        and collision checks (made once per body and shape: each motion's collision handling asks for it)."""
+        if self.resolution == "low":
+            return self
+        if self._proxy is None or self._proxy.shape != self.shape:
+            self._proxy = AnnyBody(self.shape, "low", self.rig)
+        return self._proxy
 
 
 @functools.lru_cache(maxsize=64)

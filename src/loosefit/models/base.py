@@ -26,6 +26,7 @@ from torch import nn
 from loosefit.errors import InputError
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, ROOT_FEATURES, MotionHistory
+from loosefit.models.pins import Pins, pin_sizes
 from loosefit.motion.heading import FRAMES
 from loosefit.rig.virtual_bones import skin_bones, sparse_weights
 from loosefit.train.losses import frame_mask, masked_errors_mm
@@ -79,6 +80,12 @@ class GarmentModel(nn.Module):
         self.register_buffer("joints_std", torch.ones(J - 1, 6))
         self.register_buffer("faces", torch.zeros(F, 3, dtype=torch.long))
         self.register_buffer("template", torch.zeros(V, 3))  # the garment's rest mesh
+        #: the garment's pins kept where it is animated (:mod:`loosefit.models.pins`; sizes ``pins``:
+        #: :func:`~loosefit.models.pins.pin_sizes`); None for a model configured without them and for runs before them
+        pins = sizes.get("pins")
+        if pins and not (isinstance(pins, dict) and {"vertices", "parents", "radius"} <= set(pins)):
+            raise InputError(f"{self.method}: sizes' pins need radius, parents and vertices, got {pins!r}")
+        self.pins = Pins(pins["vertices"], pins["parents"], self.frame) if pins else None
 
     # ------------------------------------------------------------------ construction
 
@@ -93,9 +100,22 @@ class GarmentModel(nn.Module):
                 **({"frame": data.frame} if data.frame != "heading" else {})}  # heading runs keep their sizes
 
     @classmethod
+    def config_sizes(cls, data: GarmentSequences, config) -> dict:
+        """:meth:`data_sizes` and what ``config`` adds to them: the garment's pins (:mod:`loosefit.models.pins`)
+        where it has a ``pin_radius`` and the garment pinned vertices; subclasses add theirs (call ``super()``)."""
+        sizes = cls.data_sizes(data)
+        radius = getattr(config, "pin_radius", None)
+        if radius is not None and data.garment.pinned.any():
+            from loosefit.models.body_lbs import training_body
+
+            sizes["pins"] = pin_sizes(data.garment, training_body(data), radius)
+        return sizes
+
+    @classmethod
     def from_data(cls, data: GarmentSequences, config) -> "GarmentModel":
-        """A model sized for ``data`` with its buffers (statistics, faces, rig...) filled from it."""
-        model = cls(cls.data_sizes(data), config)
+        """A model sized for ``data`` and ``config`` (:meth:`config_sizes`) with its buffers (statistics, faces,
+        rig...) filled from the data."""
+        model = cls(cls.config_sizes(data, config), config)
         model.init_from_data(data)
         return model
 
@@ -108,6 +128,11 @@ class GarmentModel(nn.Module):
                 getattr(self, f"{key}_std").copy_(torch.from_numpy(stats[key][1]))
             self.faces.copy_(torch.from_numpy(data.faces))
             self.template.copy_(torch.from_numpy(data.garment.verts))
+        if self.pins is not None:
+            from loosefit.models.body_lbs import training_body
+
+            self.pins.fill(data.garment.verts, data.faces, data.garment.pinned, training_body(data),
+                           self._sizes["pins"]["radius"])
 
     def sizes(self) -> dict:
         return dict(self._sizes)
@@ -133,6 +158,11 @@ class GarmentModel(nn.Module):
     def forward(self, root: torch.Tensor, joints: torch.Tensor, state: Any = None) -> dict:
         """Raw (un-normalised) features -> ``{"verts": (B,T,V,3) canonical, "state": ..., other outputs}``."""
         raise NotImplementedError
+
+    def pinned(self, verts: torch.Tensor, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+        """Canonical ``verts (..., V, 3)`` with the garment's pins kept (:class:`~loosefit.models.pins.Pins`) from
+        the same frames' raw features; unchanged for a model without pins. What is animated, not what trains."""
+        return verts if self.pins is None else self.pins(verts, root, joints)
 
     # ------------------------------------------------------------------ trainer protocol
 

@@ -4,27 +4,24 @@ joint-specific pose-space deformation, on top of the garment's virtual bones.
 Per frame, in the canonical heading frame (:mod:`loosefit.models.motion_features`); shapes for ``N``
 windows of ``T`` frames, ``V`` vertices, ``B`` virtual bones, ``J`` body joints of which ``J_s`` selected:
 
-1. **Joint-wise encoding.** Each selected body joint ``j`` (by default every non-root joint but the
-   fingers and thumbs) sees the root features, its own rotation and those of its skeleton neighbours
-   (its parent, the root's tilt for children of the root, and its selected children, zero-padded to a
-   fixed count). One GRU per joint (hidden 600) and one linear layer per joint (480) give its feature
-   ``psi_j (K,)``. The ``J_s`` GRUs run together as one grouped GRU (:class:`JointGRU`).
-2. **Association.** A learnt matrix ``A (B, J_s)`` (``B`` virtual bones) through a ReLU maps joint
-   features to bones: ``relu(A) @ psi`` (JointNet Eq. 2), its rows normalised to sum 1 by default. A sparsity
-   penalty (Eq. 8's L1, or by default the rows' L1/L2) keeps it sparse, so a bone listens to few joints (an arm
-   does not swing the hem of a skirt).
+1. **Joint-wise encoding.** Each selected body joint ``j`` (by default every non-root joint but the fingers and
+   thumbs) sees the root features, its own rotation and those of its skeleton neighbours (its parent, the root's
+   tilt for children of the root, and its selected children, zero-padded to a fixed count). One GRU per joint
+   (hidden 600) and one linear layer per joint (480) give its feature ``psi_j (K,)``, all ``J_s`` GRUs as one
+   grouped GRU (:class:`JointGRU`).
+2. **Association.** A learnt matrix ``A (B, J_s)`` through a ReLU maps joint features to bones: ``relu(A) @ psi``
+   (JointNet Eq. 2), rows normalised to sum 1 by default. A sparsity penalty (Eq. 8's L1, or by default the rows'
+   L1/L2) keeps it sparse: a bone listens to few joints (an arm does not swing the hem of a skirt).
 3. **Garment prior.** Fourier features of each bone's rest position, ``[alpha_m cos(2 pi c_m . p),
    alpha_m sin(2 pi c_m . p)]`` with fixed random frequencies ``c_m`` and learnt ``alpha_m``, are
    concatenated with the bone features, as the paper's Fig. 2 and Sec. 3.2 text have it (``F`` reads
    ``2 K`` values); its Eq. 4 writes a sum, ``fourier="add"`` (``F`` reads ``K``).
 4. **Bone transforms.** A per-bone (shared) MLP ``F`` (2K, 1024, 2048, 1024, 6) gives three Euler angles
    (or, with ``rotation="sixd"``, ours, a 6D rotation: ``F`` ends in 9) and a three-vector offset, both
-   standardised by the training statistics of the rig's bone transforms. The bone rotates about its rest
-   position ``c`` and moves by the offset, so rotation ``R = euler(angles)`` and translation ``c + offset - R c``
-   (``R p`` plus it takes ``c`` to ``c + offset``); the rotation and the translation are thereby decoupled.
-5. **Joint-specific PSD.** A shared MLP ``phi`` (K, 480, 128, |X|) gives ``|X|`` blend weights per
-   joint; with a learnt displacement basis ``D_j (|X|, V, 3)`` per joint, the rest mesh becomes
-   ``U + sum_j phi(psi_j) D_j`` in the canonical (rest) space, before the skinning.
+   standardised by the training statistics of the rig's bone transforms. The bone rotates about its rest position
+   ``c`` and moves by the offset: ``R = euler(angles)``, translation ``c + offset - R c`` (decoupled).
+5. **Joint-specific PSD.** A shared MLP ``phi`` (K, 480, 128, |X|) gives ``|X|`` blend weights per joint; with a
+   learnt basis ``D_j (|X|, V, 3)`` per joint, the rest mesh becomes ``U + sum_j phi(psi_j) D_j``, before skinning.
 6. **Skinning.** Linear blend skinning of that mesh by the bones with the rig's SSDR weights.
 
 Loss: ``L1(vertices) + lambda_norm * normal loss + lambda_s * ||relu(A)||_1``, against the full
@@ -44,7 +41,8 @@ Departures from the paper, named:
   rest distances to the joints (``association_radius``); ``association="l1"``, ``association_radius=0`` is the
   paper's form;
 - ``L_cloth`` (JointNet Eq. 7) is averaged over vertices and coordinates rather than summed over the mesh, so
-  that the loss weights (not in the paper) do not depend on the vertex count.
+  that the loss weights (not in the paper) do not depend on the vertex count;
+- the garment's pins kept where it is animated (``pin_radius``, :mod:`loosefit.models.pins`).
 """
 
 from __future__ import annotations
@@ -64,6 +62,7 @@ from loosefit.models.base import GarmentModel
 from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
+from loosefit.models.pins import PIN_RADIUS, check_pin_radius
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
 from loosefit.motion.heading import check_frame
 from loosefit.models.layers.gru_bptt import by_hand, gru_layers
@@ -95,8 +94,7 @@ class JointNetConfig:
         gru_hidden: hidden size of each joint's GRU (600).
         features: ``K``, the per-joint feature size after the per-joint linear layer (480); also the
             size of the bone features and of the Fourier features (``K / 2`` frequencies), so even.
-        bone_mlp: hidden sizes of the per-bone MLP ``F`` (1024, 2048, 1024; LeakyReLU, as every
-            MLP of :mod:`loosefit.models.layers.mlp`: the paper does not name the activation).
+        bone_mlp: hidden sizes of the per-bone MLP ``F`` (1024, 2048, 1024; LeakyReLU: the paper names none).
         psd_mlp: hidden sizes of the PSD weight MLP ``phi`` (480, 128).
         psd_shapes: ``|X|``, displacement bases per joint (64 in the authors' code; not in the paper).
         psd_modes: 0: each displacement basis ``D_j`` is a free ``(|X|, V, 3)`` array, as in the paper; ``k > 0``
@@ -167,6 +165,7 @@ class JointNetConfig:
     history_frames: tuple[float, ...] = HISTORY_FRAMES
     history_vertical: bool = False
     frame: str = "raised"
+    pin_radius: Optional[float] = PIN_RADIUS
 
     def __post_init__(self):
         check_history(self.history_frames)
@@ -193,6 +192,7 @@ class JointNetConfig:
             raise InputError(f"association_radius must be >= 0 metres, got {self.association_radius}")
         if self.association not in ("l1", "hoyer"):
             raise InputError(f"association must be 'l1' or 'hoyer', got {self.association!r}")
+        check_pin_radius(self.pin_radius)
 
 
 def _paper_training() -> TrainConfig:
@@ -439,16 +439,14 @@ class JointNet(GarmentModel):
                 "joint_names": list(body.joint_names), "parents": [int(p) for p in body.parents]}
 
     @classmethod
-    def from_data(cls, data: GarmentSequences, config: JointNetConfig) -> "JointNet":
-        """As :meth:`GarmentModel.from_data`, the PSD's mode count (``config.psd_modes``, at most ``V - 1``: a coarse
+    def config_sizes(cls, data: GarmentSequences, config: JointNetConfig) -> dict:
+        """As :meth:`GarmentModel.config_sizes`, the PSD's mode count (``config.psd_modes``, at most ``V - 1``: a coarse
         garment has fewer modes) recorded among the sizes, so that the run's model.json rebuilds the same model."""
-        sizes = cls.data_sizes(data)
+        sizes = super().config_sizes(data, config)
         sizes["psd_modes"] = min(config.psd_modes, sizes["num_verts"] - 1)
         if config.rotation != "euler":  # Euler runs keep the sizes they had
             sizes["rotation"] = config.rotation
-        model = cls(sizes, config)
-        model.init_from_data(data)
-        return model
+        return sizes
 
     def init_from_data(self, data: GarmentSequences) -> None:
         """Rig buffers and the statistics of the bone outputs over every training frame."""

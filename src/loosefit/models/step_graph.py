@@ -179,6 +179,7 @@ class StepGraph(nn.Module):
         joints = _sixd(R[1:])  # (J-1, 6)
         network = getattr(self, "_" + self.method.replace("-", "_"))
         verts, bone_R, bone_T, recurrent = network(root, joints, state, started)
+        verts = self.model.pinned(verts, root, joints)  # the garment's pins kept, as animate keeps them
         origin = torch.cat([root_position[:2], zero[None]]) if self.frame == "heading" else root_position
         if self.frame == "pelvis":
             Rh = root_rot

@@ -55,6 +55,7 @@ runs at half the steps a second and fits the training motions worse per step (``
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 import torch
@@ -67,6 +68,7 @@ from loosefit.models.body_lbs import training_body
 from loosefit.models.streams import MemoryWindowConfig, StateCarry, window_mask
 from loosefit.models.dataset import GarmentSequences
 from loosefit.models.motion_features import HISTORY_FRAMES, check_history
+from loosefit.models.pins import PIN_RADIUS, check_pin_radius
 from loosefit.motion.heading import check_frame
 from loosefit.models.ensemble import EnsembleConfig
 from loosefit.models.layers.edge_conv import EdgeConv, neighbour_table
@@ -151,6 +153,11 @@ class VirtualBonesConfig:
             validation sets, equal steps: the dress's held-out capture subject, 105.0 / 99.5 / 88.8 / 84.7 / 90.8 mm
             at 0 / 0.2 / 0.5 / 1 / 2 (0 and 0.5 again with another seed: 129.1 and 89.0), and the demo's
             validation motions, 52.3 / 52.6 / 56.6 mm at 0 / 0.5 / 1 (``benchmarks/experiments/LOG.md``).
+        pin_radius: keep the garment's pinned vertices where the simulation holds them, skinned to the body, and
+            fade the network's garment into them over this many metres along it (ours; :mod:`loosefit.models.pins`;
+            applied where the garment is animated, not in training); None: none, as the paper. Default
+            :data:`~loosefit.models.pins.PIN_RADIUS`, chosen on the real-capture dress's validation subject and the
+            demo's validation motions.
         exclude_joints: parts of body joint names (any case, e.g. ``"Arm"``, ``"Hand"``; as JointNet's) whose
             rotations the low-frequency module does not read (their features held at zero; ours): a skirt moves with
             the hips and legs, and arm poses it never met are then no input it can misread. A joint within
@@ -183,6 +190,7 @@ class VirtualBonesConfig:
     pose_noise: float = 0.5
     exclude_joints: tuple[str, ...] = EXCLUDED_JOINTS
     frame: str = "raised"
+    pin_radius: Optional[float] = PIN_RADIUS
 
     def __post_init__(self):
         check_history(self.history_frames)
@@ -196,6 +204,7 @@ class VirtualBonesConfig:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.hf_target not in HF_TARGETS:
             raise InputError(f"hf_target must be one of {HF_TARGETS}, got {self.hf_target!r}")
+        check_pin_radius(self.pin_radius)
 
 
 def _default_train() -> TrainConfig:

@@ -29,7 +29,7 @@ from loosefit.geometry.ray_cull import AxisRayCuller
 from loosefit.geometry.signed_distance import posed_body_sdfs
 from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF
 from loosefit.models.collision.network import BodySDFNet, SDFFunction, motion_sdf_inputs
-from loosefit.models.collision.resolver import CollisionResolver, ExactMotionSDF, ExactSDF, push_out
+from loosefit.models.collision.resolver import SURFACE_PASSES, CollisionResolver, ExactMotionSDF, ExactSDF, push_out
 from loosefit.sim.collider import enclosing_frames
 from loosefit.threads import torch_threads
 
@@ -214,7 +214,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
                              net: BodySDFNet | None = None, push_distance: float = 0.004,
                              cull: bool = True, margin: float = 0.0, cull_cell=CULL_CELL,
                              inflate: float = PROXY_INFLATE, surface: bool = True,
-                             exact_backend: str = "auto") -> np.ndarray:
+                             exact_backend: str = "auto", passes: int = SURFACE_PASSES) -> np.ndarray:
     """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
     Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
 
@@ -240,7 +240,8 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     ``surface`` (``"neural"`` and ``"exact"``; loosefit's addition beyond SwinGar Eq. 10, on by default): after the
     vertices, the body passing through a triangle or an edge between them is resolved too
     (:class:`CollisionResolver`: the field at every edge midpoint and triangle centroid the cull cannot prove
-    outside, the vertices of the deep ones moved until none is inside); False: the vertices only, as the paper.
+    outside, the vertices of the deep ones moved until none is inside, :data:`SURFACE_PASSES` passes at most or
+    ``passes``); False: the vertices only, as the paper.
 
     ``exact_backend`` (``"exact"`` only): ``"auto"`` (Warp when it loads: :func:`correct_exact_motion`, many frames
     a pass; else libigl), ``"warp"`` or ``"igl"`` (libigl's tree rebuilt each frame, :func:`correct_frame` frame by
@@ -267,7 +268,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     else:
         posed = proxy.pose(motion).verts if cull or mode == "pushout" else None
     culler = AxisRayCuller(posed[0], proxy.faces, cull_cell) if cull and mode != "pushout" else None
-    resolver = CollisionResolver(faces, out.shape[1], surface=surface)
+    resolver = CollisionResolver(faces, out.shape[1], surface=surface, passes=passes)
     if mode == "neural":
         code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
         return correct_motion(out, resolver, net.eval(), code, rot, origin, posed, culler, margin)[0]

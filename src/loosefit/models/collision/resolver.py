@@ -40,7 +40,11 @@ WINDING_FROM = 0.005
 #: limb (a triangle on both sides of a thigh) is wrapped around it a ring of triangles a pass. On a skinned 3.9k
 #: vertex skirt through a kicking or running leg the deepest edge midpoint or centroid left was 44-49 mm after 4
 #: passes, 27 mm after 8, 19-21 mm after 16, for 20 % more field queries than 8 (benchmarks/surface_collision.py).
-SURFACE_PASSES = 8
+#: Chosen on the shipped skirts and dresses over clips of the real-capture validation subject: the deepest point
+#: left over ten runs and clips was 50.5 mm after 8 passes, 27.7 after 32, 15.8 after 64 and 26.0 after 128 (the
+#: cascade does not always settle); the later passes see only the samples next to the last moves, so 64 cost 0-25 %
+#: more time than 8 (benchmarks/experiments/LOG.md).
+SURFACE_PASSES = 64
 #: Metres a surface sample must be inside the field's surface (``S < -SURFACE_TOLERANCE``) to be moved: cloth
 #: resting on the body is left alone (the chord of a 2 cm edge on a waist of 15 cm radius sags 0.33 mm inside it),
 #: and a sample put on the surface by the previous pass is not moved again for its float rounding. A hundredth
