@@ -9,8 +9,8 @@ import onnxruntime as ort
 import pytest
 from onnx import TensorProto, helper, numpy_helper
 
-from loosefit.io.onnx_int8 import (BLOCK_SIZE, DYNAMIC_MIN_ROWS, block_size_for, dequantize_blocks, quantize_blocks,
-                                   quantize_columns, quantize_model)
+from loosefit.io.onnx_int8 import (BLOCK_SIZE, COLUMN_LEVELS, DYNAMIC_MIN_ROWS, block_size_for, dequantize_blocks,
+                                   quantize_blocks, quantize_columns, quantize_model)
 
 K, N, G = 300, 24, 3  # K not a multiple of the block: the last block is padded
 R = DYNAMIC_MIN_ROWS + 4  # rows of the many-row product
@@ -47,7 +47,8 @@ def test_columns_round_trip_within_half_a_step():
     back = q.astype(np.float32) * scales
     assert np.all(np.abs(back - w) <= scales / 2 * (1 + 1e-6)) and np.abs(back - w).max() > 0
     np.testing.assert_array_equal(back[:, 3], 0.0)
-    assert np.all(np.abs(q).max(0)[scales > 0] == 127)  # each column's largest weight is +-127 steps
+    assert np.all(np.abs(q).max(0)[scales > 0] == COLUMN_LEVELS)  # each column's largest weight is the top step
+    assert COLUMN_LEVELS == 63  # 7 bits: onnxruntime's AVX2 kernel sums pairs of uint8 x int8 products in int16
 
 
 def _graph(rng):
