@@ -496,6 +496,11 @@ def test_the_cull_bins_change_the_work_not_the_exact_correction(body):
     assert np.abs(no_pass - plain).max() > 1e-3
     with pytest.raises(InputError, match="surface passes"):
         handle_motion_collisions(verts, sheet_faces, body, motion, "exact", passes=-1)
+    # a motion of one frame (a pose): the frames' cull given that frame's samples, as for more frames
+    one = handle_motion_collisions(verts[:1], sheet_faces, body, motion.slice(0, 1), "exact")
+    np.testing.assert_allclose(one, handle_motion_collisions(verts[:2], sheet_faces, body, motion.slice(0, 2),
+                                                             "exact")[:1], rtol=0, atol=1e-6)
+    assert np.abs(one - verts[:1]).max() > 1e-2
 
 
 def test_cpu_config_file_loads_the_measured_recipe():

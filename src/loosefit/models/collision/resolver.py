@@ -328,7 +328,7 @@ class CollisionResolver:
                 corner = self._corners(frame, sample)
                 points = np.einsum("nk,nkd->nd", self.sample_weight[sample], x[corner]).astype(dtype)
             if outside is not None:
-                kept = ~self._culled(points, frame, T, outside, every=last is None)
+                kept = ~self._culled(points, frame, T if frames else None, outside, every=last is None)
                 cand, sample, frame, points = cand[kept], sample[kept], frame[kept], points[kept]
             corner, weight = self._corners(frame, sample), self.sample_weight[sample]  # of the samples the cull left
             # a field that is a distance changes by at most |p - x_j| from a vertex to a sample: a vertex known to
@@ -383,11 +383,12 @@ class CollisionResolver:
             self._move_out(out, sdf, last, np.zeros(len(out), bool), frames)
 
     @staticmethod
-    def _culled(points: np.ndarray, frame: np.ndarray, T: int, outside, every: bool) -> np.ndarray:
-        """``(N,)`` bool: the cull proves ``points (N, 3)`` (of frames ``frame (N,)``, sorted) outside. ``every``: the
-        points are every sample of every frame, in order; otherwise a frames' cull (``T > 1``) is given each frame's
-        points padded to the same count with a point far outside."""
-        if T == 1:
+    def _culled(points: np.ndarray, frame: np.ndarray, T: int | None, outside, every: bool) -> np.ndarray:
+        """``(N,)`` bool: the cull proves ``points (N, 3)`` (of frames ``frame (N,)``, sorted) outside. ``T``: the
+        frames of a frames' cull (points ``(T, N, 3)``, one frame included), None for one frame's (``(N, 3)``).
+        ``every``: the points are every sample of every frame, in order; otherwise a frames' cull is given each
+        frame's points padded to the same count with a point far outside."""
+        if T is None:
             return np.asarray(outside(points))
         if every:
             return np.asarray(outside(points.reshape(T, -1, 3))).reshape(-1)
