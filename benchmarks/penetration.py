@@ -77,7 +77,7 @@ def animate_as_cli(run: Path, garment, body, motion, passes: int):
     t = time.perf_counter()
     raw = animator.animate_batch([motion])[0]
     t_model = time.perf_counter() - t
-    handle = dict(mode="exact", margin=0.0, passes=passes)
+    handle = dict(mode="exact", margin=0.0, passes=passes, rest=animator.rest_garment)
     handle_motion_collisions(raw, animator.faces, body, motion, **handle)  # warm-up (kernels)
     t = time.perf_counter()
     fixed = handle_motion_collisions(raw, animator.faces, body, motion, **handle)

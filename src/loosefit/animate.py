@@ -139,6 +139,12 @@ class Animator:
         return self.meta["method"]
 
     @property
+    def rest_garment(self) -> np.ndarray:
+        """``(V, 3)`` float32 the garment's rest mesh on the rest body (the model's template), metres: what the
+        collision handling skins to the body for cloth centimetres inside it."""
+        return self.model.template.detach().cpu().numpy()
+
+    @property
     def num_joints(self) -> int:
         return int(self.meta["sizes"]["num_joints"])
 

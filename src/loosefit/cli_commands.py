@@ -361,11 +361,11 @@ def cmd_animate(args):
         if fitted is not None:
             print(_refit_line(args.garment, fitted))
         pair = animator.pair(garment.verts, garment.faces, body)
-        results, faces = [animator.animate(pair, m) for m in motions], garment.faces
+        results, faces, rest = [animator.animate(pair, m) for m in motions], garment.faces, garment.verts
     else:
         animator = Animator(args.run, checkpoint=args.checkpoint, threads=args.threads, garment=args.garment,
                             body=body if args.garment else None, device=args.device)
-        results, faces = animator.animate_batch(motions), animator.faces
+        results, faces, rest = animator.animate_batch(motions), animator.faces, animator.rest_garment
     for path, motion in zip(args.motion, motions):  # root motion the run never saw: the garment may lag behind
         for line in animator.range_warnings(motion, path):
             print(f"loosefit animate: warning: {line}", file=sys.stderr)
@@ -378,7 +378,7 @@ def cmd_animate(args):
         margin = collision_margin(args.collision if net is not None else None, args.collision_margin)
         if margin and net is None:
             raise InputError("--collision-margin applies to a body SDF network, not to --collision " + mode)
-        results = [handle_motion_collisions(v, faces, body, m, mode, net, margin=margin)
+        results = [handle_motion_collisions(v, faces, body, m, mode, net, margin=margin, rest=rest)
                    for v, m in zip(results, motions)]
     outs = [Path(args.out)] if len(motions) == 1 else [Path(args.out) / f"{Path(p).stem}{args.format}" for p in args.motion]
     for motion, verts, out in zip(motions, results, outs):

@@ -151,7 +151,8 @@ def run_demo(out: Path, plan: Path | None = None, bones: int = 32) -> dict:
             motion = store.motion(seq.motion)
             body = AnnyBody(_shape(store, seq.body))
             # with the collision handling `loosefit animate` applies by default (exact, against the posed body)
-            predictions = {m: handle_motion_collisions(a.animate(motion), garment.faces, body, motion, "exact")
+            predictions = {m: handle_motion_collisions(a.animate(motion), garment.faces, body, motion, "exact",
+                                                       rest=garment.verts)
                            for m, a in animators.items()}
             posed = body.pose(motion)
             # the reference runs (start noise): RMSE against the mean of the runs and their spread, the floor

@@ -515,3 +515,69 @@ def test_cpu_config_file_loads_the_measured_recipe():
     config = load_config(SDFRunConfig, path)
     assert config.net == BodySDFConfig(hidden=32, bone_frames=True)
     assert config.train == SDFTrainConfig(steps=30000, frames=16, random_shapes=16, random_motions=8, batch_frames=2)
+
+
+def test_fallback_weights_are_the_depth_ramp_grown_two_rings_then_averaged():
+    """:func:`fallback_weights` against a vertex-by-vertex reference: 0 up to the first depth, 1 from the second,
+    linear between; the largest over each vertex and its neighbours, twice; then the mean over each vertex and its
+    neighbours (FALLBACK_SMOOTH times)."""
+    from loosefit.models.collision.handling import FALLBACK_SMOOTH, SKINNED_FALLBACK, fallback_weights
+    from loosefit.models.collision.resolver import CollisionResolver
+
+    verts, faces = sheet(9, 7)
+    V = len(verts)
+    rng = np.random.default_rng(0)
+    low, high = SKINNED_FALLBACK
+    depth = np.full((2, V), -0.01)
+    depth[0, 20], depth[0, 44], depth[1, 3] = high + 0.01, (low + high) / 2, low + (high - low) / 30
+    depth[1, 50] = rng.uniform(low, high)
+    got = fallback_weights(depth, CollisionResolver(faces, V))
+    nbrs = [set() for _ in range(V)]
+    for a, b, c in faces:
+        nbrs[a] |= {b, c}; nbrs[b] |= {a, c}; nbrs[c] |= {a, b}
+    for t in range(2):
+        w = [min(max((d - low) / (high - low), 0.0), 1.0) for d in depth[t]]
+        assert sorted(set(w)) == pytest.approx([0.0, 0.5, 1.0] if t == 0 else sorted([0.0, 1 / 30, w[50]]))
+        for _ in range(2):
+            w = [max([w[i]] + [w[j] for j in nbrs[i]]) for i in range(V)]
+        for _ in range(FALLBACK_SMOOTH):
+            w = [(w[i] + sum(w[j] for j in nbrs[i])) / (1 + len(nbrs[i])) for i in range(V)]
+        np.testing.assert_allclose(got[t], w, rtol=0, atol=1e-12)
+    assert np.all(fallback_weights(np.full((1, V), low - 1e-3), CollisionResolver(faces, V)) == 0.0)
+    assert np.all(fallback_weights(np.full((1, V), high), CollisionResolver(faces, V)) == 1.0)
+
+
+def test_cloth_deep_in_the_body_is_taken_to_the_garment_skinned_to_it(body, monkeypatch):
+    """With the garment's rest mesh, the exact handling first takes the vertices deep inside towards the garment
+    skinned to the body (:func:`fallback_weights`): a sheet through the chest ends, where wholly taken, where the same
+    sheet worn 15 cm in front of the body is skinned to, not pushed out through the back and the front (depths of
+    1 and 2.5 cm: the chest is 5.6 cm deep)."""
+    from loosefit.models.collision import handle_motion_collisions, handling
+    from loosefit.models.collision.handling import fallback_weights
+    from loosefit.models.collision.resolver import CollisionResolver
+    from loosefit.motion.procedural import generate
+    from loosefit.sim.attach import body_lbs
+
+    monkeypatch.setattr(handling, "SKINNED_FALLBACK", (0.01, 0.025))
+
+    motion = generate("walk", 0.2, 5, body)
+    sheet_verts, sheet_faces = sheet(25, 25)
+    flat = (sheet_verts - sheet_verts.mean(0)) * [0.3, 0.3, 1.0]  # 30 x 30 cm, in the xy plane
+    torso = body.collision_proxy().pose(motion).verts.mean(1) + [0.0, 0.0, 0.3]  # the chest
+    # stood up in the body's side-to-side and vertical directions (x, z), through the middle of the torso
+    upright = flat[:, [0, 2, 1]]
+    verts = (upright[None] + torso[:, None]).astype(np.float32)
+    rest_torso = body.collision_proxy().rest_verts().mean(0) + [0.0, 0.0, 0.3]
+    rest = (upright + rest_torso + [0.0, -0.15, 0.0]).astype(np.float32)  # worn in front (-y)
+    skinned = body_lbs(rest, body, motion)
+    handled = handle_motion_collisions(verts, sheet_faces, body, motion, "exact", rest=rest)
+    plain = handle_motion_collisions(verts, sheet_faces, body, motion, "exact")
+    proxy = body.collision_proxy()
+    sdf = BodySDF(proxy.pose(motion).verts[0].astype(np.float64), proxy.faces)
+    weight = fallback_weights(-sdf.query(verts[0])[None], CollisionResolver(sheet_faces, len(sheet_verts)))[0]
+    deep = weight == 1.0  # taken wholly (on the proxy itself: the handling's enclosing proxy is larger still)
+    assert deep.sum() > 20
+    np.testing.assert_allclose(handled[0][deep], skinned[0][deep], rtol=0, atol=1e-5)
+    assert np.abs(plain[0][deep] - skinned[0][deep]).max() > 0.05  # without it they go out on both sides
+    with pytest.raises(InputError, match="rest mesh"):
+        handle_motion_collisions(verts, sheet_faces, body, motion, "exact", rest=rest[:-1])

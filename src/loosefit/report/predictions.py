@@ -123,7 +123,8 @@ def load_methods(runs: list[str | Path], sequences: list[Sequence], device: str 
     for run in runs:
         method, predictions = animate_run(run, sequences, device)
         by_name = {s.name: s for s in sequences}
-        predictions = {name: post_process(p, by_name[name].faces, by_name[name].body, by_name[name].motion, handling)
+        predictions = {name: post_process(p, by_name[name].faces, by_name[name].body, by_name[name].motion, handling,
+                                          by_name[name].garment_mesh.verts)
                        for name, p in predictions.items()}
         meta = read_run_meta(run)
         warnings = [line for s in sequences if s.name in predictions

@@ -146,7 +146,7 @@ def _run_panel(run: Path, motion_path: Path, body, handling: str = "exact",
     verts = animator.animate_batch([motion])[0]
     from loosefit.models.collision import post_process
 
-    verts = post_process(verts, animator.faces, body, motion, handling)  # as `loosefit animate` does by default
+    verts = post_process(verts, animator.faces, body, motion, handling, animator.rest_garment)  # as `animate` does
     posed = body.pose(motion)
     tracks = [ViewerTrack("body", posed.verts[: len(verts)], body.faces, BODY_COLOR),
               ViewerTrack("garment", verts, animator.faces, GARMENT_COLOR)]

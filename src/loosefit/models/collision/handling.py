@@ -30,6 +30,7 @@ from loosefit.geometry.signed_distance import posed_body_sdfs
 from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF
 from loosefit.models.collision.network import BodySDFNet, SDFFunction, motion_sdf_inputs
 from loosefit.models.collision.resolver import SURFACE_PASSES, CollisionResolver, ExactMotionSDF, ExactSDF, push_out
+from loosefit.sim.attach import body_lbs
 from loosefit.sim.collider import enclosing_frames
 from loosefit.threads import torch_threads
 
@@ -131,8 +132,47 @@ def correct_motion(verts: np.ndarray, resolver: CollisionResolver, net: "BodySDF
     return world, inside
 
 
+#: Metres inside the collision body from which :func:`correct_exact_motion` takes a vertex towards the garment skinned
+#: to the body, and the depth where it takes it wholly (loosefit's, before SwinGar Eq. 10). Cloth centimetres inside
+#: (a dress's bodice left upright in a torso leaning forward, a strap through the neck) is often closer to the far
+#: side of a thin part than to where it came in: Eq. 10 sends neighbours out on opposite sides and the surface tears
+#: into spikes (the shipped dress on a dribble of the validation subject: 1.8 % of its triangles over 4 times their
+#: rest area, a vertex moved 56 cm). Chosen on the validation subject (CMU subject 6) over 2-5, 3-6 and 4-7 cm and
+#: 1 or 3 passes of :data:`FALLBACK_SMOOTH`: 4-7 cm with 3 kept the dress's validation RMSE (77.7 -> 77.6 mm
+#: VirtualBones, 80.7 -> 80.6 JointNet; 2-5 cm cost 1.4 and 3.0 mm) and lowered or kept the shares of triangles
+#: stretched over 4 times or collapsed under 20 % of their rest area for both garments and methods on every
+#: validation clip (benchmarks/experiments/skinned_fallback.py, benchmarks/experiments/LOG.md).
+SKINNED_FALLBACK = (0.04, 0.07)
+#: Passes of one-ring averaging that spread the fallback's weights (:func:`fallback_weights`): the cloth taken over
+#: fades into the cloth around it over a few rings instead of stretching across one.
+FALLBACK_SMOOTH = 3
+
+
+def fallback_weights(depth: np.ndarray, resolver: CollisionResolver, depths: tuple | None = None) -> np.ndarray:
+    """``(T, V)`` weights in [0, 1] of the garment skinned to the body, from the vertices' depths inside the body
+    ``depth (T, V)`` (metres, negative outside): 0 up to ``depths[0]``, 1 from ``depths[1]``, linear between; then
+    the largest over each vertex's two rings of neighbours (the ``resolver``'s mesh), then averaged over its one ring
+    with itself :data:`FALLBACK_SMOOTH` times, so that a piece taken over fades into the cloth around it."""
+    low, high = SKINNED_FALLBACK if depths is None else depths
+    w = np.clip((np.asarray(depth, np.float64) - low) / (high - low), 0.0, 1.0)
+    count = np.diff(resolver.start)
+    owner = np.flatnonzero(count)
+    if not w.any() or not len(owner):
+        return w
+    first, nbr = resolver.start[owner], resolver.neighbours
+    for _ in range(2):
+        grown = w.copy()
+        grown[:, owner] = np.maximum(w[:, owner], np.maximum.reduceat(w[:, nbr], first, axis=1))
+        w = grown
+    for _ in range(FALLBACK_SMOOTH):
+        total = w.copy()
+        total[:, owner] += np.add.reduceat(w[:, nbr], first, axis=1)
+        w = total / (1.0 + count)
+    return w
+
+
 def correct_exact_motion(verts: np.ndarray, resolver: CollisionResolver, posed: np.ndarray, faces: np.ndarray,
-                         culler: AxisRayCuller | None = None) -> np.ndarray:
+                         culler: AxisRayCuller | None = None, skinned: np.ndarray | None = None) -> np.ndarray:
     """SwinGar Eq. 10 with the exact field (and the resolver's surface pass) on every frame of an animated garment,
     :data:`FRAME_CHUNK` frames a pass on one thread: each chunk's posed collision surfaces in one
     :class:`~loosefit.geometry.warp_sdf.MotionMeshSDF` (Warp BVHs refitted, not rebuilt),
@@ -144,6 +184,9 @@ def correct_exact_motion(verts: np.ndarray, resolver: CollisionResolver, posed: 
         resolver: the garment's :class:`CollisionResolver`.
         posed: ``(T, Vb, 3)`` the collision surface of each frame; ``faces (Fb, 3)`` its triangles.
         culler: its :class:`~loosefit.geometry.ray_cull.AxisRayCuller`; None: every vertex reaches the field.
+        skinned: ``(T, V, 3)`` the garment skinned to the body (:func:`~loosefit.sim.attach.body_lbs`): first, each
+            vertex more than ``SKINNED_FALLBACK[0]`` inside is taken towards it (:func:`fallback_weights`); None:
+            no fallback (SwinGar Eq. 10 and the surface pass only).
 
     Returns:
         ``(T, V, 3)`` float32 corrected vertices.
@@ -162,6 +205,15 @@ def correct_exact_motion(verts: np.ndarray, resolver: CollisionResolver, posed: 
             cand, outside = np.ones(world.shape[:2], bool), None
         else:
             cand, outside = ~culler.update(posed[chunk], world).outside(world), culler.outside
+        if skinned is not None:
+            frame, vertex = np.nonzero(cand)
+            depth = np.full(cand.shape, -np.inf)
+            depth[frame, vertex] = -field.query(world[frame, vertex], frame)[0]
+            w = fallback_weights(depth, resolver)[..., None]
+            if w.any():
+                world = ((1.0 - w) * world + w * skinned[chunk]).astype(np.float32)
+                if culler is not None:  # the moved vertices asked again (the window still holds: sound anyway)
+                    cand = ~culler.outside(world)
         out[chunk] = resolver.frames(torch.from_numpy(world), sdf, cand, outside)[0].numpy()
     return out
 
@@ -178,12 +230,13 @@ def check_post_process(handling: str) -> str:
     return handling
 
 
-def post_process(verts: np.ndarray, faces: np.ndarray, body, motion, handling: str) -> np.ndarray:
+def post_process(verts: np.ndarray, faces: np.ndarray, body, motion, handling: str,
+                 rest: np.ndarray | None = None) -> np.ndarray:
     """An animation ``verts (T, V, 3)`` after ``handling`` (:data:`POST_PROCESSES`): as it is for ``"none"``,
-    else corrected by :func:`handle_motion_collisions`."""
+    else corrected by :func:`handle_motion_collisions` (``rest``: the garment's rest mesh, for its fallback)."""
     if check_post_process(handling) == "none":
         return verts
-    return handle_motion_collisions(verts, faces, body, motion, handling)
+    return handle_motion_collisions(verts, faces, body, motion, handling, rest=rest)
 
 
 #: Metres the exact handling moves its collision surface out along its vertex normals, beyond the posed proxy
@@ -214,7 +267,8 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
                              net: BodySDFNet | None = None, push_distance: float = 0.004,
                              cull: bool = True, margin: float = 0.0, cull_cell=CULL_CELL,
                              inflate: float = PROXY_INFLATE, surface: bool = True,
-                             exact_backend: str = "auto", passes: int = SURFACE_PASSES) -> np.ndarray:
+                             exact_backend: str = "auto", passes: int = SURFACE_PASSES,
+                             rest: np.ndarray | None = None) -> np.ndarray:
     """Collision post-process of an animated garment, any method: world ``verts (T, V, 3)`` on ``body`` (an
     Anny body of the right shape) following ``motion`` -> corrected ``(T, V, 3)`` float32.
 
@@ -243,6 +297,11 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
     outside, the vertices of the deep ones moved until none is inside, :data:`SURFACE_PASSES` passes at most or
     ``passes``); False: the vertices only, as the paper.
 
+    ``rest`` (``"exact"`` only): the garment's rest mesh ``(V, 3)`` on the rest body (a run's template). With it,
+    before SwinGar Eq. 10, a vertex more than :data:`SKINNED_FALLBACK` ``[0]`` inside the collision body is taken
+    towards the garment skinned to the body (:func:`fallback_weights`): cloth centimetres inside cannot be pushed
+    out whole. None: no fallback.
+
     ``exact_backend`` (``"exact"`` only): ``"auto"`` (Warp when it loads: :func:`correct_exact_motion`, many frames
     a pass; else libigl), ``"warp"`` or ``"igl"`` (libigl's tree rebuilt each frame, :func:`correct_frame` frame by
     frame: the reference; 1.4-1.9 times the CPU time on the shipped skirts, benchmarks/experiments/LOG.md).
@@ -269,17 +328,26 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
         posed = proxy.pose(motion).verts if cull or mode == "pushout" else None
     culler = AxisRayCuller(posed[0], proxy.faces, cull_cell) if cull and mode != "pushout" else None
     resolver = CollisionResolver(faces, out.shape[1], surface=surface, passes=passes)
+    skinned = None
+    if rest is not None and mode == "exact":
+        rest = np.asarray(rest, np.float32)
+        if rest.shape != out.shape[1:]:
+            raise InputError(f"the garment's rest mesh must be {out.shape[1:]} like its frames, got {rest.shape}")
+        skinned = body_lbs(rest, body, motion)
     if mode == "neural":
         code, rot, origin = motion_sdf_inputs(body, motion, net.num_bones > 0)
         return correct_motion(out, resolver, net.eval(), code, rot, origin, posed, culler, margin)[0]
     if mode == "exact" and exact_backend != "igl" and warp_sdf.available():
-        return correct_exact_motion(out, resolver, posed, proxy.faces, culler)
+        return correct_exact_motion(out, resolver, posed, proxy.faces, culler, skinned)
     meshes = posed_body_sdfs(posed, proxy.faces)
     for t in range(len(out)):
         mesh = next(meshes)  # each frame's tree; the edge map built once
         if mode == "pushout":
             out[t] = push_out(out[t], mesh, push_distance)[0]
         else:
+            if skinned is not None:
+                w = fallback_weights(-mesh.query(out[t])[None], resolver)[0, :, None]
+                out[t] = (1.0 - w) * out[t] + w * skinned[t]
             out[t] = correct_frame(out[t], resolver, ExactSDF(mesh), None,
                                    culler.update(posed[t], out[t]) if culler else None)[0]
     return out
