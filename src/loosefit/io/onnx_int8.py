@@ -13,9 +13,8 @@ traffic and, for JointNet's bone MLP, by arithmetic: a quarter of the bytes and 
   kernel also rounds each block of the input to int8 (scale: the block's largest magnitude / 127);
 - a product over many rows (JointNet's bone MLP on its 80 bones): ``DynamicQuantizeMatMul``, the weights symmetric
   per output column on 7 bits (``scale[n] = max_k |W[k, n]| / 63``, :data:`COLUMN_LEVELS`, int8, zero point 0),
-  the input rounded at run time to
-  uint8 with one scale and zero point for the whole tensor: 3.5x faster than the block kernel at 80 rows, coarser
-  in its input (a recurrent state never goes through it).
+  the input rounded at run time to uint8 with one scale and zero point for the whole tensor: 3.5x faster than the
+  block kernel at 80 rows, coarser in its input (a recurrent state never goes through it).
 
 Rounding the inputs, not the weights, is what moves a model's vertices most (measured on the shipped JointNet
 skirt: 2.7 mm from the inputs, 0.5 mm from the weights). So by default each product is made twice, by the same
