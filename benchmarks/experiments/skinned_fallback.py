@@ -49,6 +49,7 @@ def main() -> None:
     ap.add_argument("--motion", action="append", default=[], help="a motion file (BVH: --joint-map)")
     ap.add_argument("--joint-map", default="cc")
     ap.add_argument("--data", default=None, help="a store whose validation sequences the runs' garment wears")
+    ap.add_argument("--split", default="val", help="the store's split to score (default val; test only to report)")
     ap.add_argument("--depths", default=None, help="the fallback's depths, metres (default: the handling's)")
     ap.add_argument("--smooth", type=int, default=None, help="its smoothing passes (default: the handling's)")
     ap.add_argument("--name", default="skinned-fallback")
@@ -88,18 +89,18 @@ def main() -> None:
                 results["motions"].append(row)
                 print(row, flush=True)
         if a.data:
-            results["validation"] += validation_rows(a.data, run, animator, body, faces, rest, rest_area)
+            results["validation"] += validation_rows(a.data, run, animator, body, faces, rest, rest_area, a.split)
     print(save_results(a.name, results))
 
 
-def validation_rows(data: str, run: str, animator, body, faces, rest, rest_area) -> list[dict]:
-    """Pooled RMSE (mm) and the two shares over the store's validation sequences, per handling."""
+def validation_rows(data: str, run: str, animator, body, faces, rest, rest_area, split: str = "val") -> list[dict]:
+    """Pooled RMSE (mm) and the two shares over the store's sequences of ``split``, per handling."""
     from loosefit.data import DatasetStore
     from loosefit.models.collision import handle_motion_collisions
 
     sums: dict = {}
     with DatasetStore.open(data) as store:
-        for name in store.sequence_names("val"):
+        for name in store.sequence_names(split):
             seq = store.sequence(name)
             motion, gt = store.motion(seq.motion), np.asarray(seq.verts[:])
             raw = animator.animate(motion)
@@ -109,7 +110,7 @@ def validation_rows(data: str, run: str, animator, body, faces, rest, rest_area)
                 s = sums.setdefault(label, np.zeros(5))
                 s += [((verts - gt) ** 2).sum(), gt.shape[0] * gt.shape[1], stretched * len(gt), collapsed * len(gt),
                       len(gt)]
-    rows = [{"run": run, "handling": label, "rmse_mm": float(1e3 * np.sqrt(s[0] / s[1])),
+    rows = [{"run": run, "split": split, "handling": label, "rmse_mm": float(1e3 * np.sqrt(s[0] / s[1])),
              "stretched_pct": float(s[2] / s[4]), "collapsed_pct": float(s[3] / s[4])} for label, s in sums.items()]
     for row in rows:
         print(row, flush=True)
