@@ -139,10 +139,14 @@ class Animator:
         return self.meta["method"]
 
     @property
-    def rest_garment(self) -> np.ndarray:
+    def rest_garment(self) -> np.ndarray | None:
         """``(V, 3)`` float32 the garment's rest mesh on the rest body (the model's template), metres: what the
-        collision handling skins to the body for cloth centimetres inside it."""
-        return self.model.template.detach().cpu().numpy()
+        collision handling skins to the body for cloth centimetres inside it (SwinGar's: its garment graph's rest
+        mesh); None for a model that keeps none."""
+        template = getattr(self.model, "template", None)
+        if template is None:
+            template = getattr(self.model, "g", {}).get("rest")
+        return None if template is None else template.detach().cpu().numpy().astype(np.float32)
 
     @property
     def num_joints(self) -> int:
