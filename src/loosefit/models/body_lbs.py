@@ -24,10 +24,9 @@ import torch
 
 from loosefit.body import AnnyBody, AnnyShape
 from loosefit.errors import InputError
-from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
-from loosefit.geometry.rotations import sixd_to_matrix
 from loosefit.models.base import GarmentModel
 from loosefit.models.dataset import GarmentSequences
+from loosefit.models.motion_features import skin_from_features
 from loosefit.sim.attach import garment_weights
 
 
@@ -107,10 +106,5 @@ class BodyLBS(GarmentModel):
         """Raw features ``root (B, T, 11)``, ``joints (B, T, J-1, 6)`` -> ``{"verts": (B, T, V, 3) canonical,
         "joint_transforms": (B, T, J, 4, 4) canonical world transforms of the joints, "state": None}``
         (there is no recurrent state: each frame depends on its own pose only)."""
-        B, T = root.shape[:2]
-        local = sixd_to_matrix(torch.cat([root[..., None, 5:11], joints], 2)).reshape(B * T, -1, 3, 3)
-        height = root[..., 0].reshape(B * T)
-        origin = torch.stack([torch.zeros_like(height), torch.zeros_like(height), height], -1)
-        world = forward_kinematics(local, origin, self.rest_joints, self.parents)
-        verts = linear_blend_skinning(self.template, self.weights, skinning_transforms(world, self.rest_joints))
-        return {"verts": verts.reshape(B, T, -1, 3), "joint_transforms": world.reshape(B, T, -1, 4, 4), "state": None}
+        verts, world = skin_from_features(self.template, self.weights, self.rest_joints, self.parents, root, joints)
+        return {"verts": verts, "joint_transforms": world, "state": None}

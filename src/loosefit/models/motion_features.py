@@ -39,7 +39,8 @@ import numpy as np
 import torch
 
 from loosefit.errors import InputError
-from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_sixd
+from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
+from loosefit.geometry.rotations import axis_angle_to_matrix, matrix_to_sixd, sixd_to_matrix
 from loosefit.motion.heading import heading_angles, rot_z
 from loosefit.motion.motion import Motion
 
@@ -171,3 +172,21 @@ class FeatureStream:
         origin = trans[0].copy()
         origin[2] = 0.0
         return feats["root"][0], feats["joints"][0], (Rh[0], origin)
+
+
+def skin_from_features(template: torch.Tensor, weights: torch.Tensor, rest_joints: torch.Tensor, parents,
+                       root: torch.Tensor, joints: torch.Tensor, frame: str = "heading"):
+    """Rest points ``template (K, 3)`` skinned with ``weights (K, J)`` to the body posed from raw features alone,
+    ``root (..., R)``, ``joints (..., J-1, 6)``, in a model's canonical ``frame``: the root joint at height
+    ``root[..., 0]`` above the origin with the root's tilt (heading), at the origin with its tilt (raised), at the
+    origin unrotated (pelvis). Returns ``(verts (..., K, 3), world (..., J, 4, 4))`` metres, the joints' transforms."""
+    lead = root.shape[:-1]
+    tilt = root[..., None, 5:11]
+    if frame == "pelvis":
+        tilt = torch.tensor([1.0, 0, 0, 0, 1, 0], dtype=root.dtype, device=root.device).expand_as(tilt)
+    local = sixd_to_matrix(torch.cat([tilt, joints], -2)).reshape(-1, len(parents), 3, 3)
+    height = root[..., 0].reshape(-1) * (1.0 if frame == "heading" else 0.0)
+    origin = torch.stack([torch.zeros_like(height), torch.zeros_like(height), height], -1)
+    world = forward_kinematics(local, origin, rest_joints, parents)
+    verts = linear_blend_skinning(template, weights, skinning_transforms(world, rest_joints))
+    return verts.reshape(*lead, -1, 3), world.reshape(*lead, -1, 4, 4)

@@ -27,8 +27,7 @@ from torch import nn
 
 from loosefit.errors import InputError
 from loosefit.geometry.laplacian import edges
-from loosefit.geometry.lbs import forward_kinematics, linear_blend_skinning, skinning_transforms
-from loosefit.geometry.rotations import sixd_to_matrix
+from loosefit.models.motion_features import skin_from_features
 
 #: Metres along the garment from its pins over which the network's garment is faded into the skinned one. Chosen on
 #: two validation sets (pooled RMSE, VirtualBones / JointNet, mm), the real-capture dress's validation subject (its
@@ -112,20 +111,11 @@ class Pins(nn.Module):
             self.template.copy_(torch.from_numpy(template))
 
     def skinned(self, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
-        """The pins' vertices of the rest garment skinned to the body in the model's frame: raw features
-        ``root (..., R)``, ``joints (..., J-1, 6)`` -> ``(..., K, 3)`` metres. The frame's root joint: at height ``root[..., 0]`` above
-        the origin with the root's tilt (heading), at the origin with its tilt (raised), at the origin unrotated
-        (pelvis)."""
-        lead = root.shape[:-1]
-        tilt = root[..., None, 5:11]
-        if self.frame == "pelvis":
-            tilt = torch.tensor([1.0, 0, 0, 0, 1, 0], dtype=root.dtype).expand_as(tilt)
-        local = sixd_to_matrix(torch.cat([tilt, joints], -2)).reshape(-1, len(self.parents), 3, 3)
-        height = root[..., 0].reshape(-1) * (1.0 if self.frame == "heading" else 0.0)
-        origin = torch.stack([torch.zeros_like(height), torch.zeros_like(height), height], -1)
-        world = forward_kinematics(local, origin, self.rest_joints, self.parents)
-        verts = linear_blend_skinning(self.template, self.weights, skinning_transforms(world, self.rest_joints))
-        return verts.reshape(*lead, -1, 3)
+        """The pins' vertices of the rest garment skinned to the body in the model's frame
+        (:func:`~loosefit.models.motion_features.skin_from_features`): raw features ``root (..., R)``,
+        ``joints (..., J-1, 6)`` -> ``(..., K, 3)`` metres."""
+        return skin_from_features(self.template, self.weights, self.rest_joints, self.parents, root, joints,
+                                  self.frame)[0]
 
     def forward(self, verts: torch.Tensor, root: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
         """Canonical ``verts (..., V, 3)`` with the pinned ones skinned and the rest faded into them (module doc),

@@ -148,12 +148,13 @@ SKINNED_FALLBACK = (0.04, 0.07)
 FALLBACK_SMOOTH = 3
 
 
-def fallback_weights(depth: np.ndarray, resolver: CollisionResolver, depths: tuple | None = None) -> np.ndarray:
+def fallback_weights(depth: np.ndarray, resolver: CollisionResolver) -> np.ndarray:
     """``(T, V)`` weights in [0, 1] of the garment skinned to the body, from the vertices' depths inside the body
-    ``depth (T, V)`` (metres, negative outside): 0 up to ``depths[0]``, 1 from ``depths[1]``, linear between; then
+    ``depth (T, V)`` (metres, negative outside): 0 up to :data:`SKINNED_FALLBACK` ``[0]``, 1 from ``[1]``, linear
+    between; then
     the largest over each vertex's two rings of neighbours (the ``resolver``'s mesh), then averaged over its one ring
     with itself :data:`FALLBACK_SMOOTH` times, so that a piece taken over fades into the cloth around it."""
-    low, high = SKINNED_FALLBACK if depths is None else depths
+    low, high = SKINNED_FALLBACK
     w = np.clip((np.asarray(depth, np.float64) - low) / (high - low), 0.0, 1.0)
     count = np.diff(resolver.start)
     owner = np.flatnonzero(count)
@@ -169,6 +170,14 @@ def fallback_weights(depth: np.ndarray, resolver: CollisionResolver, depths: tup
         total[:, owner] += np.add.reduceat(w[:, nbr], first, axis=1)
         w = total / (1.0 + count)
     return w
+
+
+def taken_to_skinned(verts: np.ndarray, depth: np.ndarray, resolver: CollisionResolver,
+                     skinned: np.ndarray) -> np.ndarray:
+    """``verts (T, V, 3)`` taken towards the garment ``skinned (T, V, 3)`` to the body by :func:`fallback_weights` of
+    their depths ``depth (T, V)`` inside it (metres), float32."""
+    w = fallback_weights(depth, resolver)[..., None]
+    return ((1.0 - w) * verts + w * skinned).astype(np.float32)
 
 
 def correct_exact_motion(verts: np.ndarray, resolver: CollisionResolver, posed: np.ndarray, faces: np.ndarray,
@@ -209,11 +218,9 @@ def correct_exact_motion(verts: np.ndarray, resolver: CollisionResolver, posed: 
             frame, vertex = np.nonzero(cand)
             depth = np.full(cand.shape, -np.inf)
             depth[frame, vertex] = -field.query(world[frame, vertex], frame)[0]
-            w = fallback_weights(depth, resolver)[..., None]
-            if w.any():
-                world = ((1.0 - w) * world + w * skinned[chunk]).astype(np.float32)
-                if culler is not None:  # the moved vertices asked again (the window still holds: sound anyway)
-                    cand = ~culler.outside(world)
+            world = taken_to_skinned(world, depth, resolver, skinned[chunk])
+            if culler is not None:  # the moved vertices asked again (the window still holds: sound anyway)
+                cand = ~culler.outside(world)
         out[chunk] = resolver.frames(torch.from_numpy(world), sdf, cand, outside)[0].numpy()
     return out
 
@@ -346,8 +353,7 @@ def handle_motion_collisions(verts: np.ndarray, faces: np.ndarray, body, motion,
             out[t] = push_out(out[t], mesh, push_distance)[0]
         else:
             if skinned is not None:
-                w = fallback_weights(-mesh.query(out[t])[None], resolver)[0, :, None]
-                out[t] = (1.0 - w) * out[t] + w * skinned[t]
+                out[t] = taken_to_skinned(out[t][None], -mesh.query(out[t])[None], resolver, skinned[t][None])[0]
             out[t] = correct_frame(out[t], resolver, ExactSDF(mesh), None,
                                    culler.update(posed[t], out[t]) if culler else None)[0]
     return out
