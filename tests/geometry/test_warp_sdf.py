@@ -56,3 +56,32 @@ def test_frames_are_queried_together_and_refitted(posed):
         field.query(points, np.ones(500))  # one frame held now
     with pytest.raises(InputError):
         field.refit(np.concatenate([verts, verts]))  # over capacity
+
+
+def _box_mesh(low, n: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """A unit cube at ``low``, each face a grid of ``n x n`` squares cut in two triangles, normals outwards."""
+    import trimesh
+
+    box = trimesh.creation.box(extents=(1, 1, 1))
+    for _ in range(n // 2):
+        box = box.subdivide()
+    return np.asarray(box.vertices) + 0.5 + np.asarray(low, float), np.asarray(box.faces)
+
+
+def test_the_winding_number_counts_rays_through_edges_and_vertices_once_and_overlaps_twice():
+    """Two cubes overlapping as one mesh that passes through itself (winding number 2 where both hold a point),
+    asked at a lattice of points whose axis rays run exactly along the cubes' edges and through their vertices:
+    every point inside either cube is inside, every other point outside (closed form)."""
+    va, fa = _box_mesh((0, 0, 0))
+    vb, fb = _box_mesh((0.5, 0.5, 0.25))
+    verts = np.concatenate([va, vb])[None]
+    faces = np.concatenate([fa, fb + len(va)])
+    field = warp_sdf.MotionMeshSDF(faces, capacity=1).refit(verts)
+    ticks = np.arange(-0.25, 1.8, 0.125)  # the cubes' vertices lie on multiples of 0.25
+    points = np.stack(np.meshgrid(ticks, ticks, ticks, indexing="ij"), -1).reshape(-1, 3)
+    inside = ((points > 0) & (points < 1)).all(1) | ((points > vb.min(0)) & (points < vb.max(0))).all(1)
+    dist = field.query(points, np.zeros(len(points)), winding_from=0.0)[0]
+    off = dist != 0  # not on either surface
+    both = ((points > 0) & (points < 1)).all(1) & ((points > vb.min(0)) & (points < vb.max(0))).all(1)
+    assert inside[off].sum() > 500 and both[off].sum() > 40 and (~inside[off]).sum() > 1000
+    np.testing.assert_array_equal(dist[off] < 0, inside[off])
