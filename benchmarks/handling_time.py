@@ -1,15 +1,16 @@
 """CPU time of the exact collision handling (``loosefit animate --collision exact``) per frame, by part, and the
-quality it is judged by, on the shipped skirts over validation clips of real capture.
+quality it is judged by, on the shipped garments over validation clips of real capture.
 
-For each shipped run (``pretrained:skirt`` = VirtualBones, ``pretrained:skirt/jointnet``) and clip
+For each shipped run (``pretrained:skirt`` = VirtualBones, ``pretrained:skirt/jointnet``, the dress's likewise) and clip
 (``006_08``, ``006_09`` of ``../shared/mocap/cmu-cc``, joint map ``cc``) the garment is animated as
 ``loosefit animate`` does (one torch thread), then :func:`~loosefit.models.collision.handle_motion_collisions`
-(mode ``exact``) runs ``--repeats`` times after a warm-up; the CPU time of all threads (``time.process_time``) is
+(mode ``exact``, the skinned fallback from the run's rest garment) runs ``--repeats`` times after a warm-up; the CPU time of all threads (``time.process_time``) is
 split by wrapping the parts (posing and enclosing, the distance tree or mesh, the cull, closest points, the
 winding number; the rest is the resolver's own bookkeeping). Quality, against the posed full-resolution body:
 surface samples (vertices, edge midpoints, triangle centroids) more than 5 mm inside (% mean, % worst frame), the
 deepest point (mm), and how far vertices move that were more than 5 mm outside the body before the handling
-(collateral moves). ``--reference FILE.npz`` compares the handled vertices with a saved run (``--save``).
+(collateral moves), triangles stretched or collapsed against the rest garment. ``--set`` changes a constant
+of the handling for a run of this script (a lever). ``--reference FILE.npz`` compares the handled vertices with a saved run (``--save``).
 
     PYTHONPATH=src nice -n 19 python benchmarks/handling_time.py --out handling-time
 """
@@ -28,7 +29,8 @@ import numpy as np
 from _common import machine, save_results
 
 MOCAP = Path(__file__).resolve().parents[2] / "shared" / "mocap" / "cmu-cc"
-RUNS = {"vb": "pretrained:skirt", "jn": "pretrained:skirt/jointnet"}
+RUNS = {"vb": "pretrained:skirt", "jn": "pretrained:skirt/jointnet",
+        "dress-vb": "pretrained:dress", "dress-jn": "pretrained:dress/jointnet"}
 CLIPS = ["006_08", "006_09"]
 #: ``(module, owner, attribute, part)``: what is wrapped to split the handling's time (absent ones are skipped).
 PARTS = [
@@ -86,10 +88,14 @@ def loadavg() -> str:
     return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip().split("load average:")[-1].strip()
 
 
-def quality(raw, fixed, faces, posed_full, body_faces) -> dict:
-    """Surface inside %, deepest mm, and the moves of vertices that were > 5 mm outside the full body."""
+def quality(raw, fixed, faces, posed_full, body_faces, rest) -> dict:
+    """Surface inside %, deepest mm, the moves of vertices that were > 5 mm outside the full body, and the shares
+    of triangles (over frames) stretched past 4 times or collapsed under 20 % of their area on ``rest``."""
+    from loosefit.geometry.normals import face_cross
     from loosefit.geometry.signed_distance import posed_body_sdfs
     from loosefit.metrics.collision import penetrations
+
+    area = np.linalg.norm(face_cross(fixed, faces), axis=-1) / np.linalg.norm(face_cross(rest, faces), axis=-1)
 
     handled, none = penetrations([(fixed, faces), (raw, faces)], posed_full, body_faces)
     clear = np.stack([m.query(r) > 0.005 for m, r in zip(posed_body_sdfs(posed_full, body_faces), raw)])
@@ -99,6 +105,7 @@ def quality(raw, fixed, faces, posed_full, body_faces) -> dict:
             "deepest_mm": float(1e3 * handled.deepest_m.max()),
             "none_surface_inside_5mm_percent_mean": float(none.surface_percent.mean()),
             "none_deepest_mm": float(1e3 * none.deepest_m.max()),
+            "stretched_percent": float(100 * (area > 4).mean()), "collapsed_percent": float(100 * (area < 0.2).mean()),
             "clear_moved_percent": float(100 * (move > 0).mean()),
             "clear_moved_mm_mean": float(1e3 * move.mean()), "clear_moved_mm_max": float(1e3 * move.max())}
 
@@ -114,7 +121,16 @@ def main() -> None:
     ap.add_argument("--backend", default="auto", help="exact_backend of handle_motion_collisions: auto, warp, igl")
     ap.add_argument("--clips", default=",".join(CLIPS))
     ap.add_argument("--runs", default=",".join(RUNS))
+    ap.add_argument("--set", action="append", default=[], metavar="MODULE.NAME=VALUE",
+                    help="a constant of loosefit.models.collision (for example resolver.SURFACE_TOLERANCE=0.001)")
     args = ap.parse_args()
+    import importlib
+
+    for item in args.set:
+        name, value = item.split("=", 1)
+        module, attr = name.rsplit(".", 1)
+        mod = importlib.import_module(f"loosefit.models.collision.{module}")
+        setattr(mod, attr, type(getattr(mod, attr))(eval(value)))
     import torch
 
     from loosefit.animate import Animator
@@ -128,7 +144,6 @@ def main() -> None:
     cache.mkdir(parents=True, exist_ok=True)
     reference = dict(np.load(args.reference)) if args.reference else {}
     saved, rows = {}, []
-    handle = dict(mode="exact", exact_backend=args.backend)
     for clip in args.clips.split(","):
         motion = load_motion(str(MOCAP / f"{clip}.bvh"), body, joint_map="cc")
         posed_full = None
@@ -138,9 +153,11 @@ def main() -> None:
             path = cache / f"{key}.npz"
             if not path.exists():
                 animator = Animator(run, checkpoint="best", threads=1, device="cpu")
-                np.savez(path, raw=animator.animate_batch([motion])[0], faces=animator.faces)
+                np.savez(path, raw=animator.animate_batch([motion])[0], faces=animator.faces,
+                         rest=animator.rest_garment)
             data = np.load(path)
-            raw, faces = data["raw"], data["faces"]
+            raw, faces, rest = data["raw"], data["faces"], data["rest"]
+            handle = dict(mode="exact", exact_backend=args.backend, rest=rest)  # as loosefit animate
             handle_motion_collisions(raw, faces, body, motion, **handle)  # warm-up (kernels, caches)
             spent, totals = defaultdict(float), []
             for _ in range(args.repeats):
@@ -152,7 +169,8 @@ def main() -> None:
                 for part, s in timer.spent.items():
                     spent[part] += s / args.repeats
             T = len(raw)
-            row = {"run": run, "clip": clip, "backend": args.backend, "frames": T, "vertices": int(raw.shape[1]),
+            row = {"run": run, "clip": clip, "backend": args.backend, "set": args.set, "frames": T,
+                   "vertices": int(raw.shape[1]),
                    "load": loadavg(),
                    "ms_per_frame": 1e3 * min(totals) / T, "ms_per_frame_each": [1e3 * s / T for s in totals],
                    "parts_ms_per_frame": {p: 1e3 * s / T for p, s in sorted(spent.items())}}
@@ -165,7 +183,7 @@ def main() -> None:
             if not args.no_quality:
                 if posed_full is None:
                     posed_full = body.pose(motion).verts
-                row.update(quality(raw, fixed, faces, posed_full, body.faces))
+                row.update(quality(raw, fixed, faces, posed_full, body.faces, rest))
             rows.append(row)
             print(key, {k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()
                         if k not in ("run",)}, flush=True)
