@@ -75,3 +75,23 @@ def test_torch_front_end_matches_numpy_and_differentiates():
     assert torch.equal(n[2], torch.zeros(3, dtype=torch.float64))  # only in the collinear face
     n.sum().backward()
     assert torch.isfinite(flat.grad).all()
+
+
+def test_angle_weighted_normals_are_libigls_frame_by_frame():
+    """:func:`angle_weighted_normals` over frames at once against libigl's angle-weighted vertex normals and its face
+    normals, frame by frame, on a mesh with triangles of very different angles (a subdivided, jittered icosphere)."""
+    import igl
+    import trimesh
+
+    from loosefit.geometry.normals import angle_weighted_normals
+
+    sphere = trimesh.creation.icosphere(2)
+    rng = np.random.default_rng(4)
+    verts = sphere.vertices[None] * rng.uniform(0.5, 1.5, (3, 1, 3)) + rng.normal(0, 0.02, (3, len(sphere.vertices), 3))
+    faces = np.asarray(sphere.faces, np.int64)
+    fn, vn = angle_weighted_normals(verts, faces)
+    for t in range(3):
+        v = np.ascontiguousarray(verts[t])
+        np.testing.assert_allclose(vn[t], igl.per_vertex_normals(v, faces, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE),
+                                   atol=1e-12)
+        np.testing.assert_allclose(fn[t], igl.per_face_normals(v, faces, np.zeros(3)), atol=1e-12)

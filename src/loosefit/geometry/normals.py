@@ -155,3 +155,25 @@ def vertex_normals_torch(verts: torch.Tensor, faces: torch.Tensor, weighting: st
     """Unit vertex normals ``(..., V, 3)`` of ``verts (..., V, 3)``, ``faces (F, 3)`` int64 (area-weighted by
     default, as :func:`vertex_normals`), in ``verts``' dtype and device, differentiable."""
     return _unit(_TORCH, _vertex_sum(_TORCH, verts, faces, weighting))
+
+
+def angle_weighted_normals(verts: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit face normals ``(T, F, 3)`` and unit vertex normals ``(T, V, 3)`` weighted by each corner's interior
+    angle (libigl's ``PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE``: the pseudonormal of a closed mesh's vertex), of
+    ``verts (T, V, 3)``, float64, all frames at once."""
+    verts = np.asarray(verts, np.float64)
+    faces = np.asarray(faces, np.int64)
+    T, V = verts.shape[:2]
+    tri = verts[:, faces]  # (T, F, 3 corners, 3)
+    n = cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+    fn = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+    e_next = np.roll(tri, -1, axis=2) - tri
+    e_prev = np.roll(tri, 1, axis=2) - tri
+    cos = np.einsum("tfcd,tfcd->tfc", e_next, e_prev) / np.maximum(
+        np.linalg.norm(e_next, axis=-1) * np.linalg.norm(e_prev, axis=-1), 1e-300)
+    angle = np.arccos(np.clip(cos, -1.0, 1.0))
+    flat = (np.arange(T)[:, None, None] * V + faces[None]).reshape(-1)  # (T F 3,) flat vertex of each corner
+    weighted = (angle[..., None] * fn[:, :, None]).reshape(-1, 3)
+    vn = np.stack([np.bincount(flat, weighted[:, k], T * V) for k in range(3)], 1).reshape(T, V, 3)
+    vn /= np.maximum(np.linalg.norm(vn, axis=-1, keepdims=True), 1e-300)
+    return fn, vn

@@ -15,6 +15,7 @@ import numpy as np
 
 from loosefit.errors import InputError
 from loosefit.extras import warp_kernels
+from loosefit.geometry.normals import angle_weighted_normals
 
 
 def available() -> bool:
@@ -26,20 +27,8 @@ def _normals(verts: np.ndarray, faces: np.ndarray, corner_edge: np.ndarray, num_
     """Unit face normals ``(T, F, 3)``, angle-weighted unit vertex normals ``(T, V, 3)`` and edge pseudonormals
     (the sum of the two faces' normals, ``(T, E, 3)``) of ``verts (T, V, 3)`` float64, as BodySDF computes them
     frame by frame with libigl."""
-    T, V = verts.shape[:2]
-    tri = verts[:, faces]  # (T, F, 3 corners, 3)
-    n = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
-    fn = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
-    # the interior angle at each corner
-    e_next = np.roll(tri, -1, axis=2) - tri
-    e_prev = np.roll(tri, 1, axis=2) - tri
-    cos = np.einsum("tfcd,tfcd->tfc", e_next, e_prev) / np.maximum(
-        np.linalg.norm(e_next, axis=-1) * np.linalg.norm(e_prev, axis=-1), 1e-300)
-    angle = np.arccos(np.clip(cos, -1.0, 1.0))
-    flat = (np.arange(T)[:, None, None] * V + faces[None]).reshape(-1)  # (T F 3,) flat vertex of each corner
-    weighted = (angle[..., None] * fn[:, :, None]).reshape(-1, 3)
-    vn = np.stack([np.bincount(flat, weighted[:, k], T * V) for k in range(3)], 1).reshape(T, V, 3)
-    vn /= np.maximum(np.linalg.norm(vn, axis=-1, keepdims=True), 1e-300)
+    T = len(verts)
+    fn, vn = angle_weighted_normals(verts, faces)
     edge_of = (np.arange(T)[:, None, None] * num_edges + corner_edge[None]).reshape(-1)
     each = np.repeat(fn, 3, axis=1).reshape(-1, 3)
     en = np.stack([np.bincount(edge_of, each[:, k], T * num_edges) for k in range(3)], 1).reshape(T, num_edges, 3)

@@ -25,6 +25,7 @@ import torch
 
 from loosefit.errors import InputError
 from loosefit.geometry import warp_sdf
+from loosefit.geometry.normals import angle_weighted_normals
 from loosefit.geometry.ray_cull import AxisRayCuller
 from loosefit.geometry.signed_distance import posed_body_sdfs
 from loosefit.models.collision.fast_eval import FramedSDF, MotionBodySDF
@@ -258,15 +259,13 @@ PROXY_INFLATE = 0.002
 def inflated(verts: np.ndarray, faces: np.ndarray, distance: float) -> np.ndarray:
     """``verts (T, V, 3)`` (or ``(V, 3)``) of a closed mesh moved ``distance`` metres out along each frame's
     vertex normals (angle-weighted), float32."""
-    import igl
-
     v = np.asarray(verts, np.float64)
-    f = np.ascontiguousarray(faces, np.int64)
     one = v.ndim == 2
     frames = v[None] if one else v
-    out = np.stack([x + distance * igl.per_vertex_normals(np.ascontiguousarray(x), f,
-                                                          igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE)
-                    for x in frames]).astype(np.float32)
+    out = np.empty(frames.shape, np.float32)
+    for start in range(0, len(frames), FRAME_CHUNK):  # frames at once, a few MB each
+        chunk = frames[start:start + FRAME_CHUNK]
+        out[start:start + FRAME_CHUNK] = chunk + distance * angle_weighted_normals(chunk, faces)[1]
     return out[0] if one else out
 
 
