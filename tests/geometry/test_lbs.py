@@ -57,33 +57,3 @@ def test_rest_pose_reproduces_rest_mesh_and_parent_order():
     assert torch.allclose(world[..., :3, 3], rest_joints.expand(2, 4, 3), atol=1e-12)
     with pytest.raises(ValueError, match="cycle"):
         topological_order(np.array([1, 0]))
-
-
-@pytest.mark.parametrize("per_frame_rest", [False, True])
-def test_sparse_weights_skin_as_the_dense_product(per_frame_rest):
-    """Mostly-zero weights take the sparse product (:data:`SPARSE_SHARE`): each vertex equals the weighted sum of
-    its joints' transforms applied to it, written out vertex by vertex; with gradients asked the dense product runs
-    and agrees."""
-    from loosefit.geometry import lbs
-
-    rng = np.random.default_rng(3)
-    T, V, J = 7, 3000, 20
-    weights = np.zeros((V, J))
-    for v in range(V):  # three joints a vertex
-        weights[v, rng.choice(J, 3, replace=False)] = rng.dirichlet(np.ones(3))
-    rest = rng.normal(size=(T, V, 3) if per_frame_rest else (V, 3))
-    transforms = np.tile(np.eye(4), (T, J, 1, 1))
-    transforms[..., :3, :] = rng.normal(size=(T, J, 3, 4))
-    assert lbs._sparse_pays(torch.from_numpy(rest), torch.from_numpy(weights), torch.from_numpy(transforms))
-    out = linear_blend_skinning(torch.from_numpy(rest), torch.from_numpy(weights), torch.from_numpy(transforms))
-    r = rest if per_frame_rest else np.broadcast_to(rest, (T, V, 3))
-    expected = np.zeros((T, V, 3))
-    for v in range(V):
-        for j in np.flatnonzero(weights[v]):
-            expected[:, v] += weights[v, j] * (np.einsum("tab,tb->ta", transforms[:, j, :3, :3], r[:, v])
-                                               + transforms[:, j, :3, 3])
-    np.testing.assert_allclose(out.numpy(), expected, atol=1e-12)
-    graded = torch.from_numpy(transforms).requires_grad_(True)
-    dense = linear_blend_skinning(torch.from_numpy(rest), torch.from_numpy(weights), graded)
-    assert dense.requires_grad
-    np.testing.assert_allclose(dense.detach().numpy(), expected, atol=1e-12)

@@ -77,50 +77,10 @@ def linear_blend_skinning(rest_verts: torch.Tensor, weights: torch.Tensor, trans
     Returns:
         ``(T, V, 3)`` skinned positions.
     """
-    if _sparse_pays(rest_verts, weights, transforms):
-        return _sparse_skinning(rest_verts, weights, transforms)
     blend = torch.einsum("vj,tjab->tvab", weights, transforms[..., :3, :])  # (T, V, 3, 4)
     if rest_verts.dim() == 2:
         rest_verts = rest_verts.expand(transforms.shape[0], -1, -1)
     return (blend[..., :3] @ rest_verts[..., None])[..., 0] + blend[..., 3]
-
-
-#: Largest share of non-zero skinning weights for which :func:`linear_blend_skinning` skins through a sparse
-#: product (a body vertex has at most 7 of the Anny rig's 31 joints, 6 % of the weights: the full body over a motion
-#: in a quarter of the dense product's time).
-SPARSE_SHARE = 0.25
-
-
-def _sparse_pays(rest_verts: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor) -> bool:
-    """Whether :func:`linear_blend_skinning` can skin through SciPy's sparse product: on the CPU, without
-    gradients, for weights mostly zero and enough frames and vertices for the conversion to pay."""
-    tensors = (rest_verts, weights, transforms)
-    if any(t.device.type != "cpu" or t.is_sparse for t in tensors):
-        return False
-    if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
-        return False
-    V, J = weights.shape
-    frames = transforms.shape[0] if transforms.dim() == 4 else 1
-    return frames * V >= 20_000 and rest_verts.shape[-2] == V and bool(
-        torch.count_nonzero(weights) <= SPARSE_SHARE * V * J)
-
-
-def _sparse_skinning(rest_verts: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor) -> torch.Tensor:
-    """:func:`linear_blend_skinning` with the weights as a SciPy CSR matrix: ``(V, J) @ (J, T 12)``, then each
-    vertex's blended ``(3, 4)`` transform applied to it (what the dense product gives, up to float rounding)."""
-    import scipy.sparse as sp
-
-    dtype = torch.promote_types(torch.promote_types(rest_verts.dtype, weights.dtype), transforms.dtype)
-    a = transforms[..., :3, :].to(dtype).numpy()
-    T, J = a.shape[:2]
-    w = sp.csr_matrix(weights.to(dtype).numpy())
-    blend = np.asarray(w @ a.transpose(1, 0, 2, 3).reshape(J, T * 12)).reshape(-1, T, 3, 4)  # (V, T, 3, 4)
-    rest = rest_verts.to(dtype).numpy()
-    if rest.ndim == 2:
-        out = np.einsum("vtab,vb->tva", blend[..., :3], rest)
-    else:
-        out = np.einsum("vtab,tvb->tva", blend[..., :3], rest)
-    return torch.from_numpy(out + blend[..., 3].transpose(1, 0, 2))
 
 
 def pose_skeleton_and_skin(

@@ -34,7 +34,9 @@ from loosefit.models.motion_features import skin_from_features
 #: strap tops pinned): no pins 77.02 / 80.13; radius 0 (the pins alone) 76.84 / 79.88, 0.1 m 76.67 / 79.75, 0.2 m
 #: 76.36 / 79.67, 0.3 m 75.96 / 79.67, 0.4 m 75.79 / 79.74; and the demo's validation motions (its skirt's waistband
 #: pinned): no pins 53.71 / 54.49; 0 53.29 / 54.37, 0.1 m 53.18 / 54.37, 0.2 m 53.38 / 54.56, 0.3 m 54.16 / 55.33.
-#: 0.1 m is better than none on all four; from 0.2 m on the skirt's hips take the body's skinning too.
+#: 0.1 m is better than none on all four; from 0.2 m on the skirt's hips take the body's skinning too. A run keeps
+#: its own radius: the shipped dress's garments, whose pins are the strap tops, carry theirs from the dress's
+#: validation subject alone (VirtualBones 0.4 m, JointNet 0.3 m; benchmarks/experiments/LOG.md).
 PIN_RADIUS = 0.1
 
 
