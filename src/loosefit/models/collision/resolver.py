@@ -368,8 +368,12 @@ class CollisionResolver:
             pick = order[np.r_[vertex[order][1:] != vertex[order][:-1], True]]
             last = vertex[pick]  # sorted, unique
             shift = ask[pick, None] * normal[row[pick]]
-            rows = torch.from_numpy(last).to(dev)
-            out[rows] = out[rows] + torch.from_numpy(shift).to(out)
+            if dev.type == "cpu":  # in place through NumPy (the rows are unique): torch's indexed update cost 5x
+                view = out.numpy()  # shares the tensor's memory
+                view[last] += shift.astype(view.dtype)
+            else:
+                rows = torch.from_numpy(last).to(dev)
+                out[rows] = out[rows] + torch.from_numpy(shift).to(out)
             moved[last] = True
             known[last] = -np.inf
             # the samples touching a moved vertex are the ones that can have changed, the vertex's own among them
