@@ -4,13 +4,14 @@ quality it is judged by, on the shipped garments over validation clips of real c
 For each shipped run (``pretrained:skirt`` = VirtualBones, ``pretrained:skirt/jointnet``, the dress's likewise) and clip
 (``006_08``, ``006_09`` of ``../shared/mocap/cmu-cc``, joint map ``cc``) the garment is animated as
 ``loosefit animate`` does (one torch thread), then :func:`~loosefit.models.collision.handle_motion_collisions`
-(mode ``exact``, the skinned fallback from the run's rest garment) runs ``--repeats`` times after a warm-up; the CPU time of all threads (``time.process_time``) is
-split by wrapping the parts (posing and enclosing, the distance tree or mesh, the cull, closest points, the
+(mode ``exact``, the skinned fallback from the run's rest garment) runs ``--repeats`` times after a warm-up; the
+CPU time of all threads (``time.process_time``) is split by wrapping the parts (posing and enclosing, the distance tree or mesh, the cull, closest points, the
 winding number; the rest is the resolver's own bookkeeping). Quality, against the posed full-resolution body:
 surface samples (vertices, edge midpoints, triangle centroids) more than 5 mm inside (% mean, % worst frame), the
 deepest point (mm), and how far vertices move that were more than 5 mm outside the body before the handling
 (collateral moves), triangles stretched or collapsed against the rest garment. ``--set`` changes a constant
-of the handling for a run of this script (a lever). ``--reference FILE.npz`` compares the handled vertices with a saved run (``--save``).
+of the handling for a run of this script (a lever). ``--reference FILE.npz`` compares the handled vertices with a
+saved run (``--save``).
 
     PYTHONPATH=src nice -n 19 python benchmarks/handling_time.py --out handling-time
 """
@@ -124,13 +125,14 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="MODULE.NAME=VALUE",
                     help="a constant of loosefit.models.collision (for example resolver.SURFACE_TOLERANCE=0.001)")
     args = ap.parse_args()
+    import ast
     import importlib
 
     for item in args.set:
         name, value = item.split("=", 1)
         module, attr = name.rsplit(".", 1)
         mod = importlib.import_module(f"loosefit.models.collision.{module}")
-        setattr(mod, attr, type(getattr(mod, attr))(eval(value)))
+        setattr(mod, attr, type(getattr(mod, attr))(ast.literal_eval(value)))
     import torch
 
     from loosefit.animate import Animator

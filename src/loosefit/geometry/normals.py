@@ -165,7 +165,7 @@ def angle_weighted_normals(verts: np.ndarray, faces: np.ndarray) -> tuple[np.nda
     faces = np.asarray(faces, np.int64)
     T, V = verts.shape[:2]
     tri = verts[:, faces]  # (T, F, 3 corners, 3)
-    n = cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+    n = face_cross(verts, faces)
     fn = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
     e_next = np.roll(tri, -1, axis=2) - tri
     e_prev = np.roll(tri, 1, axis=2) - tri

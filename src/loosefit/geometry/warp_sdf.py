@@ -118,7 +118,8 @@ class MotionMeshSDF:
         arr = lambda a, dtype: wp.array(a, dtype=dtype, device="cpu", copy=False)  # noqa: E731
         wp.launch(self._kernel, dim=len(p), device="cpu",
                   inputs=[self._ids, self._verts_wp, self._faces_wp, self._corner_wp, self._fn_wp, self._en_wp,
-                          self._vn_wp, self._low_wp, self._high_wp, self.verts.shape[1], len(self.faces), self.num_edges,
+                          self._vn_wp, self._low_wp, self._high_wp, self.verts.shape[1], len(self.faces),
+                          self.num_edges,
                           arr(p, wp.vec3d), arr(fr, wp.int32), arr(beyond, wp.float64),
                           wp.float64(winding_from), arr(dist, wp.float64), arr(closest, wp.vec3d),
                           arr(face, wp.int32)])

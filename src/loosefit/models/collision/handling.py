@@ -152,9 +152,9 @@ FALLBACK_SMOOTH = 3
 def fallback_weights(depth: np.ndarray, resolver: CollisionResolver) -> np.ndarray:
     """``(T, V)`` weights in [0, 1] of the garment skinned to the body, from the vertices' depths inside the body
     ``depth (T, V)`` (metres, negative outside): 0 up to :data:`SKINNED_FALLBACK` ``[0]``, 1 from ``[1]``, linear
-    between; then
-    the largest over each vertex's two rings of neighbours (the ``resolver``'s mesh), then averaged over its one ring
-    with itself :data:`FALLBACK_SMOOTH` times, so that a piece taken over fades into the cloth around it."""
+    between; then the largest over each vertex's two rings of neighbours (the ``resolver``'s mesh), then averaged over
+    its one ring with itself :data:`FALLBACK_SMOOTH` times, so that a piece taken over fades into the cloth around
+    it."""
     low, high = SKINNED_FALLBACK
     w = np.clip((np.asarray(depth, np.float64) - low) / (high - low), 0.0, 1.0)
     count = np.diff(resolver.start)
